@@ -1,0 +1,80 @@
+#include "adapters/mrcal/lens.h"
+
+#include <vector>
+
+#include "adapters/mrcal/mrcal_c.h"
+
+namespace omm {
+namespace {
+
+bool ParseLensModel(const std::string& name, mrcal_lensmodel_t* lensmodel) {
+  return mrcal_lensmodel_from_name(lensmodel, name.c_str()) &&
+         mrcal_lensmodel_type_is_valid(lensmodel->type);
+}
+
+}  // namespace
+
+bool IsValidLensModel(const std::string& lens_model) {
+  mrcal_lensmodel_t lensmodel;
+  return ParseLensModel(lens_model, &lensmodel);
+}
+
+int LensModelNumParams(const std::string& lens_model) {
+  mrcal_lensmodel_t lensmodel;
+  if (!ParseLensModel(lens_model, &lensmodel)) return -1;
+  return mrcal_lensmodel_num_params(&lensmodel);
+}
+
+bool ProjectPoints(const CameraModel& camera, const Eigen::Matrix3Xd& p_cam,
+                   Eigen::Matrix2Xd* q_px, Eigen::MatrixXd* dq_dp,
+                   Eigen::MatrixXd* dq_dintrinsics) {
+  mrcal_lensmodel_t lensmodel;
+  if (!ParseLensModel(camera.lens_model, &lensmodel)) return false;
+  const int n_intrinsics = mrcal_lensmodel_num_params(&lensmodel);
+  if (camera.intrinsics.size() != n_intrinsics) return false;
+  const int n = static_cast<int>(p_cam.cols());
+  // Eigen's column-major 3 x N / 2 x N layouts are exactly mrcal's arrays of
+  // mrcal_point3_t / mrcal_point2_t.
+  q_px->resize(2, n);
+  std::vector<mrcal_point3_t> dq_dp_buf(dq_dp ? 2 * n : 0);
+  std::vector<double> dq_di_buf(dq_dintrinsics ? 2 * n * n_intrinsics : 0);
+  const bool ok = mrcal_project(
+      reinterpret_cast<mrcal_point2_t*>(q_px->data()), dq_dp ? dq_dp_buf.data() : nullptr,
+      dq_dintrinsics ? dq_di_buf.data() : nullptr,
+      reinterpret_cast<const mrcal_point3_t*>(p_cam.data()), n, &lensmodel,
+      camera.intrinsics.data());
+  if (!ok) return false;
+  if (dq_dp) {
+    dq_dp->resize(2 * n, 3);
+    for (int i = 0; i < 2 * n; ++i) {
+      for (int k = 0; k < 3; ++k) (*dq_dp)(i, k) = dq_dp_buf[i].xyz[k];
+    }
+  }
+  if (dq_dintrinsics) {
+    dq_dintrinsics->resize(2 * n, n_intrinsics);
+    for (int i = 0; i < 2 * n; ++i) {
+      for (int k = 0; k < n_intrinsics; ++k) {
+        (*dq_dintrinsics)(i, k) = dq_di_buf[static_cast<size_t>(i) * n_intrinsics + k];
+      }
+    }
+  }
+  return true;
+}
+
+bool UnprojectPixels(const CameraModel& camera, const Eigen::Matrix2Xd& q_px,
+                     Eigen::Matrix3Xd* v_cam) {
+  mrcal_lensmodel_t lensmodel;
+  if (!ParseLensModel(camera.lens_model, &lensmodel)) return false;
+  if (camera.intrinsics.size() != mrcal_lensmodel_num_params(&lensmodel)) return false;
+  const int n = static_cast<int>(q_px.cols());
+  v_cam->resize(3, n);
+  if (!mrcal_unproject(reinterpret_cast<mrcal_point3_t*>(v_cam->data()),
+                       reinterpret_cast<const mrcal_point2_t*>(q_px.data()), n, &lensmodel,
+                       camera.intrinsics.data())) {
+    return false;
+  }
+  for (int i = 0; i < n; ++i) v_cam->col(i) /= (*v_cam)(2, i);
+  return true;
+}
+
+}  // namespace omm

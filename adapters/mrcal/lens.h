@@ -1,0 +1,36 @@
+// Projection through a mrcal lens model, on Eigen types.
+//
+// q = project(p; lens_model, intrinsics): camera-frame points p (mm, z forward)
+// to pixels q (centre of the top-left pixel at (0, 0)). These wrap
+// mrcal_project / mrcal_unproject (mrcal 2.2) so no mrcal type leaves this
+// adapter.
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/camera.h"
+
+namespace omm {
+
+// True if `lens_model` is a mrcal lens-model name mrcal can use (configured
+// where the model needs a configuration).
+bool IsValidLensModel(const std::string& lens_model);
+
+// Number of intrinsics of a lens model (4 core + distortions); -1 if invalid.
+int LensModelNumParams(const std::string& lens_model);
+
+// Projects N camera-frame points (3 x N) to pixels (2 x N). Optional outputs:
+// dq_dp (2N x 3: rows 2i, 2i+1 are point i's dq/dp), dq_dintrinsics
+// (2N x Nintrinsics, same row layout). Returns false if mrcal refuses.
+bool ProjectPoints(const CameraModel& camera, const Eigen::Matrix3Xd& p_cam,
+                   Eigen::Matrix2Xd* q_px, Eigen::MatrixXd* dq_dp = nullptr,
+                   Eigen::MatrixXd* dq_dintrinsics = nullptr);
+
+// Unprojects pixels (2 x N) to camera-frame directions (3 x N) with z = 1
+// (observation rays). Iterative inside mrcal: far slower than ProjectPoints.
+bool UnprojectPixels(const CameraModel& camera, const Eigen::Matrix2Xd& q_px,
+                     Eigen::Matrix3Xd* v_cam);
+
+}  // namespace omm

@@ -1,0 +1,16 @@
+// Reads a project directory (format omm-project/1) into a Project.
+#pragma once
+
+#include <filesystem>
+
+#include "pipeline/core/project.h"
+
+namespace omm {
+
+// Parses project.yaml, table.csv, cmm.csv and the image lists of `dir`, and
+// checks them against each other (every feature, measurement, tile and CMM
+// name resolves; every image decodes and all have one size). Throws InputError
+// naming the file, the line or key, and what was expected.
+Project LoadProject(const std::filesystem::path& dir);
+
+}  // namespace omm

@@ -1,0 +1,40 @@
+# Helpers that keep every target's flags identical.
+
+add_library(omm_warnings INTERFACE)
+target_compile_options(omm_warnings INTERFACE -Wall -Wextra -Wpedantic -Wshadow
+                       -Wnon-virtual-dtor -Wno-missing-field-initializers)
+if(OMM_WERROR)
+  target_compile_options(omm_warnings INTERFACE -Werror)
+endif()
+if(OMM_SANITIZE)
+  add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
+  add_link_options(-fsanitize=address,undefined)
+endif()
+
+# omm_library(NAME SOURCES ... LINKS ...): a static library whose include root is
+# the repository root (#include "pipeline/core/camera.h").
+function(omm_library name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LINKS" ${ARGN})
+  add_library(${name} STATIC ${ARG_SOURCES})
+  target_include_directories(${name} PUBLIC ${PROJECT_SOURCE_DIR})
+  target_link_libraries(${name} PUBLIC ${ARG_LINKS} PRIVATE omm_warnings)
+endfunction()
+
+# omm_test(NAME SOURCES ... LINKS ... [LABELS ...]): one GoogleTest executable;
+# each TEST becomes its own CTest name.
+function(omm_test name)
+  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;LINKS;LABELS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LINKS} GTest::gtest GTest::gtest_main omm_warnings)
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 600)
+  endif()
+  set(props TIMEOUT ${ARG_TIMEOUT}
+      ENVIRONMENT "OMM_SOURCE_DIR=${PROJECT_SOURCE_DIR};OMM_BINARY_DIR=${PROJECT_BINARY_DIR}")
+  if(ARG_LABELS)
+    list(APPEND props LABELS "${ARG_LABELS}")
+  endif()
+  gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+                       PROPERTIES ${props} DISCOVERY_TIMEOUT 60)
+endfunction()
+include(GoogleTest)

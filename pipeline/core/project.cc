@@ -1,0 +1,13 @@
+#include "pipeline/core/project.h"
+
+namespace omm {
+
+const char* MeasurementTypeName(MeasurementType type) {
+  switch (type) {
+    case MeasurementType::kDistance: return "distance";
+    case MeasurementType::kDiameter: return "diameter";
+  }
+  return "?";
+}
+
+}  // namespace omm

@@ -1,0 +1,86 @@
+// A measurement job as read from a project directory (format omm-project/1,
+// ../../../shared/docs/project-format.md). Plain values: no yaml or csv types.
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/board.h"
+
+namespace omm {
+
+struct CameraSpec {
+  double pixel_pitch_um = 0.0;           // nominal sensor pixel pitch
+  double focal_length_mm = 0.0;          // nominal lens focal length
+  std::optional<std::string> lens_model;  // forced mrcal lens model, if given
+};
+
+// `calibration.from`: reuse an earlier calibration instead of calib/.
+struct CalibrationSource {
+  enum class Kind { kProject, kCameraModel };
+  Kind kind = Kind::kProject;
+  std::filesystem::path path;  // absolute (resolved against the project directory)
+};
+
+enum class FeatureType { kCircle };
+
+struct FeatureSpec {
+  std::string name;
+  FeatureType type = FeatureType::kCircle;
+  std::string image;        // file name of a tile in tiles/ that sees it
+  Eigen::Vector2d near_px;  // rough position in that raw tile, px
+  double diameter_mm = 0.0;  // nominal diameter
+};
+
+enum class MeasurementType { kDistance, kDiameter };
+
+struct MeasurementSpec {
+  std::string name;
+  MeasurementType type = MeasurementType::kDistance;
+  // kDistance: two feature names; kDiameter: one.
+  std::vector<std::string> features;
+};
+
+// One row of table.csv: the commanded table position a tile was taken at.
+struct TilePosition {
+  std::string image;            // file name in tiles/
+  Eigen::Vector2d table_pos_mm;  // machine X, Y
+};
+
+struct CmmValue {
+  std::string measurement;  // a name in `measurements`
+  double value_mm = 0.0;
+};
+
+struct Project {
+  std::filesystem::path dir;  // the project directory (absolute)
+  std::string name;
+  CameraSpec camera;
+  std::optional<CalibrationSource> calibration_from;
+  std::optional<BoardSpec> board;  // required unless calibration_from is set
+  double table_sigma_mm = 0.0;
+  double mosaic_gsd_mm = 0.0;
+  std::vector<FeatureSpec> features;
+  std::vector<MeasurementSpec> measurements;
+
+  std::vector<std::filesystem::path> calib_images;  // absolute, file-name order
+  std::vector<TilePosition> tiles;                  // file-name order of tiles/
+  std::vector<CmmValue> cmm;                        // empty without cmm.csv
+
+  // Size shared by all images (calib/ and tiles/), px.
+  int image_width_px = 0;
+  int image_height_px = 0;
+
+  std::filesystem::path TilePath(const std::string& image) const {
+    return dir / "tiles" / image;
+  }
+  std::filesystem::path OutDir() const { return dir / "out"; }
+};
+
+const char* MeasurementTypeName(MeasurementType type);
+
+}  // namespace omm
