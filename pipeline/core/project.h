@@ -81,6 +81,7 @@ struct Project {
   std::filesystem::path OutDir() const { return dir / "out"; }
 };
 
+const char* FeatureTypeName(FeatureType type);
 const char* MeasurementTypeName(MeasurementType type);
 
 }  // namespace omm
