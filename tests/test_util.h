@@ -1,0 +1,58 @@
+// Helpers shared by tests: temporary directories, tiny valid projects, files
+// edited in place, and running the `omm` program.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "pipeline/core/project.h"
+
+namespace omm::testing {
+
+// A fresh empty directory under the system temp dir, removed with everything
+// in it when the object goes out of scope.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// A small valid project in `dir`: a 7x7 caltab, two calibration images, a
+// 2x2 grid of tiles with table positions, two circles, a distance and a
+// diameter, and CMM values for both. The images are `width_px` x `height_px`
+// plain gray PNGs (the loader checks files, not content).
+Project TinyProject(const std::filesystem::path& dir, int width_px = 32, int height_px = 24);
+
+// Writes `project`'s text files (WriteProjectFiles) and a gray PNG of its
+// image size for every calib image and tile.
+void WriteTinyProject(const Project& project);
+
+// A gray PNG of the given size.
+void WriteGrayPng(const std::filesystem::path& path, int width_px, int height_px);
+
+// Replaces the first `from` in the text file `path` by `to`; fails the test
+// if `from` is not there.
+void ReplaceInFile(const std::filesystem::path& path, const std::string& from,
+                   const std::string& to);
+void WriteTextFile(const std::filesystem::path& path, const std::string& text);
+std::string ReadTextFile(const std::filesystem::path& path);
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr together
+};
+
+// Runs a shell command line and captures its output.
+CommandResult RunCommand(const std::string& command);
+
+// The built `omm` program (from OMM_BINARY_DIR, set by omm_test).
+std::filesystem::path OmmProgram();
+
+}  // namespace omm::testing
