@@ -1,1 +1,345 @@
-// placeholder: being written
+#include "adapters/project_io/truth_json.h"
+
+#include <fstream>
+#include <sstream>
+#include <system_error>
+
+#include <nlohmann/json.hpp>
+
+#include "pipeline/core/error.h"
+
+namespace omm {
+namespace {
+
+using nlohmann::json;
+
+constexpr const char* kFormat = "omm-truth/1";
+
+json Vec(const Eigen::VectorXd& v) {
+  json out = json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) out.push_back(v[i]);
+  return out;
+}
+
+json Pose(const Eigen::Isometry3d& pose) {
+  json rows = json::array();
+  for (int r = 0; r < 3; ++r) rows.push_back(Vec(pose.linear().row(r).transpose()));
+  const Eigen::AngleAxisd angle_axis(pose.linear());
+  return {{"R", rows},
+          {"t", Vec(pose.translation())},
+          {"r", Vec(angle_axis.angle() * angle_axis.axis())}};
+}
+
+json Exposure(const ExposureTruth& exposure) {
+  return {{"gain", exposure.gain},
+          {"vignetting", exposure.vignetting},
+          {"psf_sigma_px", exposure.psf_sigma_px}};
+}
+
+// Reading: every access names the key path, so a malformed file says where.
+class Reader {
+ public:
+  explicit Reader(std::string where) : where_(std::move(where)) {}
+
+  const json& At(const json& node, const std::string& key, const std::string& path) const {
+    if (!node.is_object() || !node.contains(key)) Fail(path + "." + key, "missing");
+    return node.at(key);
+  }
+  double Number(const json& node, const std::string& key, const std::string& path) const {
+    const json& v = At(node, key, path);
+    if (!v.is_number()) Fail(path + "." + key, "expected a number");
+    return v.get<double>();
+  }
+  int Int(const json& node, const std::string& key, const std::string& path) const {
+    const json& v = At(node, key, path);
+    if (!v.is_number_integer()) Fail(path + "." + key, "expected an integer");
+    return v.get<int>();
+  }
+  std::string String(const json& node, const std::string& key, const std::string& path) const {
+    const json& v = At(node, key, path);
+    if (!v.is_string()) Fail(path + "." + key, "expected a string");
+    return v.get<std::string>();
+  }
+  const json& Array(const json& node, const std::string& key, const std::string& path) const {
+    const json& v = At(node, key, path);
+    if (!v.is_array()) Fail(path + "." + key, "expected an array");
+    return v;
+  }
+  Eigen::VectorXd Vector(const json& node, const std::string& key, const std::string& path,
+                         int size = -1) const {
+    const json& v = Array(node, key, path);
+    if (size >= 0 && static_cast<int>(v.size()) != size) {
+      Fail(path + "." + key, "expected " + std::to_string(size) + " numbers");
+    }
+    Eigen::VectorXd out(v.size());
+    for (size_t i = 0; i < v.size(); ++i) {
+      if (!v[i].is_number()) Fail(path + "." + key, "expected numbers");
+      out[static_cast<Eigen::Index>(i)] = v[i].get<double>();
+    }
+    return out;
+  }
+  Eigen::Vector2d Vec2(const json& node, const std::string& key, const std::string& path) const {
+    return Vector(node, key, path, 2);
+  }
+  Eigen::Isometry3d Pose(const json& node, const std::string& path) const {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    const json& rows = Array(node, "R", path);
+    if (rows.size() != 3) Fail(path + ".R", "expected 3 rows");
+    for (int r = 0; r < 3; ++r) {
+      const json wrapped = {{"row", rows[r]}};
+      pose.linear().row(r) = Vector(wrapped, "row", path + ".R[" + std::to_string(r) + "]", 3);
+    }
+    pose.translation() = Vector(node, "t", path, 3);
+    return pose;
+  }
+  ExposureTruth Exposure(const json& node, const std::string& path) const {
+    ExposureTruth exposure;
+    exposure.gain = Number(node, "gain", path);
+    exposure.vignetting = Number(node, "vignetting", path);
+    exposure.psf_sigma_px = Number(node, "psf_sigma_px", path);
+    return exposure;
+  }
+  [[noreturn]] void Fail(const std::string& key, const std::string& what) const {
+    throw InputError(where_ + " key '" + key + "'", what);
+  }
+
+ private:
+  std::string where_;
+};
+
+}  // namespace
+
+std::string TruthToJson(const SimulationTruth& truth) {
+  json root;
+  root["format"] = kFormat;
+  root["preset"] = truth.preset;
+  root["seed"] = truth.seed;
+
+  const CameraModel& model = truth.camera.model;
+  root["camera"] = {{"lens_model", model.lens_model},
+                    {"intrinsics", Vec(model.intrinsics)},
+                    {"imager_size_px", {model.width_px, model.height_px}},
+                    {"pixel_pitch_um", truth.camera.pixel_pitch_um},
+                    {"focal_length_mm", truth.camera.focal_length_mm},
+                    {"psf_sigma_px", truth.camera.psf_sigma_px}};
+
+  const BoardSpec& board = truth.board;
+  root["board"] = {{"type", BoardTypeName(board.type)},
+                   {"rows", board.rows},
+                   {"cols", board.cols},
+                   {"pitch_mm", board.pitch_mm},
+                   {"dot_diameter_mm", board.dot_diameter_mm},
+                   {"frame_mm", board.frame_mm},
+                   {"frame_bar_mm", board.frame_bar_mm},
+                   {"triangle_mm", board.triangle_mm},
+                   {"plate_size_mm", truth.plate_size_mm}};
+
+  json calib = json::array();
+  for (const CalibImageTruth& image : truth.calib_images) {
+    calib.push_back({{"image", image.image},
+                     {"kind", CalibImageKindName(image.kind)},
+                     {"cam_from_plate", Pose(image.cam_from_plate)},
+                     {"exposure", Exposure(image.exposure)}});
+  }
+  root["calib_images"] = calib;
+
+  root["part"] = {{"cam_from_part", Pose(truth.cam_from_part)},
+                  {"outline_min_mm", Vec(truth.part_min_mm)},
+                  {"outline_max_mm", Vec(truth.part_max_mm)},
+                  {"thickness_mm", truth.part_thickness_mm}};
+
+  json tiles = json::array();
+  for (const TileTruth& tile : truth.tiles) {
+    tiles.push_back({{"image", tile.image},
+                     {"grid", {tile.grid_row, tile.grid_col}},
+                     {"commanded_mm", Vec(tile.commanded_mm)},
+                     {"actual_mm", Vec(tile.actual_mm)},
+                     {"exposure", Exposure(tile.exposure)}});
+  }
+  root["table"] = {{"sigma_mm", truth.table_sigma_mm}, {"tiles", tiles}};
+
+  json holes = json::array();
+  for (const HoleTruth& hole : truth.holes) {
+    holes.push_back({{"name", hole.name},
+                     {"center_mm", Vec(hole.center_part_mm)},
+                     {"diameter_mm", hole.diameter_mm},
+                     {"nominal_diameter_mm", hole.nominal_diameter_mm}});
+  }
+  root["holes"] = holes;
+
+  json markers = json::array();
+  for (const MarkerTruth& marker : truth.markers) {
+    json corners = json::array();
+    for (int k = 0; k < 4; ++k) corners.push_back(Vec(marker.corners_part_mm.col(k)));
+    markers.push_back({{"id", marker.id},
+                       {"corners_mm", corners},
+                       {"tag_size_mm", marker.tag_size_mm},
+                       {"paper_size_mm", marker.paper_size_mm}});
+  }
+  root["markers"] = markers;
+
+  root["part_from_plate"] = truth.part_from_plate ? Pose(*truth.part_from_plate) : json(nullptr);
+
+  json measurements = json::array();
+  for (const MeasurementTruth& m : truth.measurements) {
+    measurements.push_back({{"name", m.name}, {"value_mm", m.value_mm}});
+  }
+  root["measurements"] = measurements;
+  return root.dump(1) + "\n";
+}
+
+SimulationTruth TruthFromJson(const std::string& text, const std::string& where) {
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw InputError(where, std::string("not valid JSON: ") + e.what());
+  }
+  const Reader in(where);
+  if (in.String(root, "format", "") != kFormat) {
+    in.Fail("format", std::string("expected \"") + kFormat + "\"");
+  }
+  SimulationTruth truth;
+  truth.preset = in.String(root, "preset", "");
+  const json& seed = in.At(root, "seed", "");
+  if (!seed.is_number_unsigned()) in.Fail("seed", "expected an unsigned integer");
+  truth.seed = seed.get<std::uint64_t>();
+
+  const json& camera = in.At(root, "camera", "");
+  truth.camera.model.lens_model = in.String(camera, "lens_model", "camera");
+  truth.camera.model.intrinsics = in.Vector(camera, "intrinsics", "camera");
+  const Eigen::VectorXd size = in.Vector(camera, "imager_size_px", "camera", 2);
+  truth.camera.model.width_px = static_cast<int>(size[0]);
+  truth.camera.model.height_px = static_cast<int>(size[1]);
+  truth.camera.pixel_pitch_um = in.Number(camera, "pixel_pitch_um", "camera");
+  truth.camera.focal_length_mm = in.Number(camera, "focal_length_mm", "camera");
+  truth.camera.psf_sigma_px = in.Number(camera, "psf_sigma_px", "camera");
+
+  const json& board = in.At(root, "board", "");
+  const std::string type = in.String(board, "type", "board");
+  if (type == "caltab") {
+    truth.board.type = BoardType::kCaltab;
+  } else if (type == "circles") {
+    truth.board.type = BoardType::kCircles;
+  } else if (type == "chessboard") {
+    truth.board.type = BoardType::kChessboard;
+  } else {
+    in.Fail("board.type", "expected caltab, circles or chessboard");
+  }
+  truth.board.rows = in.Int(board, "rows", "board");
+  truth.board.cols = in.Int(board, "cols", "board");
+  truth.board.pitch_mm = in.Number(board, "pitch_mm", "board");
+  truth.board.dot_diameter_mm = in.Number(board, "dot_diameter_mm", "board");
+  truth.board.frame_mm = in.Number(board, "frame_mm", "board");
+  truth.board.frame_bar_mm = in.Number(board, "frame_bar_mm", "board");
+  truth.board.triangle_mm = in.Number(board, "triangle_mm", "board");
+  truth.plate_size_mm = in.Number(board, "plate_size_mm", "board");
+
+  const json& calib = in.Array(root, "calib_images", "");
+  for (size_t i = 0; i < calib.size(); ++i) {
+    const std::string path = "calib_images[" + std::to_string(i) + "]";
+    CalibImageTruth image;
+    image.image = in.String(calib[i], "image", path);
+    const std::string kind = in.String(calib[i], "kind", path);
+    if (kind == "full") {
+      image.kind = CalibImageTruth::Kind::kFull;
+    } else if (kind == "partial") {
+      image.kind = CalibImageTruth::Kind::kPartial;
+    } else if (kind == "plate-absent") {
+      image.kind = CalibImageTruth::Kind::kPlateAbsent;
+    } else {
+      in.Fail(path + ".kind", "expected full, partial or plate-absent");
+    }
+    image.cam_from_plate = in.Pose(in.At(calib[i], "cam_from_plate", path), path + ".cam_from_plate");
+    image.exposure = in.Exposure(in.At(calib[i], "exposure", path), path + ".exposure");
+    truth.calib_images.push_back(image);
+  }
+
+  const json& part = in.At(root, "part", "");
+  truth.cam_from_part = in.Pose(in.At(part, "cam_from_part", "part"), "part.cam_from_part");
+  truth.part_min_mm = in.Vec2(part, "outline_min_mm", "part");
+  truth.part_max_mm = in.Vec2(part, "outline_max_mm", "part");
+  truth.part_thickness_mm = in.Number(part, "thickness_mm", "part");
+
+  const json& table = in.At(root, "table", "");
+  truth.table_sigma_mm = in.Number(table, "sigma_mm", "table");
+  const json& tiles = in.Array(table, "tiles", "table");
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    const std::string path = "table.tiles[" + std::to_string(i) + "]";
+    TileTruth tile;
+    tile.image = in.String(tiles[i], "image", path);
+    const Eigen::VectorXd grid = in.Vector(tiles[i], "grid", path, 2);
+    tile.grid_row = static_cast<int>(grid[0]);
+    tile.grid_col = static_cast<int>(grid[1]);
+    tile.commanded_mm = in.Vec2(tiles[i], "commanded_mm", path);
+    tile.actual_mm = in.Vec2(tiles[i], "actual_mm", path);
+    tile.exposure = in.Exposure(in.At(tiles[i], "exposure", path), path + ".exposure");
+    truth.tiles.push_back(tile);
+  }
+
+  const json& holes = in.Array(root, "holes", "");
+  for (size_t i = 0; i < holes.size(); ++i) {
+    const std::string path = "holes[" + std::to_string(i) + "]";
+    HoleTruth hole;
+    hole.name = in.String(holes[i], "name", path);
+    hole.center_part_mm = in.Vec2(holes[i], "center_mm", path);
+    hole.diameter_mm = in.Number(holes[i], "diameter_mm", path);
+    hole.nominal_diameter_mm = in.Number(holes[i], "nominal_diameter_mm", path);
+    truth.holes.push_back(hole);
+  }
+
+  const json& markers = in.Array(root, "markers", "");
+  for (size_t i = 0; i < markers.size(); ++i) {
+    const std::string path = "markers[" + std::to_string(i) + "]";
+    MarkerTruth marker;
+    marker.id = in.Int(markers[i], "id", path);
+    const json& corners = in.Array(markers[i], "corners_mm", path);
+    if (corners.size() != 4) in.Fail(path + ".corners_mm", "expected 4 corners");
+    for (int k = 0; k < 4; ++k) {
+      const json wrapped = {{"corner", corners[k]}};
+      marker.corners_part_mm.col(k) =
+          in.Vec2(wrapped, "corner", path + ".corners_mm[" + std::to_string(k) + "]");
+    }
+    marker.tag_size_mm = in.Number(markers[i], "tag_size_mm", path);
+    marker.paper_size_mm = in.Number(markers[i], "paper_size_mm", path);
+    truth.markers.push_back(marker);
+  }
+
+  const json& plate = in.At(root, "part_from_plate", "");
+  if (!plate.is_null()) truth.part_from_plate = in.Pose(plate, "part_from_plate");
+
+  const json& measurements = in.Array(root, "measurements", "");
+  for (size_t i = 0; i < measurements.size(); ++i) {
+    const std::string path = "measurements[" + std::to_string(i) + "]";
+    truth.measurements.push_back({in.String(measurements[i], "name", path),
+                                  in.Number(measurements[i], "value_mm", path)});
+  }
+  return truth;
+}
+
+void WriteTruthJson(const SimulationTruth& truth, const std::filesystem::path& path) {
+  std::filesystem::path tmp = path;
+  tmp += ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    out << TruthToJson(truth);
+    out.flush();
+    if (!out) throw InputError(path.string(), "cannot write file");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw InputError(path.string(), "cannot write file: " + ec.message());
+  }
+}
+
+SimulationTruth ReadTruthJson(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path.string(), "cannot open truth file");
+  std::stringstream text;
+  text << in.rdbuf();
+  return TruthFromJson(text.str(), path.string());
+}
+
+}  // namespace omm
