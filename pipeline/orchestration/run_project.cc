@@ -1,0 +1,182 @@
+#include "pipeline/orchestration/run_project.h"
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <chrono>
+#include <system_error>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "adapters/project_io/report_json.h"
+#include "pipeline/core/error.h"
+#include "pipeline/orchestration/input_hash.h"
+#include "pipeline/orchestration/version.h"
+
+namespace fs = std::filesystem;
+
+namespace omm {
+namespace {
+
+constexpr const char* kStagingPrefix = ".staging-";
+constexpr const char* kReportName = "report.json";
+
+// Removes out/.staging-<pid> directories whose process is gone.
+void RemoveStaleStaging(const fs::path& out_dir) {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(out_dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind(kStagingPrefix, 0) != 0) continue;
+    const pid_t pid = static_cast<pid_t>(std::atol(name.c_str() + std::strlen(kStagingPrefix)));
+    if (pid > 0 && kill(pid, 0) != 0 && errno == ESRCH) {
+      spdlog::debug("removing {} left by an interrupted run", entry.path().string());
+      fs::remove_all(entry.path(), ec);
+    }
+  }
+}
+
+// The report to start from: the earlier one if it belongs to these inputs.
+Report StartingReport(const Project& project, const std::string& inputs_sha256) {
+  Report report;
+  const fs::path path = project.OutDir() / kReportName;
+  std::error_code ec;
+  if (fs::is_regular_file(path, ec)) {
+    try {
+      Report earlier = ReadReportJson(path);
+      if (earlier.inputs_sha256 == inputs_sha256 &&
+          earlier.software_version == SoftwareVersion()) {
+        report = std::move(earlier);
+      } else {
+        spdlog::info("{} is from other inputs or another omm version; starting afresh",
+                     path.string());
+      }
+    } catch (const InputError& e) {
+      spdlog::warn("ignoring unreadable earlier report: {}", e.what());
+    }
+  }
+  report.format = kReportFormat;
+  report.project = project.name;
+  report.software_version = SoftwareVersion();
+  report.inputs_sha256 = inputs_sha256;
+  return report;
+}
+
+// A rerun stage invalidates its own section and those of later stages.
+void DropSectionsFrom(Stage first, Report& report) {
+  switch (first) {
+    case Stage::kCalibrate: report.calibration.reset(); [[fallthrough]];
+    case Stage::kMosaic: report.mosaic.reset(); [[fallthrough]];
+    case Stage::kMeasure: report.measurements.reset();
+  }
+}
+
+// Moves the staged outputs into out/, report.json last.
+void Commit(const fs::path& staging_dir, const fs::path& out_dir) {
+  try {
+    for (const auto& entry : fs::directory_iterator(staging_dir)) {
+      const fs::path& from = entry.path();
+      if (from.filename() == kReportName) continue;
+      const fs::path to = out_dir / from.filename();
+      // rename() replaces a file atomically but not a directory.
+      if (fs::is_directory(from) || fs::is_directory(to)) fs::remove_all(to);
+      fs::rename(from, to);
+    }
+    fs::rename(staging_dir / kReportName, out_dir / kReportName);
+  } catch (const fs::filesystem_error& e) {
+    throw InputError(out_dir.string(), std::string("cannot move the results into place: ") +
+                                           e.code().message());
+  }
+}
+
+}  // namespace
+
+void RunStage(Stage stage, StageContext& context) {
+  switch (stage) {
+    case Stage::kCalibrate: return RunCalibrateStage(context);
+    case Stage::kMosaic: return RunMosaicStage(context);
+    case Stage::kMeasure: return RunMeasureStage(context);
+  }
+}
+
+std::string RunOptions::Check() const {
+  if (stages.empty()) return "no stage to run";
+  if (!runner) return "no stage runner";
+  const std::vector<Stage> all = AllStages();
+  auto at = all.begin();
+  for (const Stage stage : stages) {
+    at = std::find(at, all.end(), stage);
+    if (at == all.end()) return "stages must be distinct and in run order (calibrate, mosaic, measure)";
+    ++at;
+  }
+  return "";
+}
+
+std::string RunSummary::Brief() const {
+  std::string names;
+  for (const Stage stage : stages_run) names += (names.empty() ? "" : ", ") + std::string(StageName(stage));
+  return fmt::format("{} done in {:.1f} s: {}", names, seconds, report_path.string());
+}
+
+RunSummary RunProject(const Project& project, const RunOptions& options) {
+  if (const std::string problem = options.Check(); !problem.empty()) {
+    throw std::invalid_argument("RunOptions: " + problem);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const fs::path out_dir = project.OutDir();
+  std::error_code ec;
+  const bool out_existed = fs::is_directory(out_dir, ec);
+  fs::create_directories(out_dir, ec);
+  if (ec) throw InputError(out_dir.string(), "cannot create the output directory: " + ec.message());
+  RemoveStaleStaging(out_dir);
+
+  const fs::path staging_dir = out_dir / (kStagingPrefix + std::to_string(getpid()));
+  fs::remove_all(staging_dir, ec);
+  fs::create_directory(staging_dir, ec);
+  if (ec) throw InputError(staging_dir.string(), "cannot create directory: " + ec.message());
+
+  RunSummary summary;
+  try {
+    spdlog::info("hashing the inputs of {}", project.dir.string());
+    Report report = StartingReport(project, HashProjectInputs(project));
+    DropSectionsFrom(options.stages.front(), report);
+    StageContext context{project, staging_dir, out_dir, report, options.progress};
+    for (const Stage stage : options.stages) {
+      spdlog::info("{}: starting", StageName(stage));
+      options.runner(stage, context);
+      spdlog::info("{}: done", StageName(stage));
+      summary.stages_run.push_back(stage);
+    }
+    WriteReportJson(staging_dir / kReportName, report);
+    Commit(staging_dir, out_dir);
+    summary.report = std::move(report);
+  } catch (...) {
+    fs::remove_all(staging_dir, ec);
+    if (!out_existed) fs::remove(out_dir, ec);  // only if still empty
+    throw;
+  }
+  fs::remove_all(staging_dir, ec);
+  summary.report_path = out_dir / kReportName;
+  summary.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+bool ReportIsCurrent(const Project& project) {
+  const fs::path path = project.OutDir() / kReportName;
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return false;
+  try {
+    const Report report = ReadReportJson(path);
+    return report.software_version == SoftwareVersion() && report.calibration &&
+           report.mosaic && report.measurements &&
+           report.inputs_sha256 == HashProjectInputs(project);
+  } catch (const InputError&) {
+    return false;
+  }
+}
+
+}  // namespace omm

@@ -1,0 +1,63 @@
+// Running stages on a loaded project, with transactional output.
+//
+// Output protocol: a run writes everything into out/.staging-<pid>/ and moves
+// it into out/ only when every requested stage succeeded, report.json last
+// (each move is an atomic rename on one file system). A failed or interrupted
+// run therefore leaves out/report.json as the earlier complete report, or
+// absent; never half-written. Stale staging directories of processes that no
+// longer run are removed at the next run.
+//
+// Single-stage runs (`omm mosaic`) start from out/report.json when it is from
+// the same inputs and software version, and drop the sections of the stages
+// after the one rerun (their results would be stale).
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "pipeline/core/progress.h"
+#include "pipeline/core/project.h"
+#include "pipeline/core/report.h"
+#include "pipeline/orchestration/stage.h"
+
+namespace omm {
+
+// Runs one stage: RunStage dispatches to the runners of stage.h; tests pass
+// their own to exercise the output protocol.
+using StageRunner = std::function<void(Stage, StageContext&)>;
+void RunStage(Stage stage, StageContext& context);
+
+struct RunOptions {
+  // The stages to run, in run order (a subsequence of AllStages()).
+  std::vector<Stage> stages = AllStages();
+  // Progress of long work inside stages; may be empty.
+  ProgressCallback progress;
+  // What runs a stage.
+  StageRunner runner = RunStage;
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+struct RunSummary {
+  std::filesystem::path report_path;  // out/report.json
+  Report report;                      // as written
+  std::vector<Stage> stages_run;
+  double seconds = 0.0;  // wall time of the run
+
+  // One line, e.g. "calibrate, mosaic, measure done in 42.1 s: out/report.json".
+  std::string Brief() const;
+};
+
+// Runs `options.stages` on `project` and commits their outputs to out/.
+// Throws InputError (bad input, including an unwritable out/),
+// StageNotBuiltError or StageFailedError; out/ is untouched then.
+RunSummary RunProject(const Project& project, const RunOptions& options);
+
+// True if out/report.json exists, was written by this software version from
+// the project's current inputs, and has every stage's section.
+bool ReportIsCurrent(const Project& project);
+
+}  // namespace omm

@@ -1,0 +1,178 @@
+#include "pipeline/orchestration/run_project.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "adapters/opencv/image_io.h"
+#include "adapters/project_io/project_reader.h"
+#include "adapters/project_io/report_json.h"
+#include "pipeline/core/error.h"
+#include "pipeline/orchestration/input_hash.h"
+#include "pipeline/orchestration/version.h"
+#include "tests/test_util.h"
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+namespace omm {
+namespace {
+
+class RunProjectTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    testing::WriteTinyProject(testing::TinyProject(dir_.path() / "job"));
+    project_ = LoadProject(dir_.path() / "job");
+  }
+
+  fs::path Out(const std::string& name) const { return project_.OutDir() / name; }
+
+  // Leftover staging directories in out/.
+  int StagingDirs() const {
+    int count = 0;
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(project_.OutDir(), ec)) {
+      count += entry.path().filename().string().rfind(".staging-", 0) == 0;
+    }
+    return count;
+  }
+
+  testing::TempDir dir_;
+  Project project_;
+};
+
+// A stand-in for the real stages: each writes a file and fills its section.
+void FakeStage(Stage stage, StageContext& context, const std::string& content) {
+  switch (stage) {
+    case Stage::kCalibrate:
+      testing::WriteTextFile(context.staging_dir / "camera.cameramodel", content);
+      context.report.calibration = CalibrationReport{"LENSMODEL_OPENCV8", 0.1, 2, {}, {}};
+      break;
+    case Stage::kMosaic: {
+      // The calibration is read through Input(): this run's or out/'s.
+      EXPECT_FALSE(context.Input("camera.cameramodel").empty());
+      testing::WriteTextFile(context.staging_dir / "mosaic.png", content);
+      context.report.mosaic = MosaicReport{};
+      context.report.mosaic->file = "mosaic.png";
+      break;
+    }
+    case Stage::kMeasure:
+      context.report.measurements = std::vector<MeasurementReport>{};
+      break;
+  }
+}
+
+TEST_F(RunProjectTest, UnbuiltStageStopsTheRunAndLeavesNoOut) {
+  try {
+    RunProject(project_, RunOptions{});
+    FAIL() << "the run passed an unbuilt stage";
+  } catch (const StageNotBuiltError& e) {
+    EXPECT_EQ(e.stage(), Stage::kCalibrate);
+    EXPECT_STREQ(e.what(), "stage 'calibrate' is not built yet");
+  }
+  EXPECT_FALSE(fs::exists(project_.OutDir()));
+}
+
+TEST_F(RunProjectTest, SuccessfulRunCommitsOutputsAndReport) {
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
+  const RunSummary summary = RunProject(project_, options);
+  EXPECT_EQ(summary.report_path, Out("report.json"));
+  EXPECT_EQ(summary.stages_run.size(), 3u);
+  EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
+  EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v1");
+  const Report report = ReadReportJson(Out("report.json"));
+  EXPECT_EQ(report.project, "tiny");
+  EXPECT_EQ(report.software_version, SoftwareVersion());
+  EXPECT_EQ(report.inputs_sha256, HashProjectInputs(project_));
+  EXPECT_TRUE(report.calibration && report.mosaic && report.measurements);
+  EXPECT_EQ(StagingDirs(), 0);
+  EXPECT_TRUE(ReportIsCurrent(project_));
+}
+
+TEST_F(RunProjectTest, FailureKeepsTheEarlierOutputsExactly) {
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
+  RunProject(project_, options);
+  const std::string report_before = testing::ReadTextFile(Out("report.json"));
+
+  // The second run writes new outputs in calibrate, then fails in mosaic.
+  options.runner = [](Stage stage, StageContext& context) {
+    FakeStage(stage, context, "v2");
+    if (stage == Stage::kMosaic) throw StageFailedError(stage, "tiles do not overlap");
+  };
+  EXPECT_THROW(RunProject(project_, options), StageFailedError);
+  EXPECT_EQ(testing::ReadTextFile(Out("report.json")), report_before);
+  EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
+  EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v1");
+  EXPECT_EQ(StagingDirs(), 0);
+}
+
+TEST_F(RunProjectTest, InputErrorInAStageKeepsOutUntouched) {
+  RunOptions options;
+  options.runner = [](Stage, StageContext& context) {
+    testing::WriteTextFile(context.staging_dir / "camera.cameramodel", "partial");
+    throw InputError("calib/calib_01.png", "cannot decode image");
+  };
+  EXPECT_THROW(RunProject(project_, options), InputError);
+  EXPECT_FALSE(fs::exists(project_.OutDir()));
+}
+
+TEST_F(RunProjectTest, SingleStageRunKeepsEarlierSectionsAndDropsLaterOnes) {
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
+  RunProject(project_, options);
+
+  options.stages = {Stage::kMosaic};
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v2"); };
+  const RunSummary summary = RunProject(project_, options);
+  EXPECT_TRUE(summary.report.calibration.has_value());   // from the earlier run
+  EXPECT_TRUE(summary.report.mosaic.has_value());        // rerun
+  EXPECT_FALSE(summary.report.measurements.has_value());  // stale, dropped
+  EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v2");
+  EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
+  EXPECT_FALSE(ReportIsCurrent(project_));  // measure has not run on it
+}
+
+TEST_F(RunProjectTest, ReportIsNotCurrentAfterAnInputChanges) {
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
+  RunProject(project_, options);
+  ASSERT_TRUE(ReportIsCurrent(project_));
+  testing::ReplaceInFile(project_.dir / "table.csv", "108.6", "108.7");
+  EXPECT_FALSE(ReportIsCurrent(project_));
+}
+
+TEST_F(RunProjectTest, StagingOfADeadProcessIsRemoved) {
+  fs::create_directories(Out(".staging-4194303") / "half");  // above any live pid here
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
+  RunProject(project_, options);
+  EXPECT_EQ(StagingDirs(), 0);
+}
+
+TEST_F(RunProjectTest, OptionsCheckRejectsStagesOutOfOrder) {
+  RunOptions options;
+  EXPECT_EQ(options.Check(), "");
+  options.stages = {Stage::kMosaic, Stage::kCalibrate};
+  EXPECT_THAT(options.Check(), HasSubstr("run order"));
+  options.stages = {Stage::kMosaic, Stage::kMosaic};
+  EXPECT_THAT(options.Check(), HasSubstr("run order"));
+  options.stages = {};
+  EXPECT_NE(options.Check(), "");
+}
+
+TEST_F(RunProjectTest, InputHashSeesEveryInput) {
+  const std::string hash = HashProjectInputs(project_);
+  EXPECT_EQ(hash.size(), 64u);
+  EXPECT_EQ(HashProjectInputs(project_), hash);  // deterministic
+  // 2 calib images + 4 tiles + project.yaml, table.csv, cmm.csv.
+  EXPECT_EQ(ProjectInputFiles(project_).size(), 9u);
+
+  testing::WriteGrayPng(project_.TilePath("Part_02.png"), 32, 24);  // same bytes
+  EXPECT_EQ(HashProjectInputs(project_), hash);
+  WriteGrayImage(project_.TilePath("Part_02.png"), ImageF::Constant(24, 32, 0.25f), 8);
+  EXPECT_NE(HashProjectInputs(project_), hash);
+}
+
+}  // namespace
+}  // namespace omm

@@ -1,0 +1,77 @@
+// The stages `omm` runs on a project, and what a stage runner sees.
+//
+// A stage runner (calibrate_stage.cc, mosaic_stage.cc, measure_stage.cc) is
+// the glue between files and a pipeline stage: it reads its inputs through
+// adapters, calls the stage's pure functions, writes its outputs into the
+// staging directory and fills its section of the report. RunProject
+// (run_project.h) moves the staged files into out/ only when every stage
+// succeeded.
+#pragma once
+
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "pipeline/core/progress.h"
+#include "pipeline/core/project.h"
+#include "pipeline/core/report.h"
+
+namespace omm {
+
+enum class Stage { kCalibrate, kMosaic, kMeasure };
+
+// "calibrate", "mosaic", "measure".
+const char* StageName(Stage stage);
+// In run order.
+std::vector<Stage> AllStages();
+
+// A stage whose code is not written yet. `omm` exits with kExitNotBuilt.
+class StageNotBuiltError : public std::runtime_error {
+ public:
+  explicit StageNotBuiltError(Stage stage)
+      : std::runtime_error(std::string("stage '") + StageName(stage) + "' is not built yet"),
+        stage_(stage) {}
+  Stage stage() const { return stage_; }
+
+ private:
+  Stage stage_;
+};
+
+// A data failure that leaves a stage without a usable result (no plate found
+// in any calibration image, tiles that do not overlap, ...): the run stops
+// and out/ is left as it was. Failures of single items (one image, one
+// measurement) are recorded in the report instead.
+class StageFailedError : public std::runtime_error {
+ public:
+  StageFailedError(Stage stage, const std::string& why)
+      : std::runtime_error(std::string("stage '") + StageName(stage) + "' failed: " + why),
+        stage_(stage) {}
+  Stage stage() const { return stage_; }
+
+ private:
+  Stage stage_;
+};
+
+struct StageContext {
+  const Project& project;
+  // Where this run's outputs go, named as they will be in out/.
+  std::filesystem::path staging_dir;
+  // out/ as earlier runs left it (read only).
+  std::filesystem::path out_dir;
+  // The report being built; a runner fills its own section.
+  Report& report;
+  const ProgressCallback& progress;
+
+  // An earlier stage's output file: this run's if it wrote one, else the one
+  // in out/ from an earlier run, else an empty path.
+  std::filesystem::path Input(const std::string& name) const;
+};
+
+// The runners, one per stage. Each throws StageNotBuiltError until written,
+// InputError for bad input, StageFailedError for a data failure.
+void RunCalibrateStage(StageContext& context);
+void RunMosaicStage(StageContext& context);
+void RunMeasureStage(StageContext& context);
+
+}  // namespace omm

@@ -1,0 +1,7 @@
+#include "pipeline/orchestration/version.h"
+
+namespace omm {
+
+const char* SoftwareVersion() { return OMM_VERSION; }
+
+}  // namespace omm
