@@ -101,9 +101,6 @@ CommandResult RunCommand(const std::string& command) {
   return result;
 }
 
-fs::path OmmProgram() {
-  const char* binary_dir = std::getenv("OMM_BINARY_DIR");
-  return fs::path(binary_dir != nullptr ? binary_dir : ".") / "app" / "omm";
-}
+fs::path OmmProgram() { return OMM_PROGRAM; }
 
 }  // namespace omm::testing

@@ -52,7 +52,7 @@ struct CommandResult {
 // Runs a shell command line and captures its output.
 CommandResult RunCommand(const std::string& command);
 
-// The built `omm` program (from OMM_BINARY_DIR, set by omm_test).
+// The built `omm` program of this build tree.
 std::filesystem::path OmmProgram();
 
 }  // namespace omm::testing

@@ -1,0 +1,215 @@
+#include "app/commands.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "adapters/project_io/project_reader.h"
+#include "adapters/project_io/report_json.h"
+#include "app/exit_codes.h"
+#include "app/terminal_progress.h"
+#include "pipeline/core/error.h"
+#include "pipeline/orchestration/run_project.h"
+#include "pipeline/simulate/simulate_project.h"
+
+namespace fs = std::filesystem;
+
+namespace omm {
+namespace {
+
+struct Outcome {
+  int exit_code = kExitOk;
+  std::string message;  // empty when ok
+};
+
+// Runs `body`, turning the three kinds of failure into exit codes.
+Outcome Guarded(const std::function<void()>& body) {
+  try {
+    body();
+    return {};
+  } catch (const InputError& e) {
+    return {kExitBadInput, e.what()};
+  } catch (const StageNotBuiltError& e) {
+    return {kExitNotBuilt, e.what()};
+  } catch (const StageFailedError& e) {
+    return {kExitFailed, e.what()};
+  } catch (const std::exception& e) {
+    return {kExitInternal, std::string("internal error (a bug; please report it): ") + e.what()};
+  }
+}
+
+int Finish(const Outcome& outcome) {
+  if (outcome.exit_code != kExitOk) spdlog::error("{}", outcome.message);
+  return outcome.exit_code;
+}
+
+std::string Optional(const std::optional<double>& value, const char* format_spec = "{:.4f}") {
+  return value ? fmt::format(fmt::runtime(format_spec), *value) : "-";
+}
+
+// Measurements made / listed, and the largest |deviation| / sigma.
+std::string MeasurementBrief(const Report& report) {
+  if (!report.measurements) return "-";
+  int made = 0;
+  double worst = 0.0;
+  for (const MeasurementReport& m : *report.measurements) {
+    made += m.value_mm.has_value();
+    if (m.deviation_sigma) worst = std::max(worst, std::abs(*m.deviation_sigma));
+  }
+  return fmt::format("{}/{} made, max |dev|/sigma {:.2f}", made, report.measurements->size(), worst);
+}
+
+// Project directories named by `dirs` (a project, or a folder of projects).
+std::vector<fs::path> FindProjects(const std::vector<fs::path>& dirs) {
+  std::vector<fs::path> projects;
+  std::error_code ec;
+  for (const fs::path& dir : dirs) {
+    if (fs::is_regular_file(dir / "project.yaml", ec)) {
+      projects.push_back(dir);
+      continue;
+    }
+    if (!fs::is_directory(dir, ec)) throw InputError(dir.string(), "directory not found");
+    std::vector<fs::path> found;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      if (fs::is_regular_file(entry.path() / "project.yaml", ec)) found.push_back(entry.path());
+    }
+    if (found.empty()) {
+      throw InputError(dir.string(), "neither a project (no project.yaml) nor a folder of projects");
+    }
+    std::sort(found.begin(), found.end());
+    projects.insert(projects.end(), found.begin(), found.end());
+  }
+  return projects;
+}
+
+}  // namespace
+
+int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages) {
+  return Finish(Guarded([&] {
+    const Project project = LoadProject(project_dir);
+    spdlog::info("loaded {}: {} calibration images, {} tiles, {} measurements", project.name,
+                 project.calib_images.size(), project.tiles.size(), project.measurements.size());
+    TerminalProgress progress(IsStderrTerminal());
+    RunOptions options;
+    options.stages = stages;
+    options.progress = progress.Callback();
+    const RunSummary summary = RunProject(project, options);
+    progress.Finish();
+    spdlog::info("{}", summary.Brief());
+    fmt::print("{}\n", summary.report_path.string());
+  }));
+}
+
+int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
+  std::vector<fs::path> projects;
+  if (const Outcome found = Guarded([&] { projects = FindProjects(dirs); });
+      found.exit_code != kExitOk) {
+    return Finish(found);
+  }
+  struct Row {
+    std::string project, result, measurements;
+    double seconds = 0.0;
+  };
+  std::vector<Row> rows;
+  bool any_failed = false;
+  for (size_t i = 0; i < projects.size(); ++i) {
+    const fs::path& dir = projects[i];
+    spdlog::info("[{}/{}] {}", i + 1, projects.size(), dir.string());
+    Row row{dir.string(), "ok", "-"};
+    const auto start = std::chrono::steady_clock::now();
+    const Outcome outcome = Guarded([&] {
+      const Project project = LoadProject(dir);
+      if (!force && ReportIsCurrent(project)) {
+        row.result = "current (skipped)";
+      } else {
+        TerminalProgress progress(IsStderrTerminal());
+        RunOptions options;
+        options.progress = progress.Callback();
+        RunProject(project, options);
+      }
+      row.measurements = MeasurementBrief(ReadReportJson(project.OutDir() / "report.json"));
+    });
+    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (outcome.exit_code != kExitOk) {
+      any_failed = true;
+      row.result = fmt::format("FAILED ({}): {}", outcome.exit_code, outcome.message);
+      spdlog::error("{}: {}", dir.string(), outcome.message);
+    }
+    rows.push_back(row);
+  }
+
+  size_t width = 7;
+  for (const Row& row : rows) width = std::max(width, row.project.size());
+  fmt::print("{:<{}}  {:>8}  {:<34}  {}\n", "project", width, "time_s", "measurements", "result");
+  for (const Row& row : rows) {
+    fmt::print("{:<{}}  {:>8.1f}  {:<34}  {}\n", row.project, width, row.seconds,
+               row.measurements, row.result);
+  }
+  const auto failed = std::count_if(rows.begin(), rows.end(),
+                                    [](const Row& r) { return r.result.rfind("FAILED", 0) == 0; });
+  fmt::print("{} projects, {} failed\n", rows.size(), failed);
+  return any_failed ? kExitFailed : kExitOk;
+}
+
+int SimulateCommand(const fs::path& project_dir, std::uint64_t seed, const std::string& preset,
+                    const std::optional<fs::path>& truth) {
+  return Finish(Guarded([&] {
+    SimulationOptions options;
+    options.seed = seed;
+    options.preset = preset;
+    if (const std::string problem = options.Check(); !problem.empty()) {
+      throw InputError("omm simulate", problem);
+    }
+    const fs::path truth_path = truth ? *truth : DefaultTruthPath(project_dir);
+    TerminalProgress progress(IsStderrTerminal());
+    SimulateProjectDirectory(options, project_dir, truth_path, progress.Callback());
+    progress.Finish();
+    spdlog::info("simulated project '{}' (preset {}, seed {}); truth in {}", project_dir.string(),
+                 preset, seed, truth_path.string());
+    fmt::print("{}\n", project_dir.string());
+  }));
+}
+
+int ReportCommand(const fs::path& project_dir, bool json) {
+  return Finish(Guarded([&] {
+    const fs::path path = project_dir / "out" / "report.json";
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) {
+      throw InputError(path.string(), "no report yet (run 'omm run " + project_dir.string() + "')");
+    }
+    const Report report = ReadReportJson(path);
+    if (json) {
+      fmt::print("{}", ReportToJson(report));
+      return;
+    }
+    fmt::print("project {}  (omm {}, inputs {})\n", report.project, report.software_version,
+               report.inputs_sha256.substr(0, 12));
+    if (report.calibration) {
+      const CalibrationReport& c = *report.calibration;
+      fmt::print("calibration: {}, rms {:.3f} px, {} images used, {} rejected\n", c.lens_model,
+                 c.rms_px, c.images_used, c.images_rejected.size());
+      for (const RejectedImage& r : c.images_rejected) fmt::print("  rejected {}: {}\n", r.image, r.why);
+    }
+    if (report.mosaic) {
+      const MosaicReport& m = *report.mosaic;
+      fmt::print("mosaic: {}, {} x {} px at {} mm/px, rms {:.3f} px\n", m.file, m.size_px.x(),
+                 m.size_px.y(), m.gsd_mm, m.rms_px);
+    }
+    if (report.measurements) {
+      fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}\n", "measurement", "type",
+                 "value_mm", "sigma_mm", "cmm_mm", "dev_mm", "dev/sigma");
+      for (const MeasurementReport& m : *report.measurements) {
+        fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}{}\n", m.name,
+                   MeasurementTypeName(m.type), Optional(m.value_mm), Optional(m.sigma_mm),
+                   Optional(m.cmm_mm), Optional(m.deviation_mm), Optional(m.deviation_sigma, "{:.2f}"),
+                   m.error.empty() ? "" : "  error: " + m.error);
+      }
+    }
+  }));
+}
+
+}  // namespace omm

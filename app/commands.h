@@ -1,0 +1,30 @@
+// The subcommands of `omm`, each returning its exit code (exit_codes.h). They
+// log through spdlog and print results to stdout.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "pipeline/orchestration/stage.h"
+
+namespace omm {
+
+// `omm run` (all stages) and `omm calibrate|mosaic|measure` (one stage).
+int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage>& stages);
+
+// `omm batch`: each argument is a project directory or a directory whose
+// subdirectories are projects. Projects whose report is current are skipped
+// unless `force`. Prints a summary table; exits kExitFailed if any failed.
+int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force);
+
+// `omm simulate`.
+int SimulateCommand(const std::filesystem::path& project_dir, std::uint64_t seed,
+                    const std::string& preset, const std::optional<std::filesystem::path>& truth);
+
+// `omm report`: a summary of out/report.json, or the JSON itself.
+int ReportCommand(const std::filesystem::path& project_dir, bool json);
+
+}  // namespace omm

@@ -1,0 +1,147 @@
+// `omm`: on-machine vision metrology from the command line. See README.md.
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "app/commands.h"
+#include "app/exit_codes.h"
+#include "pipeline/orchestration/version.h"
+#include "pipeline/simulate/simulate_project.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kExitCodes = R"(Exit codes:
+  0  done
+  1  a stage failed on the data (e.g. no plate found); batch: some project failed
+  2  bad input: command line, project files (the message names file and key or line)
+  3  a stage that is not built yet was needed
+  4  internal error (a bug; please report it)
+
+Every project is a directory in format omm-project/1 (project.yaml, calib/,
+tiles/, table.csv, optional cmm.csv); results go to its out/ (report.json, ...),
+written only when every stage succeeded.)";
+
+void SetUpLogging(int verbose, bool quiet) {
+  auto logger = spdlog::stderr_color_mt("omm");
+  logger->set_pattern("%^%l%$: %v");
+  spdlog::set_default_logger(logger);
+  spdlog::set_level(quiet ? spdlog::level::warn
+                    : verbose >= 2 ? spdlog::level::trace
+                    : verbose == 1 ? spdlog::level::debug
+                                   : spdlog::level::info);
+}
+
+// `omm calibrate|mosaic|measure PROJECT`.
+CLI::App* AddStageCommand(CLI::App& app, omm::Stage stage, const std::string& help,
+                          std::string& project, std::optional<omm::Stage>& chosen) {
+  CLI::App* command = app.add_subcommand(omm::StageName(stage), help);
+  command->add_option("PROJECT", project, "project directory")->required();
+  command->callback([stage, &chosen] { chosen = stage; });
+  return command;
+}
+
+std::string PresetList() {
+  std::string list;
+  for (const std::string& preset : omm::SimulationPresets()) list += (list.empty() ? "" : ", ") + preset;
+  return list;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"omm: on-machine vision metrology. Calibrates the camera over an NC machine "
+               "table, registers the tiles of a flat workpiece into an orthorectified mosaic, "
+               "and measures holes with their uncertainty.",
+               "omm"};
+  app.footer(kExitCodes);
+  app.set_version_flag("--version", std::string("omm ") + omm::SoftwareVersion());
+  app.require_subcommand(1);
+  app.fallthrough();
+  int verbose = 0;
+  bool quiet = false;
+  app.add_flag("-v,--verbose", verbose, "more log detail (-vv: everything)");
+  app.add_flag("-q,--quiet", quiet, "warnings and errors only");
+
+  std::string project;
+  std::optional<omm::Stage> stage;
+
+  CLI::App* run = app.add_subcommand(
+      "run",
+      "Run every stage on a project: calibrate, mosaic, measure.\n"
+      "Reads PROJECT/project.yaml, calib/, tiles/, table.csv, cmm.csv.\n"
+      "Writes PROJECT/out/: report.json, camera.cameramodel, the mosaic, ... (all or nothing).");
+  run->add_option("PROJECT", project, "project directory")->required();
+
+  AddStageCommand(app, omm::Stage::kCalibrate,
+                  "Calibrate the camera from the plate images.\n"
+                  "Reads PROJECT/project.yaml (camera, board) and calib/ (or calibration.from).\n"
+                  "Writes PROJECT/out/camera.cameramodel and the report's calibration section.",
+                  project, stage);
+  AddStageCommand(app, omm::Stage::kMosaic,
+                  "Register the tiles and write the orthorectified mosaic.\n"
+                  "Reads PROJECT/project.yaml, tiles/, table.csv and out/camera.cameramodel.\n"
+                  "Writes PROJECT/out/mosaic.* and the report's mosaic section.",
+                  project, stage);
+  AddStageCommand(app, omm::Stage::kMeasure,
+                  "Measure the features and measurements listed in project.yaml.\n"
+                  "Reads PROJECT/project.yaml, cmm.csv and the mosaic stage's results in out/.\n"
+                  "Writes the report's measurements section (values, 1-sigma, CMM deviations).",
+                  project, stage);
+
+  std::vector<fs::path> batch_dirs;
+  bool force = false;
+  CLI::App* batch = app.add_subcommand(
+      "batch",
+      "Run many projects, one after another, and print a summary table.\n"
+      "Each DIR is a project directory or a directory of project directories.\n"
+      "Projects whose out/report.json is current (same inputs, same omm) are skipped.\n"
+      "Writes each project's out/ as `omm run` does; a failing project does not stop the batch.");
+  batch->add_option("DIR", batch_dirs, "project directories or folders of projects")->required();
+  batch->add_flag("--force", force, "rerun projects whose report is current");
+
+  fs::path simulate_out;
+  std::uint64_t seed = 1;
+  std::string preset = "demo";
+  std::optional<fs::path> truth;
+  CLI::App* simulate = app.add_subcommand(
+      "simulate",
+      "Render a synthetic project with known truth (for the demo, tests, planning a capture).\n"
+      "Writes the project directory OUT (must not exist or be empty) and its truth as JSON\n"
+      "(default OUT.truth.json beside it, outside the project).");
+  simulate->add_option("OUT", simulate_out, "project directory to create")->required();
+  simulate->add_option("--seed", seed, "random seed; the same seed gives the same project")
+      ->capture_default_str();
+  simulate->add_option("--preset", preset, "scene preset: " + PresetList())->capture_default_str();
+  simulate->add_option("--truth", truth, "where to write the truth JSON");
+
+  bool json = false;
+  CLI::App* report = app.add_subcommand(
+      "report",
+      "Print a summary of PROJECT/out/report.json (calibration, mosaic, measurements vs CMM).\n"
+      "Reads PROJECT/out/report.json. Writes nothing.");
+  report->add_option("PROJECT", project, "project directory")->required();
+  report->add_flag("--json", json, "print the report's JSON instead");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);  // prints help, version or the error
+    return code == 0 ? omm::kExitOk : omm::kExitBadInput;
+  }
+  SetUpLogging(verbose, quiet);
+
+  if (run->parsed()) return omm::RunCommand(project, omm::AllStages());
+  if (stage) return omm::RunCommand(project, {*stage});
+  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force);
+  if (simulate->parsed()) return omm::SimulateCommand(simulate_out, seed, preset, truth);
+  if (report->parsed()) return omm::ReportCommand(project, json);
+  return omm::kExitBadInput;
+}

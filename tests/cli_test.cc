@@ -1,0 +1,134 @@
+// The `omm` program as a user meets it: help, exit codes, error messages and
+// what is (not) left in out/.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "adapters/project_io/report_json.h"
+#include "tests/test_util.h"
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+namespace omm {
+namespace {
+
+testing::CommandResult Omm(const std::string& arguments) {
+  return testing::RunCommand(testing::OmmProgram().string() + " " + arguments);
+}
+
+std::string Quoted(const fs::path& path) { return "'" + path.string() + "'"; }
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    project_ = testing::TinyProject(dir_.path() / "job");
+    testing::WriteTinyProject(project_);
+  }
+  testing::TempDir dir_;
+  Project project_;
+};
+
+TEST(Cli, EverySubcommandHasHelpSayingWhatItReadsAndWrites) {
+  for (const std::string command :
+       {"run", "calibrate", "mosaic", "measure", "batch", "simulate", "report"}) {
+    const auto result = Omm(command + " --help");
+    EXPECT_EQ(result.exit_code, 0) << command;
+    EXPECT_THAT(result.output, HasSubstr("Usage: omm " + command)) << command;
+    EXPECT_THAT(result.output, HasSubstr("Writes")) << command;
+  }
+  const auto top = Omm("--help");
+  EXPECT_EQ(top.exit_code, 0);
+  EXPECT_THAT(top.output, HasSubstr("Exit codes:"));
+}
+
+TEST(Cli, VersionAndUsageErrors) {
+  const auto version = Omm("--version");
+  EXPECT_EQ(version.exit_code, 0);
+  EXPECT_THAT(version.output, HasSubstr("omm 0."));
+  EXPECT_EQ(Omm("").exit_code, 2);
+  EXPECT_EQ(Omm("frobnicate").exit_code, 2);
+  EXPECT_EQ(Omm("run").exit_code, 2);  // PROJECT missing
+}
+
+TEST_F(CliTest, BadProjectExitsTwoAndNamesFileAndKey) {
+  testing::ReplaceInFile(project_.dir / "project.yaml", "pitch_mm: 12.5", "pitch_mm: -12.5");
+  const auto result = Omm("run " + Quoted(project_.dir));
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("project.yaml:"));
+  EXPECT_THAT(result.output, HasSubstr("board.pitch_mm"));
+  EXPECT_FALSE(fs::exists(project_.OutDir()));
+}
+
+TEST_F(CliTest, MissingProjectExitsTwo) {
+  const auto result = Omm("run " + Quoted(dir_.path() / "nowhere"));
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_THAT(result.output, HasSubstr("nowhere"));
+}
+
+TEST_F(CliTest, CorruptTileIsNamedAndLeavesNoReport) {
+  testing::WriteTextFile(project_.TilePath("Part_03.png"), "\x89PNG\r\n\x1a\n cut short");
+  const auto result = Omm("run " + Quoted(project_.dir));
+  EXPECT_NE(result.exit_code, 0);
+  EXPECT_THAT(result.output, HasSubstr("Part_03.png"));
+  EXPECT_FALSE(fs::exists(project_.OutDir() / "report.json"));
+}
+
+TEST_F(CliTest, FailedRunKeepsAnEarlierReportByteForByte) {
+  Report earlier;
+  earlier.project = "tiny";
+  fs::create_directories(project_.OutDir());
+  WriteReportJson(project_.OutDir() / "report.json", earlier);
+  const std::string before = testing::ReadTextFile(project_.OutDir() / "report.json");
+  const auto result = Omm("run " + Quoted(project_.dir));
+  EXPECT_NE(result.exit_code, 0);
+  EXPECT_EQ(testing::ReadTextFile(project_.OutDir() / "report.json"), before);
+  std::vector<std::string> left;
+  for (const auto& entry : fs::directory_iterator(project_.OutDir())) {
+    left.push_back(entry.path().filename().string());
+  }
+  EXPECT_EQ(left, std::vector<std::string>{"report.json"});  // no staging left behind
+}
+
+TEST_F(CliTest, ValidProjectStopsAtTheFirstUnbuiltStage) {
+  const auto result = Omm("run " + Quoted(project_.dir));
+  EXPECT_EQ(result.exit_code, 3) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("stage 'calibrate' is not built yet"));
+  EXPECT_FALSE(fs::exists(project_.OutDir()));
+  const auto mosaic = Omm("mosaic " + Quoted(project_.dir));
+  EXPECT_EQ(mosaic.exit_code, 3);
+  EXPECT_THAT(mosaic.output, HasSubstr("stage 'mosaic' is not built yet"));
+}
+
+TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
+  Project bad = testing::TinyProject(dir_.path() / "bad");
+  testing::WriteTinyProject(bad);
+  testing::ReplaceInFile(bad.dir / "table.csv", "image,x_mm,y_mm", "image,x,y");
+  const auto result = Omm("batch " + Quoted(dir_.path()));  // a folder of projects
+  EXPECT_EQ(result.exit_code, 1) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("2 projects, 2 failed"));
+  EXPECT_THAT(result.output, HasSubstr("FAILED (2)"));  // bad: table.csv header
+  EXPECT_THAT(result.output, HasSubstr("table.csv:1"));
+  EXPECT_THAT(result.output, HasSubstr("FAILED (3)"));  // job: calibrate not built
+}
+
+TEST_F(CliTest, ReportPrintsTheMeasurements) {
+  EXPECT_EQ(Omm("report " + Quoted(project_.dir)).exit_code, 2);  // no report yet
+  Report report;
+  report.project = "tiny";
+  MeasurementReport m;
+  m.name = "A_to_B";
+  m.value_mm = 202.6021;
+  m.sigma_mm = 0.0031;
+  report.measurements = std::vector<MeasurementReport>{m};
+  fs::create_directories(project_.OutDir());
+  WriteReportJson(project_.OutDir() / "report.json", report);
+  const auto text = Omm("report " + Quoted(project_.dir));
+  EXPECT_EQ(text.exit_code, 0);
+  EXPECT_THAT(text.output, HasSubstr("A_to_B"));
+  EXPECT_THAT(text.output, HasSubstr("202.6021"));
+  const auto json = Omm("report --json " + Quoted(project_.dir));
+  EXPECT_THAT(json.output, HasSubstr("\"format\": \"omm-report/1\""));
+}
+
+}  // namespace
+}  // namespace omm
