@@ -1,0 +1,359 @@
+#include "adapters/ceres/plane_bundle.h"
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <utility>
+#include <vector>
+
+#include <ceres/ceres.h>
+
+#include "adapters/ceres/plane_costs.h"
+
+namespace omm {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// The Ceres parameter blocks: copies of the scene's values in the layout the
+// cost functions expect (track points alias scene->track_xy_mm's columns).
+struct Blocks {
+  std::array<double, 3> r{};
+  std::array<double, 3> t{};
+  std::vector<std::array<double, 2>> table_pos;
+  std::vector<std::array<double, 3>> plate_pose;  // x, y, theta
+  std::vector<double> plate_height;
+  std::vector<double> plate_scale;
+  Eigen::VectorXd intrinsics;
+  double* point(PlaneScene* scene, int track) const { return scene->track_xy_mm.col(track).data(); }
+};
+
+Blocks BlocksFromScene(const PlaneScene& scene) {
+  Blocks b;
+  for (int k = 0; k < 3; ++k) {
+    b.r[k] = scene.cam_from_part_r[k];
+    b.t[k] = scene.cam_from_part_t_mm[k];
+  }
+  for (const Eigen::Vector2d& pos : scene.table_pos_mm) b.table_pos.push_back({pos.x(), pos.y()});
+  for (const PlatePose& plate : scene.plates) {
+    b.plate_pose.push_back({plate.x_mm, plate.y_mm, plate.theta_rad});
+    b.plate_height.push_back(plate.height_mm);
+    b.plate_scale.push_back(plate.scale);
+  }
+  b.intrinsics = scene.intrinsics;
+  return b;
+}
+
+void BlocksToScene(const Blocks& b, PlaneScene* scene) {
+  scene->cam_from_part_r = Eigen::Vector3d(b.r.data());
+  scene->cam_from_part_t_mm = Eigen::Vector3d(b.t.data());
+  for (size_t i = 0; i < b.table_pos.size(); ++i) {
+    scene->table_pos_mm[i] = Eigen::Vector2d(b.table_pos[i][0], b.table_pos[i][1]);
+  }
+  for (size_t g = 0; g < b.plate_pose.size(); ++g) {
+    scene->plates[g] = {b.plate_pose[g][0], b.plate_pose[g][1], b.plate_pose[g][2],
+                        b.plate_height[g], b.plate_scale[g]};
+  }
+  scene->intrinsics = b.intrinsics;
+}
+
+// Model minus observed pixel of every observation (weight-0 ones too), px;
+// NaN where the lens cannot project.
+void ComputeResiduals(const LensProjection& lens, const PlaneBundleInput& input, Blocks* b,
+                      PlaneScene* scene) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  scene->residual_px.resize(2, static_cast<Eigen::Index>(input.observations.size()));
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    const TrackObservation& obs = input.observations[n];
+    const TrackReprojectionCost cost(lens, obs.q_px, 1.0);
+    const double* params[] = {b->r.data(), b->t.data(), b->table_pos[obs.tile].data(),
+                              b->point(scene, obs.track), b->intrinsics.data()};
+    Eigen::Vector2d res;
+    if (!cost.Evaluate(params, res.data(), nullptr)) res.setConstant(nan);
+    scene->residual_px.col(static_cast<Eigen::Index>(n)) = res;
+  }
+  scene->plate_residual_px.resize(2,
+                                  static_cast<Eigen::Index>(input.plate_observations.size()));
+  for (size_t n = 0; n < input.plate_observations.size(); ++n) {
+    const PlateMarkObservation& obs = input.plate_observations[n];
+    const PlateMarkReprojectionCost cost(lens, input.plates[obs.plate].mark_uv_mm.col(obs.mark),
+                                         obs.q_px, 1.0);
+    const double* params[] = {b->r.data(),
+                              b->t.data(),
+                              b->table_pos[obs.tile].data(),
+                              b->plate_pose[obs.plate].data(),
+                              &b->plate_height[obs.plate],
+                              &b->plate_scale[obs.plate],
+                              b->intrinsics.data()};
+    Eigen::Vector2d res;
+    if (!cost.Evaluate(params, res.data(), nullptr)) res.setConstant(nan);
+    scene->plate_residual_px.col(static_cast<Eigen::Index>(n)) = res;
+  }
+}
+
+// RMS of |residual| over the used observations, and their weighted chi^2.
+std::pair<double, double> RmsAndChi2(const PlaneBundleInput& input, const PlaneScene& scene) {
+  double sum_sq = 0.0, chi2 = 0.0;
+  int count = 0;
+  const double inv_sigma = 1.0 / input.observation_sigma_px;
+  auto add = [&](double weight, const Eigen::Vector2d& res) {
+    if (weight <= 0.0) return;
+    sum_sq += res.squaredNorm();
+    chi2 += (weight * inv_sigma * res).squaredNorm();
+    ++count;
+  };
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    add(input.observations[n].weight, scene.residual_px.col(static_cast<Eigen::Index>(n)));
+  }
+  for (size_t n = 0; n < input.plate_observations.size(); ++n) {
+    add(input.plate_observations[n].weight,
+        scene.plate_residual_px.col(static_cast<Eigen::Index>(n)));
+  }
+  return {count > 0 ? std::sqrt(sum_sq / count) : 0.0, chi2};
+}
+
+ceres::LossFunction* MakeLoss(const PlaneBundleOptions& options, double sigma_px) {
+  // The residual is in sigmas; the loss scale is given in px.
+  const double scale = options.loss_scale_px / sigma_px;
+  switch (options.loss) {
+    case RobustLoss::kTrivial: return nullptr;
+    case RobustLoss::kHuber: return new ceres::HuberLoss(scale);
+    case RobustLoss::kCauchy: return new ceres::CauchyLoss(scale);
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundleInput& input,
+                                    const PlaneBundleConfig& config,
+                                    const PlaneBundleOptions& options, PlaneScene* scene) {
+  PlaneBundleSummary summary;
+  const int num_tiles = static_cast<int>(input.commanded_table_pos_mm.size());
+  const int num_plates = static_cast<int>(input.plates.size());
+  const int num_intrinsics = lens.NumIntrinsics();
+  std::string error = config.Check();
+  if (error.empty()) error = options.Check();
+  if (error.empty()) error = CheckPlaneBundleInput(input, config, num_intrinsics);
+  if (error.empty() && (static_cast<int>(scene->table_pos_mm.size()) != num_tiles ||
+                        scene->track_xy_mm.cols() != input.num_tracks ||
+                        static_cast<int>(scene->plates.size()) != num_plates ||
+                        scene->intrinsics.size() != num_intrinsics)) {
+    error = "the initial scene's sizes do not match the input";
+  }
+  if (!error.empty()) {
+    summary.brief = "plane bundle adjustment not run: " + error;
+    return summary;
+  }
+  const Clock::time_point start = Clock::now();
+
+  Blocks b = BlocksFromScene(*scene);
+  const Eigen::VectorXd calibrated_intrinsics = scene->intrinsics;  // the prior's mean
+  ComputeResiduals(lens, input, &b, scene);
+  summary.initial_rms_px = RmsAndChi2(input, *scene).first;
+
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  std::unique_ptr<ceres::LossFunction> loss(MakeLoss(options, input.observation_sigma_px));
+  const double inv_sigma = 1.0 / input.observation_sigma_px;
+
+  std::vector<int> tile_observations(num_tiles, 0);
+  for (const TrackObservation& obs : input.observations) {
+    if (obs.weight <= 0.0) continue;
+    problem.AddResidualBlock(
+        new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma), loss.get(),
+        {b.r.data(), b.t.data(), b.table_pos[obs.tile].data(), b.point(scene, obs.track),
+         b.intrinsics.data()});
+    ++tile_observations[obs.tile];
+    ++summary.num_observations;
+  }
+  for (const PlateMarkObservation& obs : input.plate_observations) {
+    if (obs.weight <= 0.0) continue;
+    problem.AddResidualBlock(
+        new PlateMarkReprojectionCost(lens, input.plates[obs.plate].mark_uv_mm.col(obs.mark),
+                                      obs.q_px, obs.weight * inv_sigma),
+        loss.get(),
+        {b.r.data(), b.t.data(), b.table_pos[obs.tile].data(), b.plate_pose[obs.plate].data(),
+         &b.plate_height[obs.plate], &b.plate_scale[obs.plate], b.intrinsics.data()});
+    ++tile_observations[obs.tile];
+    ++summary.num_observations;
+  }
+  for (int i = 0; i < num_tiles; ++i) {
+    problem.AddResidualBlock(
+        new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
+        b.table_pos[i].data());
+    if (tile_observations[i] == 0) summary.tiles_without_observations.push_back(i);
+    if (!config.refine_table_positions) problem.SetParameterBlockConstant(b.table_pos[i].data());
+  }
+  const bool has_observations = summary.num_observations > 0;
+  if (has_observations) {
+    if (!config.refine_plane_pose) {
+      problem.SetParameterBlockConstant(b.r.data());
+      problem.SetParameterBlockConstant(b.t.data());
+    } else if (config.gauge == PlaneGauge::kOriginOnOpticalAxis) {
+      problem.SetManifold(b.t.data(), new ceres::SubsetManifold(3, {0, 1}));
+    }
+    if (config.refine_intrinsics) {
+      problem.AddResidualBlock(
+          new IntrinsicsPriorCost(b.intrinsics, input.intrinsics_information), nullptr,
+          b.intrinsics.data());
+    } else {
+      problem.SetParameterBlockConstant(b.intrinsics.data());
+    }
+    if (config.gauge == PlaneGauge::kFixedTrack) {
+      problem.SetParameterBlockConstant(b.point(scene, config.gauge_track));
+    }
+  }
+  for (int g = 0; g < num_plates; ++g) {
+    if (!problem.HasParameterBlock(b.plate_pose[g].data())) continue;
+    if (input.plates[g].height_mm.has_value()) {
+      b.plate_height[g] = *input.plates[g].height_mm;
+      problem.SetParameterBlockConstant(&b.plate_height[g]);
+    }
+    if (!config.refine_plate_scale) problem.SetParameterBlockConstant(&b.plate_scale[g]);
+  }
+
+  ceres::Solver::Options solver_options;
+  solver_options.linear_solver_type = options.linear_solver == LinearSolver::kSparseSchur
+                                          ? ceres::SPARSE_SCHUR
+                                          : ceres::DENSE_SCHUR;
+  solver_options.max_num_iterations = options.max_iterations;
+  solver_options.function_tolerance = options.function_tolerance;
+  solver_options.gradient_tolerance = options.gradient_tolerance;
+  solver_options.parameter_tolerance = options.parameter_tolerance;
+  solver_options.num_threads = options.num_threads;
+  solver_options.logging_type = ceres::SILENT;
+  if (has_observations) {
+    auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+    for (int k = 0; k < input.num_tracks; ++k) ordering->AddElementToGroup(b.point(scene, k), 0);
+    std::vector<double*> blocks;
+    problem.GetParameterBlocks(&blocks);
+    for (double* block : blocks) {
+      if (!ordering->IsMember(block)) ordering->AddElementToGroup(block, 1);
+    }
+    solver_options.linear_solver_ordering = ordering;
+  } else {
+    solver_options.linear_solver_type = ceres::DENSE_QR;  // priors alone: no points
+  }
+  ceres::Solver::Summary solver_summary;
+  ceres::Solve(solver_options, &problem, &solver_summary);
+  summary.iterations = static_cast<int>(solver_summary.iterations.size()) - 1;
+  summary.num_residuals = solver_summary.num_residuals;
+  summary.num_parameters = solver_summary.num_effective_parameters;
+  summary.solve_seconds = SecondsSince(start);
+
+  BlocksToScene(b, scene);
+  ComputeResiduals(lens, input, &b, scene);
+  const auto [rms_px, chi2_observations] = RmsAndChi2(input, *scene);
+  summary.final_rms_px = rms_px;
+  double chi2 = chi2_observations;
+  for (int i = 0; i < num_tiles; ++i) {
+    const Eigen::Vector2d adjustment = scene->table_pos_mm[i] - input.commanded_table_pos_mm[i];
+    summary.table_adjustment_mm.push_back(adjustment);
+    chi2 += adjustment.squaredNorm() / (input.table_sigma_mm * input.table_sigma_mm);
+  }
+  if (config.refine_intrinsics) {
+    const Eigen::VectorXd change = scene->intrinsics - calibrated_intrinsics;
+    chi2 += change.dot(input.intrinsics_information * change);
+  }
+  const int dof = summary.num_residuals - summary.num_parameters;
+  summary.unit_weight_sigma = dof > 0 ? std::sqrt(chi2 / dof) : 0.0;
+  summary.plane_tilt_deg = PlaneTiltDeg(scene->cam_from_part_r);
+
+  // Covariance of the scene vector (plane_scene.h's layout) and chosen points.
+  if (config.compute_covariance) {
+    const Clock::time_point covariance_start = Clock::now();
+    std::vector<std::pair<const double*, int>> scene_blocks;  // block, offset
+    auto add_block = [&](const double* block, int offset) {
+      if (problem.HasParameterBlock(block)) scene_blocks.push_back({block, offset});
+    };
+    add_block(b.r.data(), 0);
+    add_block(b.t.data(), 3);
+    for (int i = 0; i < num_tiles; ++i) add_block(b.table_pos[i].data(), 6 + 2 * i);
+    for (int g = 0; g < num_plates; ++g) {
+      const int offset = 6 + 2 * num_tiles + 5 * g;
+      add_block(b.plate_pose[g].data(), offset);
+      add_block(&b.plate_height[g], offset + 3);
+      add_block(&b.plate_scale[g], offset + 4);
+    }
+    add_block(b.intrinsics.data(), 6 + 2 * num_tiles + 5 * num_plates);
+    std::vector<std::pair<const double*, const double*>> pairs;
+    for (size_t m = 0; m < scene_blocks.size(); ++m) {
+      for (size_t n = m; n < scene_blocks.size(); ++n) {
+        pairs.push_back({scene_blocks[m].first, scene_blocks[n].first});
+      }
+    }
+    for (int k : config.covariance_tracks) {
+      pairs.push_back({b.point(scene, k), b.point(scene, k)});
+    }
+    ceres::Covariance::Options covariance_options;
+    covariance_options.num_threads = options.num_threads;
+    covariance_options.algorithm_type = ceres::SPARSE_QR;
+    ceres::Covariance covariance(covariance_options);
+    summary.covariance_ok = covariance.Compute(pairs, &problem);
+    const int size = PlaneSceneCovarianceSize(num_tiles, num_plates, num_intrinsics);
+    scene->covariance.resize(0, 0);
+    scene->track_covariance_mm2.clear();
+    if (summary.covariance_ok) {
+      scene->covariance = Eigen::MatrixXd::Zero(size, size);
+      for (size_t m = 0; m < scene_blocks.size(); ++m) {
+        for (size_t n = m; n < scene_blocks.size(); ++n) {
+          const auto [block_m, offset_m] = scene_blocks[m];
+          const auto [block_n, offset_n] = scene_blocks[n];
+          const int size_m = problem.ParameterBlockSize(block_m);
+          const int size_n = problem.ParameterBlockSize(block_n);
+          Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> c(size_m,
+                                                                                   size_n);
+          covariance.GetCovarianceBlock(block_m, block_n, c.data());
+          scene->covariance.block(offset_m, offset_n, size_m, size_n) = c;
+          scene->covariance.block(offset_n, offset_m, size_n, size_m) = c.transpose();
+        }
+      }
+      for (int k : config.covariance_tracks) {
+        Eigen::Matrix2d c;  // symmetric: storage order does not matter
+        covariance.GetCovarianceBlock(b.point(scene, k), b.point(scene, k), c.data());
+        scene->track_covariance_mm2.push_back(c);
+      }
+    }
+    summary.covariance_seconds = SecondsSince(covariance_start);
+  }
+
+  const int observed_tiles = num_tiles - static_cast<int>(summary.tiles_without_observations.size());
+  std::string why_unusable;
+  if (!solver_summary.IsSolutionUsable()) {
+    why_unusable = "the solver failed: " + solver_summary.message;
+  } else if (solver_summary.termination_type == ceres::NO_CONVERGENCE) {
+    why_unusable = "no convergence in " + std::to_string(options.max_iterations) + " iterations";
+  } else if (observed_tiles < 2) {
+    why_unusable = "fewer than 2 tiles observed";
+  } else if (!(summary.final_rms_px <= options.max_usable_rms_px)) {
+    why_unusable = "RMS above max_usable_rms_px";
+  } else if (config.compute_covariance && !summary.covariance_ok) {
+    why_unusable = "covariance not computable (rank-deficient: too few observations?)";
+  }
+  summary.usable = why_unusable.empty();
+  double max_adjustment_mm = 0.0;
+  for (const Eigen::Vector2d& a : summary.table_adjustment_mm) {
+    max_adjustment_mm = std::max(max_adjustment_mm, a.norm());
+  }
+  std::ostringstream brief;
+  brief.precision(3);
+  brief << "plane BA " << (summary.usable ? "ok" : "UNUSABLE (" + why_unusable + ")") << ": "
+        << num_tiles << " tiles (" << summary.tiles_without_observations.size()
+        << " by prior only), " << input.num_tracks << " tracks, " << summary.num_observations
+        << " obs, rms " << summary.initial_rms_px << " -> " << summary.final_rms_px
+        << " px in " << summary.iterations << " it, tilt " << summary.plane_tilt_deg
+        << " deg, max |T adj| " << max_adjustment_mm << " mm";
+  summary.brief = brief.str();
+  return summary;
+}
+
+}  // namespace omm

@@ -1,0 +1,35 @@
+// The planar bundle adjustment, solved with Ceres. No Ceres type leaves this
+// adapter: the problem, configuration, options and result are
+// pipeline/core/plane_scene.h's, the lens model comes in as a LensProjection.
+//
+// Cost (all residuals dimensionless, so the covariance is absolute):
+//   sum over observations  rho(|(w / sigma_px) (q(R (P + T_i) + t) - q_obs)|^2)
+//   + sum over tiles        |(T_i - T_i,commanded) / sigma_table|^2
+//   + |U (k - k_calibrated)|^2                  (if the intrinsics are refined)
+// with rho the robust loss (PlaneBundleOptions). Cost functions:
+// plane_costs.h. Points are eliminated by the Schur complement (ordering:
+// track points first, then pose, table positions, plates, intrinsics).
+//
+// Gauge. Without it the normal equations are singular (plane_scene.h, (a)):
+// kOriginOnOpticalAxis holds t_x, t_y (t on a SubsetManifold), kFixedTrack
+// holds one track's P. Everything else is determined by data and priors, so
+// ceres::Covariance (sparse QR of the full Jacobian) applies directly; its
+// covariance is that of this gauge, and only of this gauge.
+#pragma once
+
+#include "pipeline/core/lens_projection.h"
+#include "pipeline/core/plane_scene.h"
+
+namespace omm {
+
+// Adjusts *scene, which holds the initial values (sizes: one table position
+// per tile, one column of track_xy_mm per track, one PlatePose per plate,
+// lens.NumIntrinsics() intrinsics; PlaneSceneSeed gives them), and fills its
+// residuals and covariance. `lens` is evaluated concurrently
+// (options.num_threads). Invalid input, config or options give an unusable
+// summary whose brief says what is wrong; the stage checks them first.
+PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundleInput& input,
+                                    const PlaneBundleConfig& config,
+                                    const PlaneBundleOptions& options, PlaneScene* scene);
+
+}  // namespace omm

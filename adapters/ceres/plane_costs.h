@@ -1,0 +1,89 @@
+// Ceres cost functions of the planar bundle adjustment (pipeline/core/
+// plane_scene.h states the model). Internal to adapters/ceres: the rest of the
+// pipeline calls plane_bundle.h, which exposes no Ceres type.
+//
+// All Jacobians are analytic. The projection's dq/dp_cam and dq/dintrinsics
+// come from a LensProjection (mrcal's analytic gradients); the rest is the
+// chain rule through p_cam = R(r) X + t, X = P + T:
+//   dp_cam/dr = -R [X]x J_r(r)   (J_r: SO(3)'s right Jacobian at r, so that
+//                                  R(r + dr) = R(r) Exp(J_r(r) dr) to first order),
+//   dp_cam/dt = I,   dp_cam/dT = dp_cam/dP = R[:, 0:2] (both in the plane).
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/lens_projection.h"
+
+namespace omm {
+
+// SO(3)'s right Jacobian of the angle-axis vector r:
+// J_r = I - (1 - cos a)/a^2 [r]x + (a - sin a)/a^3 [r]x^2, a = |r|.
+Eigen::Matrix3d RightJacobianSO3(const Eigen::Vector3d& r);
+
+// Residual (2, dimensionless): (weight / sigma_px) (q(R (P + T) + t) - q_px),
+// q through `lens`, P = (P_x, P_y, 0), T = (T_x, T_y, 0).
+// Parameter blocks: r (3, angle-axis, rad), t (3, mm), T (2, mm), P (2, mm),
+// intrinsics (lens.NumIntrinsics()). A point the lens cannot project makes
+// Evaluate fail (Ceres then shortens the step).
+class TrackReprojectionCost : public ceres::CostFunction {
+ public:
+  TrackReprojectionCost(const LensProjection& lens, const Eigen::Vector2d& q_px,
+                        double weight_over_sigma_px);
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
+
+ private:
+  const LensProjection& lens_;
+  Eigen::Vector2d q_px_;
+  double scale_;  // weight / sigma_px, 1/px
+};
+
+// Residual (2, dimensionless): (weight / sigma_px) (q(R (P + T) + t) - q_px)
+// for a plate mark with plate coordinates (u, v):
+//   P = (x, y, h) + s M(theta) (u, v, 0)-in-plane, M(theta) = [c  s; s  -c].
+// Parameter blocks: r (3), t (3), T (2), plate pose (x mm, y mm, theta rad),
+// plate height h (1, mm), plate scale s (1), intrinsics (N).
+class PlateMarkReprojectionCost : public ceres::CostFunction {
+ public:
+  PlateMarkReprojectionCost(const LensProjection& lens, const Eigen::Vector2d& mark_uv_mm,
+                            const Eigen::Vector2d& q_px, double weight_over_sigma_px);
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
+
+ private:
+  const LensProjection& lens_;
+  Eigen::Vector2d mark_uv_mm_;
+  Eigen::Vector2d q_px_;
+  double scale_;
+};
+
+// Residual (2, dimensionless): (T - T_commanded) / sigma_mm. Block: T (2, mm).
+class TablePriorCost : public ceres::SizedCostFunction<2, 2> {
+ public:
+  TablePriorCost(const Eigen::Vector2d& commanded_mm, double sigma_mm);
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
+
+ private:
+  Eigen::Vector2d commanded_mm_;
+  double sigma_mm_;
+};
+
+// Residual (N, dimensionless): U (k - k_calibrated), U^T U = the calibration's
+// information matrix (U from its Cholesky factor), so the cost is the
+// Gaussian prior's 0.5 (k - k0)^T Info (k - k0). Block: intrinsics k (N).
+class IntrinsicsPriorCost : public ceres::CostFunction {
+ public:
+  // `information` must be positive definite (N x N).
+  IntrinsicsPriorCost(const Eigen::VectorXd& calibrated, const Eigen::MatrixXd& information);
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
+
+ private:
+  Eigen::VectorXd calibrated_;
+  Eigen::MatrixXd sqrt_information_;  // U, upper triangular
+};
+
+}  // namespace omm
