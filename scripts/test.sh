@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The README's test command (and CI's, through .ci/run): set-up, a Release
+# build with every test, then the same tests under AddressSanitizer and
+# UndefinedBehaviorSanitizer in build-asan/. Non-zero on any failure.
+#
+# CI=true turns warnings into errors (OMM_WERROR=ON). Budget: CI has 2 cores
+# and 30 minutes, so both builds use Ninja with -j2 (OMM_JOBS overrides) and the
+# sanitizer pass leaves out tests labelled "slow" (heavy simulator renders,
+# which run in the Release pass; `omm_test(... LABELS slow)` marks them).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+jobs=${OMM_JOBS:-2}
+werror=OFF
+if [ "${CI:-}" = "true" ]; then werror=ON; fi
+
+bash scripts/setup.sh
+
+echo "== Release build and tests (build/)"
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DOMM_WERROR=$werror
+cmake --build build -j "$jobs"
+ctest --test-dir build --output-on-failure -j "$jobs"
+
+echo "== AddressSanitizer + UBSan build and tests (build-asan/)"
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DOMM_SANITIZE=ON \
+  -DOMM_WERROR=$werror -DOMM_BUILD_BENCHMARKS=OFF
+cmake --build build-asan -j "$jobs"
+ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1} \
+UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1} \
+  ctest --test-dir build-asan --output-on-failure -j "$jobs" -LE slow
+
+echo "== all tests passed"
