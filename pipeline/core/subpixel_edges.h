@@ -1,0 +1,93 @@
+// Sub-pixel edge points of an elliptical mark and the mark's refined centre.
+//
+// Edge model. The image of a dark dot on a bright ground (or the reverse) is
+// the ideal two-level image blurred by the optics' PSF and integrated over the
+// pixel. For a symmetric blur, the point where the intensity crosses the level
+// halfway between the local dark and bright levels lies on the geometric edge
+// of a straight boundary; on a curved one it moves inwards by ~sigma^2 / 2R
+// (R the radius of curvature), the same amount on opposite sides of an
+// ellipse, so the fitted centre is unaffected. This "mid-level" edge is used
+// rather than the gradient maximum because it needs no derivative and because
+// it sits at the edge profile's inflection, where bilinear interpolation is
+// exact to second order (its error term is the second derivative along x and
+// y, zero there); a plane fit of each level around the mark removes the effect
+// of smooth illumination gradients, which would otherwise pull the centre
+// towards the darker side.
+//
+// Procedure: rays along the normals of a rough ellipse, one per
+// `ray_spacing_px` of its perimeter, evenly spaced in the ellipse's parametric
+// angle, sampled by bilinear interpolation; the outer `plateau_px` of each ray
+// gives the inside and outside levels (a robust plane fit of each over all
+// rays); the mid-level crossing is bracketed on a `sample_step_px` grid and
+// solved to 1e-5 px by false position on the interpolated profile.
+// RefineEllipticalMark repeats this along the normals of the previous fit
+// until the centre settles and fits an ellipse (ellipse_fit.h) to the edge
+// points of the last pass.
+//
+// Pixel convention: (0, 0) is the centre of the top-left pixel; image(row, col)
+// is the value at (x = col, y = row).
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/ellipse_fit.h"
+#include "pipeline/core/image.h"
+
+namespace omm {
+
+struct EllipseEdgeOptions {
+  double ray_half_length_px = 4.0;  // rays span the rough boundary +- this, px
+  double plateau_px = 1.5;          // outer part of each ray used for the levels, px
+  double ray_spacing_px = 1.0;      // rays per px of the rough perimeter (1/spacing)
+  double sample_step_px = 0.25;     // bracketing step along a ray, px
+  int min_rays = 24;                // at least this many rays, whatever the size
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+struct EllipseEdges {
+  Eigen::Matrix2Xd points_px;     // one edge point per ray that crossed cleanly
+  int num_rays = 0;               // rays cast
+  int num_rays_off_image = 0;     // rays (partly) outside the image: not used
+  double contrast = 0.0;          // median (outside - inside) level, image units
+  double edge_sigma_px = 0.0;     // median blur: contrast / (sqrt(2 pi) slope at the crossing)
+};
+
+// Edge points of the mark whose boundary is roughly `rough`. Rays are clipped
+// to half the minor axis inside so they never cross the centre.
+EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough,
+                              const EllipseEdgeOptions& options = {});
+
+struct MarkRefinementOptions {
+  EllipseEdgeOptions edges;
+  EllipseFitOptions fit;
+  double min_contrast = 0.04;        // |outside - inside| below this: fail (image units)
+  double min_inlier_fraction = 0.6;  // fraction of cast rays that must end as inliers
+  int max_passes = 5;                // edge passes, each along the previous fit's normals
+  double converged_px = 2e-4;        // stop when a pass moves the centre less, px
+
+  std::string Check() const;
+};
+
+struct MarkFit {
+  bool ok = false;
+  std::string why_failed;  // set when !ok: "mark touches the image border", ...
+  Ellipse ellipse;         // fitted boundary; its centre is the mark centre
+  Eigen::Matrix2d centre_cov_px2 = Eigen::Matrix2d::Zero();
+  double sigma_px = 0.0;   // sqrt(trace(centre_cov) / 2): isotropic 1-sigma of the centre
+  double rms_px = 0.0;     // RMS edge-point distance to the fit
+  double contrast = 0.0;
+  double edge_sigma_px = 0.0;
+  int num_edge_points = 0;
+  int num_inliers = 0;
+};
+
+// Sub-pixel centre of one elliptical mark from its rough boundary (within
+// ~ray_half_length_px / 2 of the true one).
+MarkFit RefineEllipticalMark(const ImageF& image, const Ellipse& rough,
+                             const MarkRefinementOptions& options = {});
+
+}  // namespace omm
