@@ -1,0 +1,129 @@
+#include "adapters/mrcal/calibrate.h"
+
+#include <gtest/gtest.h>
+
+#include "adapters/mrcal/lens.h"
+#include "adapters/mrcal/projection_diff.h"
+#include "adapters/mrcal/synthetic_plates.h"
+#include "pipeline/core/error.h"
+
+namespace omm {
+namespace {
+
+constexpr double kDistanceMm = 390.0;
+
+CalibrationOptions Options(const std::string& lens_model) {
+  CalibrationOptions options;
+  options.lens_model = lens_model;
+  options.width_px = 1600;
+  options.height_px = 1200;
+  return options;
+}
+
+TEST(Calibrate, HomographySeedRecoversAPinholePose) {
+  const BoardSpec board;
+  CameraModel pinhole{"LENSMODEL_PINHOLE", Eigen::Vector4d(2600, 2600, 799.5, 599.5), 1600, 1200};
+  const testing::SyntheticPlates plates = testing::MakeSyntheticPlates(board, pinhole, 6, 390, 3);
+  for (size_t i = 0; i < plates.q_truth_px.size(); ++i) {
+    Vector6d rt;
+    ASSERT_TRUE(PlatePoseFromHomography(BoardPoints(board), plates.q_truth_px[i],
+                                        Eigen::VectorXd::Ones(49), 2600,
+                                        Eigen::Vector2d(799.5, 599.5), &rt));
+    // Exact data through an exact pinhole: only rounding is left.
+    EXPECT_LT((rt - plates.rt_cam_from_plate[i]).cwiseAbs().maxCoeff(), 1e-8) << i;
+  }
+}
+
+// With the right model and tiny noise, the unregularised solve is the truth.
+TEST(Calibrate, TinyNoiseRecoversTheTruth) {
+  const BoardSpec board;
+  const CameraModel truth = testing::TruthCamera();
+  const testing::SyntheticPlates plates =
+      testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
+  CalibrationOptions options = Options("LENSMODEL_OPENCV8");
+  options.apply_regularization = false;
+  const CalibrationResult result = CalibrateCamera(board, plates.Observe(1e-6, 7), options);
+  ASSERT_TRUE(result.usable) << result.brief;
+  EXPECT_EQ(result.record.images.size(), 18u);
+  EXPECT_EQ(result.num_observations_used, 18 * 49);
+  EXPECT_EQ(result.num_outliers, 0);
+  EXPECT_LT(result.rms_px, 2e-6);
+  EXPECT_LT((result.camera.intrinsics.head<4>() - truth.intrinsics.head<4>()).cwiseAbs().maxCoeff(),
+            1e-3);
+  // The rational coefficients are nearly degenerate with each other (a
+  // numerator and denominator sharing a factor), so compare projections.
+  EXPECT_LT(ProjectionDiffRms(result.camera, truth, kDistanceMm), 1e-4);
+  for (size_t i = 0; i < plates.rt_cam_from_plate.size(); ++i) {
+    EXPECT_LT((result.record.images[i].rt_cam_from_plate - plates.rt_cam_from_plate[i])
+                  .cwiseAbs()
+                  .maxCoeff(),
+              1e-5);
+  }
+}
+
+// mrcal 2.2's regularisation (on by default) pulls the distortions toward 0
+// with a weight tuned for ~1 px noise: with this lens it biases the projection
+// by ~0.02 px even without noise. Measured, pinned here so a change shows.
+TEST(Calibrate, RegularizationBiasIsSmallButNotZero) {
+  const BoardSpec board;
+  const CameraModel truth = testing::TruthCamera();
+  const testing::SyntheticPlates plates =
+      testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
+  const CalibrationResult result =
+      CalibrateCamera(board, plates.Observe(1e-6, 7), Options("LENSMODEL_OPENCV8"));
+  ASSERT_TRUE(result.usable) << result.brief;
+  const double diff_px = ProjectionDiffRms(result.camera, truth, kDistanceMm);
+  EXPECT_GT(diff_px, 0.005);
+  EXPECT_LT(diff_px, 0.03);
+}
+
+TEST(Calibrate, FlagsAGrossOutlier) {
+  const BoardSpec board;
+  const CameraModel truth = testing::TruthCamera();
+  const testing::SyntheticPlates plates = testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
+  std::vector<PlateObservation> observations = plates.Observe(0.03, 7);
+  observations[4].q_px(0, 10) += 3.0;      // 100 sigma off
+  observations[5].weight[20] = 0.0;        // not observed
+  observations[6].usable = false;          // rejected by detection
+  const CalibrationResult result = CalibrateCamera(board, observations, Options("LENSMODEL_OPENCV8"));
+  ASSERT_TRUE(result.usable) << result.brief;
+  ASSERT_EQ(result.record.images.size(), 17u);
+  EXPECT_EQ(result.images_not_used, std::vector<std::string>{"calib_6.png"});
+  EXPECT_TRUE(result.record.images[4].outlier[10]);
+  EXPECT_TRUE(result.record.images[5].outlier[20]);
+  EXPECT_EQ(result.per_image[4].num_outliers, 1);
+  EXPECT_EQ(result.per_image[5].num_outliers, 0);  // unobserved, not an outlier
+  EXPECT_EQ(result.per_image[5].num_inliers, 48);
+  EXPECT_NEAR(result.rms_px, 0.03, 0.005);
+}
+
+TEST(Calibrate, TooFewImagesIsAResultNotACrash) {
+  const BoardSpec board;
+  const testing::SyntheticPlates plates =
+      testing::MakeSyntheticPlates(board, testing::TruthCamera(), 3, kDistanceMm, 1);
+  const CalibrationResult result =
+      CalibrateCamera(board, plates.Observe(0.03, 7), Options("LENSMODEL_OPENCV8"));
+  EXPECT_FALSE(result.usable);
+  EXPECT_NE(result.brief.find("too few"), std::string::npos);
+}
+
+TEST(Calibrate, BadOptionsThrow) {
+  CalibrationOptions options = Options("LENSMODEL_SPLINED_STEREOGRAPHIC");
+  EXPECT_FALSE(options.Check().empty());
+  EXPECT_THROW(CalibrateCamera(BoardSpec(), {}, options), InputError);
+}
+
+TEST(Calibrate, SplinedModelSeededFromOpencv8FitsTheLens) {
+  const BoardSpec board;
+  const CameraModel truth = testing::TruthCamera();
+  const testing::SyntheticPlates plates = testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
+  const CalibrationResult result = CalibrateCamera(
+      board, plates.Observe(0.02, 7),
+      Options("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=40"));
+  ASSERT_TRUE(result.usable) << result.brief;
+  EXPECT_NEAR(result.rms_px, 0.02, 0.004);
+  EXPECT_EQ(result.num_outliers, 0);
+}
+
+}  // namespace
+}  // namespace omm
