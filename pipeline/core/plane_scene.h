@@ -160,7 +160,8 @@ struct PlaneScene {
   Eigen::VectorXd intrinsics;  // held unless PlaneBundleConfig::refine_intrinsics
 
   // After a solve: model minus observed pixel of each observation
-  // (unweighted, px), in input order; NaN for weight-0 observations.
+  // (unweighted, px), in input order, weight-0 ones included (to spot
+  // outliers); NaN where the lens cannot project.
   Eigen::Matrix2Xd residual_px;
   Eigen::Matrix2Xd plate_residual_px;
 

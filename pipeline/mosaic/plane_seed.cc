@@ -1,0 +1,244 @@
+#include "pipeline/mosaic/plane_seed.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "adapters/mrcal/lens.h"
+
+namespace omm {
+namespace {
+
+constexpr int kMinPairs = 20;
+
+double Deg(double rad) { return rad * 180.0 / std::numbers::pi; }
+
+struct Pair {
+  Eigen::Vector3d m_i, m_j;
+  Eigen::Vector2d delta_table_mm;  // T_j - T_i, commanded
+};
+
+// The two independent rows of [m_j]x (m_j's z is 1) applied to
+// m_i + K (dT (x) m_i): coefficients of vec(K) (column-major, 18) and the
+// right-hand side, so that rows * vec(K) = rhs.
+void PairEquations(const Pair& p, Eigen::Matrix<double, 2, 18>* rows, Eigen::Vector2d* rhs) {
+  Eigen::Matrix<double, 2, 3> cross;
+  cross << 0.0, -1.0, p.m_j.y(), 1.0, 0.0, -p.m_j.x();
+  Eigen::Matrix<double, 6, 1> a;
+  a << p.delta_table_mm.x() * p.m_i, p.delta_table_mm.y() * p.m_i;
+  for (int c = 0; c < 6; ++c) {
+    for (int row = 0; row < 3; ++row) rows->col(3 * c + row) = a[c] * cross.col(row);
+  }
+  *rhs = -cross * p.m_i;
+}
+
+// Least squares for vec(K) over the pairs with keep[n].
+Eigen::Matrix<double, 18, 1> SolveK(const std::vector<Pair>& pairs, const std::vector<bool>& keep) {
+  Eigen::Matrix<double, 18, 18> normal = Eigen::Matrix<double, 18, 18>::Zero();
+  Eigen::Matrix<double, 18, 1> rhs_sum = Eigen::Matrix<double, 18, 1>::Zero();
+  for (size_t n = 0; n < pairs.size(); ++n) {
+    if (!keep[n]) continue;
+    Eigen::Matrix<double, 2, 18> rows;
+    Eigen::Vector2d rhs;
+    PairEquations(pairs[n], &rows, &rhs);
+    normal += rows.transpose() * rows;
+    rhs_sum += rows.transpose() * rhs;
+  }
+  return normal.ldlt().solve(rhs_sum);
+}
+
+// Pixel residual RMS of the scene over all used observations.
+double SceneRms(const CameraModel& camera, const PlaneBundleInput& input, const PlaneScene& scene) {
+  const double angle = scene.cam_from_part_r.norm();
+  const Eigen::Matrix3d rot =
+      angle > 0.0 ? Eigen::AngleAxisd(angle, scene.cam_from_part_r / angle).toRotationMatrix()
+                  : Eigen::Matrix3d::Identity();
+  Eigen::Matrix3Xd p_cam(3, input.observations.size());
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    const TrackObservation& obs = input.observations[n];
+    const Eigen::Vector2d x = scene.track_xy_mm.col(obs.track) + scene.table_pos_mm[obs.tile];
+    p_cam.col(static_cast<Eigen::Index>(n)) =
+        rot * Eigen::Vector3d(x.x(), x.y(), 0.0) + scene.cam_from_part_t_mm;
+  }
+  Eigen::Matrix2Xd q;
+  if (!ProjectPoints(camera, p_cam, &q)) return std::numeric_limits<double>::infinity();
+  double sum_sq = 0.0;
+  int count = 0;
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    if (input.observations[n].weight <= 0.0) continue;
+    sum_sq += (q.col(static_cast<Eigen::Index>(n)) - input.observations[n].q_px).squaredNorm();
+    ++count;
+  }
+  return count > 0 ? std::sqrt(sum_sq / count) : 0.0;
+}
+
+}  // namespace
+
+PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInput& input,
+                                PlaneScene* scene) {
+  PlaneSeedSummary summary;
+
+  // Normalised rays of every observation (tracks, then plate marks).
+  const size_t num_track_obs = input.observations.size();
+  Eigen::Matrix2Xd q_px(2, num_track_obs + input.plate_observations.size());
+  for (size_t n = 0; n < num_track_obs; ++n) q_px.col(n) = input.observations[n].q_px;
+  for (size_t n = 0; n < input.plate_observations.size(); ++n) {
+    q_px.col(num_track_obs + n) = input.plate_observations[n].q_px;
+  }
+  Eigen::Matrix3Xd rays;
+  if (!UnprojectPixels(camera, q_px, &rays)) {
+    summary.why_failed = "the lens model cannot unproject the observations";
+    return summary;
+  }
+
+  // Pairs of observations of one track in two tiles.
+  std::vector<std::vector<int>> obs_of_track(input.num_tracks);
+  for (size_t n = 0; n < num_track_obs; ++n) {
+    if (input.observations[n].weight > 0.0) obs_of_track[input.observations[n].track].push_back(n);
+  }
+  std::vector<Pair> pairs;
+  auto add_pairs = [&](const std::vector<int>& obs, auto tile_of) {
+    for (size_t a = 0; a < obs.size(); ++a) {
+      for (size_t b = a + 1; b < obs.size(); ++b) {
+        const int i = tile_of(obs[a]), j = tile_of(obs[b]);
+        if (i == j) continue;
+        pairs.push_back({rays.col(obs[a]), rays.col(obs[b]),
+                         input.commanded_table_pos_mm[j] - input.commanded_table_pos_mm[i]});
+      }
+    }
+  };
+  for (const std::vector<int>& obs : obs_of_track) {
+    add_pairs(obs, [&](int n) { return input.observations[n].tile; });
+  }
+  summary.num_pairs = static_cast<int>(pairs.size());
+  if (summary.num_pairs < kMinPairs) {
+    summary.why_failed = "fewer than " + std::to_string(kMinPairs) + " track pairs";
+    return summary;
+  }
+
+  // K by least squares, once more without the gross outliers.
+  std::vector<bool> keep(pairs.size(), true);
+  Eigen::Matrix<double, 18, 1> vec_k = SolveK(pairs, keep);
+  std::vector<double> errors(pairs.size());
+  for (size_t n = 0; n < pairs.size(); ++n) {
+    Eigen::Matrix<double, 2, 18> rows;
+    Eigen::Vector2d rhs;
+    PairEquations(pairs[n], &rows, &rhs);
+    errors[n] = (rows * vec_k - rhs).norm();
+  }
+  std::vector<double> sorted = errors;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double threshold = 5.0 * sorted[sorted.size() / 2];
+  for (size_t n = 0; n < pairs.size(); ++n) keep[n] = errors[n] <= threshold;
+  vec_k = SolveK(pairs, keep);
+
+  // Split K = [B_1 l^T, B_2 l^T]: rearranged, vec(B) l^T is rank 1.
+  Eigen::Matrix<double, 6, 3> rearranged;
+  for (int a = 0; a < 2; ++a) {
+    for (int b = 0; b < 3; ++b) {
+      for (int row = 0; row < 3; ++row) rearranged(3 * a + row, b) = vec_k[3 * (3 * a + b) + row];
+    }
+  }
+  const Eigen::JacobiSVD<Eigen::Matrix<double, 6, 3>> svd(
+      rearranged, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix<double, 6, 1> vec_b = std::sqrt(2.0) * svd.matrixU().col(0);
+  Eigen::Vector3d l = svd.singularValues()[0] / std::sqrt(2.0) * svd.matrixV().col(0);
+  if (l.z() < 0.0) {
+    vec_b = -vec_b;
+    l = -l;
+  }
+  Eigen::Matrix<double, 3, 2> b_mat;
+  b_mat << vec_b.head<3>(), vec_b.tail<3>();
+  const Eigen::JacobiSVD<Eigen::MatrixXd> polar(Eigen::MatrixXd(b_mat),
+                                                 Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const Eigen::Matrix<double, 3, 2> r12 = polar.matrixU() * polar.matrixV().transpose();
+  Eigen::Matrix3d cam_from_part;
+  cam_from_part << r12, r12.col(0).cross(r12.col(1));
+  const Eigen::Vector3d normal = cam_from_part.col(2);
+  const double n_dot_l = normal.dot(l);
+  if (!(std::abs(n_dot_l) > 0.5 * l.norm()) || std::abs(normal.z()) < 0.5) {
+    summary.why_failed = "the tile-to-tile motion is not that of a plane seen from above";
+    return summary;
+  }
+  const double delta = 1.0 / n_dot_l;
+  summary.distance_mm = std::abs(delta);
+  summary.normal_disagreement_deg =
+      Deg(std::acos(std::min(1.0, std::abs(n_dot_l) / l.norm())));
+
+  const Eigen::AngleAxisd angle_axis(cam_from_part);
+  scene->cam_from_part_r = angle_axis.angle() * angle_axis.axis();
+  scene->cam_from_part_t_mm = Eigen::Vector3d(0.0, 0.0, delta / normal.z());
+  scene->table_pos_mm = input.commanded_table_pos_mm;
+  scene->intrinsics = camera.intrinsics;
+  summary.tilt_deg = PlaneTiltDeg(scene->cam_from_part_r);
+
+  // A ray's point at height h above the top surface, in the part frame at the
+  // tile's commanded table position: P = (R^T (X - t))_xy - T_i.
+  auto part_point = [&](size_t ray, int tile, double height_mm) -> Eigen::Vector2d {
+    const Eigen::Vector3d m = rays.col(static_cast<Eigen::Index>(ray));
+    const Eigen::Vector3d x_cam = m * (delta + height_mm) / normal.dot(m);
+    return (cam_from_part.transpose() * (x_cam - scene->cam_from_part_t_mm)).head<2>() -
+           input.commanded_table_pos_mm[tile];
+  };
+  scene->track_xy_mm.setZero(2, input.num_tracks);
+  std::vector<int> count(input.num_tracks, 0);
+  for (size_t n = 0; n < num_track_obs; ++n) {
+    const TrackObservation& obs = input.observations[n];
+    if (obs.weight <= 0.0) continue;
+    scene->track_xy_mm.col(obs.track) += part_point(n, obs.tile, 0.0);
+    ++count[obs.track];
+  }
+  for (int k = 0; k < input.num_tracks; ++k) {
+    if (count[k] > 0) scene->track_xy_mm.col(k) /= count[k];
+  }
+
+  // Plates: mean intersection per mark, then P = o + Rot(theta) (u, -v).
+  scene->plates.assign(input.plates.size(), PlatePose{});
+  for (size_t g = 0; g < input.plates.size(); ++g) {
+    const double height = input.plates[g].height_mm.value_or(0.0);
+    const Eigen::Index num_marks = input.plates[g].mark_uv_mm.cols();
+    Eigen::Matrix2Xd sum = Eigen::Matrix2Xd::Zero(2, num_marks);
+    std::vector<int> seen(num_marks, 0);
+    for (size_t n = 0; n < input.plate_observations.size(); ++n) {
+      const PlateMarkObservation& obs = input.plate_observations[n];
+      if (obs.plate != static_cast<int>(g) || obs.weight <= 0.0) continue;
+      sum.col(obs.mark) += part_point(num_track_obs + n, obs.tile, height);
+      ++seen[obs.mark];
+    }
+    std::vector<Eigen::Vector2d> mirrored, part;
+    for (Eigen::Index k = 0; k < num_marks; ++k) {
+      if (seen[k] == 0) continue;
+      const Eigen::Vector2d uv = input.plates[g].mark_uv_mm.col(k);
+      mirrored.emplace_back(uv.x(), -uv.y());
+      part.push_back(sum.col(k) / seen[k]);
+    }
+    PlatePose& pose = scene->plates[g];
+    pose.height_mm = height;
+    if (part.size() < 2) continue;  // unobserved: the plate's blocks stay out of the solve
+    Eigen::Vector2d mean_w = Eigen::Vector2d::Zero(), mean_p = Eigen::Vector2d::Zero();
+    for (size_t k = 0; k < part.size(); ++k) {
+      mean_w += mirrored[k] / part.size();
+      mean_p += part[k] / part.size();
+    }
+    double sin_sum = 0.0, cos_sum = 0.0;
+    for (size_t k = 0; k < part.size(); ++k) {
+      const Eigen::Vector2d w = mirrored[k] - mean_w, p = part[k] - mean_p;
+      cos_sum += w.dot(p);
+      sin_sum += w.x() * p.y() - w.y() * p.x();
+    }
+    pose.theta_rad = std::atan2(sin_sum, cos_sum);
+    const Eigen::Vector2d origin = mean_p - Eigen::Rotation2Dd(pose.theta_rad) * mean_w;
+    pose.x_mm = origin.x();
+    pose.y_mm = origin.y();
+  }
+
+  summary.rms_px = SceneRms(camera, input, *scene);
+  summary.ok = true;
+  return summary;
+}
+
+}  // namespace omm
