@@ -61,10 +61,10 @@ TEST(Calibrate, TinyNoiseRecoversTheTruth) {
   }
 }
 
-// mrcal 2.2's regularisation (on by default) pulls the distortions toward 0
-// with a weight tuned for ~1 px noise: with this lens it biases the projection
-// by ~0.02 px even without noise. Measured, pinned here so a change shows.
-TEST(Calibrate, RegularizationBiasIsSmallButNotZero) {
+// mrcal 2.2's regularisation (on by default) pulls the distortions and the
+// centre a little; with this lens and plate coverage its bias on the
+// projection at the working distance is negligible (measured 3e-4 px).
+TEST(Calibrate, RegularizationBiasIsNegligible) {
   const BoardSpec board;
   const CameraModel truth = testing::TruthCamera();
   const testing::SyntheticPlates plates =
@@ -72,9 +72,7 @@ TEST(Calibrate, RegularizationBiasIsSmallButNotZero) {
   const CalibrationResult result =
       CalibrateCamera(board, plates.Observe(1e-6, 7), Options("LENSMODEL_OPENCV8"));
   ASSERT_TRUE(result.usable) << result.brief;
-  const double diff_px = ProjectionDiffRms(result.camera, truth, kDistanceMm);
-  EXPECT_GT(diff_px, 0.005);
-  EXPECT_LT(diff_px, 0.03);
+  EXPECT_LT(ProjectionDiffRms(result.camera, truth, kDistanceMm), 1e-3);
 }
 
 TEST(Calibrate, FlagsAGrossOutlier) {

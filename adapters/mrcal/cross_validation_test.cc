@@ -10,8 +10,9 @@
 namespace omm {
 namespace {
 
-// Truth OPENCV8 (its k3 and rational terms matter at the edges): OPENCV4
-// cannot follow it and the halves disagree more; OPENCV8 wins.
+// Truth OPENCV8 whose higher terms are small: a pinhole cannot follow its
+// k1 = -0.12 and its halves disagree; OPENCV4 and OPENCV8 both fit to the
+// noise (measured 0.024 vs 0.023 px), a tie the simpler OPENCV4 wins.
 TEST(CrossValidation, PicksTheModelThatFitsTheLens) {
   const BoardSpec board;
   const testing::SyntheticPlates plates =
@@ -20,14 +21,19 @@ TEST(CrossValidation, PicksTheModelThatFitsTheLens) {
   options.calibration.width_px = 1600;
   options.calibration.height_px = 1200;
   const CrossValidationSummary summary = CrossValidateLensModels(
-      board, plates.Observe(0.03, 21), {"LENSMODEL_OPENCV4", "LENSMODEL_OPENCV8"}, options);
+      board, plates.Observe(0.03, 21), {"LENSMODEL_PINHOLE", "LENSMODEL_OPENCV4", "LENSMODEL_OPENCV8"}, options);
   std::cout << summary.brief << "\n";
-  ASSERT_EQ(summary.scores.size(), 2u);
+  for (const LensModelScore& score : summary.scores) {
+    std::cout << score.lens_model << " " << score.mean_diff_rms_px << "\n";
+  }
+  ASSERT_EQ(summary.scores.size(), 3u);
   for (const LensModelScore& score : summary.scores) {
     EXPECT_TRUE(score.usable);
     EXPECT_EQ(score.diff_rms_px.size(), 3u);  // alternating + 2 random splits
   }
-  EXPECT_EQ(summary.chosen_lens_model, "LENSMODEL_OPENCV8");
+  EXPECT_GT(summary.scores[0].mean_diff_rms_px, 5.0 * summary.scores[2].mean_diff_rms_px);
+  EXPECT_LT(summary.scores[1].mean_diff_rms_px, 1.1 * summary.scores[2].mean_diff_rms_px);
+  EXPECT_EQ(summary.chosen_lens_model, "LENSMODEL_OPENCV4");
 }
 
 TEST(CrossValidation, BadCandidatesThrow) {
