@@ -37,10 +37,14 @@ bool ProjectPoints(const CameraModel& camera, const Eigen::Matrix3Xd& p_cam,
   // mrcal_point3_t / mrcal_point2_t.
   q_px->resize(2, n);
   std::vector<mrcal_point3_t> dq_dp_buf(dq_dp ? 2 * n : 0);
-  std::vector<double> dq_di_buf(dq_dintrinsics ? 2 * n * n_intrinsics : 0);
+  // mrcal 2.2 fills dq_dp correctly for N > 1 only when dq_dintrinsics is
+  // requested too (without it, every point but the first gets zeros), so ask
+  // for both whenever dq_dp is wanted.
+  const bool want_dq_di = dq_dintrinsics != nullptr || dq_dp != nullptr;
+  std::vector<double> dq_di_buf(want_dq_di ? 2 * n * n_intrinsics : 0);
   const bool ok = mrcal_project(
       reinterpret_cast<mrcal_point2_t*>(q_px->data()), dq_dp ? dq_dp_buf.data() : nullptr,
-      dq_dintrinsics ? dq_di_buf.data() : nullptr,
+      want_dq_di ? dq_di_buf.data() : nullptr,
       reinterpret_cast<const mrcal_point3_t*>(p_cam.data()), n, &lensmodel,
       camera.intrinsics.data());
   if (!ok) return false;

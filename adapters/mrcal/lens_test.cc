@@ -65,5 +65,19 @@ TEST(Lens, AnalyticGradientsMatchFiniteDifferences) {
   }
 }
 
+TEST(Lens, PointGradientsAloneMatchGradientsWithIntrinsics) {
+  // mrcal 2.2 mis-fills dq_dp for N > 1 when dq_dintrinsics is not requested;
+  // ProjectPoints must hide that.
+  const CameraModel camera = TwelveMillimetreCamera();
+  Eigen::Matrix3Xd p(3, 3);
+  p << 40.0, -85.0, 10.0, -30.0, 60.0, 75.0, 390.0, 410.0, 380.0;
+  Eigen::Matrix2Xd q;
+  Eigen::MatrixXd dq_dp_alone, dq_dp_both, dq_di;
+  ASSERT_TRUE(ProjectPoints(camera, p, &q, &dq_dp_alone));
+  ASSERT_TRUE(ProjectPoints(camera, p, &q, &dq_dp_both, &dq_di));
+  EXPECT_EQ(dq_dp_alone, dq_dp_both);
+  EXPECT_GT(dq_dp_alone.row(5).norm(), 1.0);  // the last point's gradient is not zero
+}
+
 }  // namespace
 }  // namespace omm
