@@ -98,16 +98,28 @@ void ComputeResiduals(const LensProjection& lens, const PlaneBundleInput& input,
   }
 }
 
-// RMS of |residual| over the used observations, and their weighted chi^2.
-std::pair<double, double> RmsAndChi2(const PlaneBundleInput& input, const PlaneScene& scene) {
-  double sum_sq = 0.0, chi2 = 0.0;
+struct ResidualStats {
+  double rms_px = 0.0;  // over the used observations
+  double chi2 = 0.0;    // their weighted sum of squares, in sigmas
+  int num_outliers = 0;  // |residual| > outlier_px
+  double inlier_rms_px = 0.0;
+};
+
+ResidualStats Stats(const PlaneBundleInput& input, const PlaneScene& scene, double outlier_px) {
+  ResidualStats stats;
+  double sum_sq = 0.0, inlier_sum_sq = 0.0;
   int count = 0;
   const double inv_sigma = 1.0 / input.observation_sigma_px;
   auto add = [&](double weight, const Eigen::Vector2d& res) {
     if (weight <= 0.0) return;
     sum_sq += res.squaredNorm();
-    chi2 += (weight * inv_sigma * res).squaredNorm();
+    stats.chi2 += (weight * inv_sigma * res).squaredNorm();
     ++count;
+    if (res.norm() > outlier_px) {
+      ++stats.num_outliers;
+    } else {
+      inlier_sum_sq += res.squaredNorm();
+    }
   };
   for (size_t n = 0; n < input.observations.size(); ++n) {
     add(input.observations[n].weight, scene.residual_px.col(static_cast<Eigen::Index>(n)));
@@ -116,7 +128,10 @@ std::pair<double, double> RmsAndChi2(const PlaneBundleInput& input, const PlaneS
     add(input.plate_observations[n].weight,
         scene.plate_residual_px.col(static_cast<Eigen::Index>(n)));
   }
-  return {count > 0 ? std::sqrt(sum_sq / count) : 0.0, chi2};
+  const int inliers = count - stats.num_outliers;
+  stats.rms_px = count > 0 ? std::sqrt(sum_sq / count) : 0.0;
+  stats.inlier_rms_px = inliers > 0 ? std::sqrt(inlier_sum_sq / inliers) : 0.0;
+  return stats;
 }
 
 ceres::LossFunction* MakeLoss(const PlaneBundleOptions& options, double sigma_px) {
@@ -157,7 +172,8 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   Blocks b = BlocksFromScene(*scene);
   const Eigen::VectorXd calibrated_intrinsics = scene->intrinsics;  // the prior's mean
   ComputeResiduals(lens, input, &b, scene);
-  summary.initial_rms_px = RmsAndChi2(input, *scene).first;
+  const double outlier_px = 3.0 * options.loss_scale_px;
+  summary.initial_rms_px = Stats(input, *scene, outlier_px).rms_px;
 
   ceres::Problem::Options problem_options;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
@@ -252,9 +268,11 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
 
   BlocksToScene(b, scene);
   ComputeResiduals(lens, input, &b, scene);
-  const auto [rms_px, chi2_observations] = RmsAndChi2(input, *scene);
-  summary.final_rms_px = rms_px;
-  double chi2 = chi2_observations;
+  const ResidualStats stats = Stats(input, *scene, outlier_px);
+  summary.final_rms_px = stats.rms_px;
+  summary.num_outliers = stats.num_outliers;
+  summary.inlier_rms_px = stats.inlier_rms_px;
+  double chi2 = stats.chi2;
   for (int i = 0; i < num_tiles; ++i) {
     const Eigen::Vector2d adjustment = scene->table_pos_mm[i] - input.commanded_table_pos_mm[i];
     summary.table_adjustment_mm.push_back(adjustment);
@@ -334,8 +352,8 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
     why_unusable = "no convergence in " + std::to_string(options.max_iterations) + " iterations";
   } else if (observed_tiles < 2) {
     why_unusable = "fewer than 2 tiles observed";
-  } else if (!(summary.final_rms_px <= options.max_usable_rms_px)) {
-    why_unusable = "RMS above max_usable_rms_px";
+  } else if (!(summary.inlier_rms_px <= options.max_usable_rms_px)) {
+    why_unusable = "inlier RMS above max_usable_rms_px";
   } else if (config.compute_covariance && !summary.covariance_ok) {
     why_unusable = "covariance not computable (rank-deficient: too few observations?)";
   }
@@ -350,7 +368,8 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
         << num_tiles << " tiles (" << summary.tiles_without_observations.size()
         << " by prior only), " << input.num_tracks << " tracks, " << summary.num_observations
         << " obs, rms " << summary.initial_rms_px << " -> " << summary.final_rms_px
-        << " px in " << summary.iterations << " it, tilt " << summary.plane_tilt_deg
+        << " px (inliers " << summary.inlier_rms_px << ", " << summary.num_outliers
+        << " outliers) in " << summary.iterations << " it, tilt " << summary.plane_tilt_deg
         << " deg, max |T adj| " << max_adjustment_mm << " mm";
   summary.brief = brief.str();
   return summary;

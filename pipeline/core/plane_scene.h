@@ -128,7 +128,7 @@ struct PlaneBundleOptions {
   double gradient_tolerance = 1e-12;   // max-norm of the scaled gradient to stop
   double parameter_tolerance = 1e-10;  // relative step size to stop
   int num_threads = 2;                 // for evaluation, linear solve, covariance
-  // Largest acceptable RMS reprojection error for a usable result, px.
+  // Largest acceptable inlier RMS reprojection error for a usable result, px.
   double max_usable_rms_px = 1.0;
 
   // Empty if valid, else what is wrong.
@@ -188,6 +188,11 @@ struct PlaneBundleSummary {
   int iterations = 0;
   double initial_rms_px = 0.0;  // RMS of |q - q_px| over used observations
   double final_rms_px = 0.0;
+  // Used observations whose final |q - q_px| exceeds 3 loss_scale_px (what
+  // the robust loss discounted), and the RMS over the others: the usability
+  // test reads this one, so a few gross mismatches do not condemn a solve.
+  int num_outliers = 0;
+  double inlier_rms_px = 0.0;
   // sqrt(chi^2 / degrees of freedom) of the whole cost: ~1 when the declared
   // sigmas are right; the covariance is NOT rescaled by it.
   double unit_weight_sigma = 0.0;
