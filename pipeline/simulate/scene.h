@@ -1,0 +1,195 @@
+// The analytic scenes the simulator images: reflectance as an exact function
+// of position on a plane, so edges are exact at any sampling density.
+//
+// Two planes are imaged: the caltab plate (plate frame, project-format.md) and
+// the workpiece's top surface (part frame, Z = 0). A view of a plane maps a
+// camera ray (x/z, y/z) to the plane point it meets:
+//   X(lambda) = R^T (lambda d - t),  d = (x/z, y/z, 1),  lambda = (R^T t)_z / (R^T d)_z
+// for cam_from_plane = (R, t), and the scene gives that point's reflectance.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "adapters/apriltag/tag_family.h"
+#include "pipeline/core/board.h"
+#include "pipeline/simulate/texture.h"
+
+namespace omm {
+
+// What a ray sees: a reflectance and the region it belongs to. Reflectance is
+// continuous inside a region and may jump between regions; the renderer
+// integrates pixels that straddle a region boundary more finely (render.h).
+enum class Region : std::uint8_t {
+  kTexture,     // the workpiece's (continuous) surface texture
+  kPlateWhite,  // caltab ground and margin
+  kPlateBlack,  // caltab frame, dots, triangle
+  kBackground,  // behind the plate in calib/ images
+  kTable,       // machine table: beyond the part and through holes
+  kHoleWall,
+  kPaper,
+  kInk,
+};
+
+struct SceneSample {
+  float reflectance = 0.0f;
+  Region region = Region::kBackground;
+};
+
+// Reflectances of the simulated materials (fraction of a perfect white).
+struct Materials {
+  float plate_white = 0.85f;
+  float plate_black = 0.06f;
+  float calib_background = 0.22f;  // what is behind the plate in calib/ images
+  float table = 0.04f;             // machine table: beyond the part and through holes
+  float hole_wall = 0.16f;         // the bore of a through-hole, seen obliquely
+  float paper = 0.9f;              // marker paper
+  float ink = 0.05f;               // marker print
+};
+
+// The caltab plate: square plate of `plate_size_mm` (white), the black frame,
+// the rows x cols dots and the corner triangle of project-format.md.
+class CaltabPattern {
+ public:
+  CaltabPattern(const BoardSpec& board, double plate_size_mm, const Materials& materials);
+  bool Contains(double x_mm, double y_mm) const {
+    return std::abs(x_mm) <= half_plate_ && std::abs(y_mm) <= half_plate_;
+  }
+  // What plate point (x, y) looks like; the point must be on the plate (Contains).
+  SceneSample Sample(double x_mm, double y_mm) const;
+
+ private:
+  BoardSpec board_;
+  double half_plate_, half_frame_, half_inner_, dot_r2_;
+  float white_, black_;
+};
+
+// A plane's pose seen along camera rays: precomputes R^T and R^T t.
+class PlaneView {
+ public:
+  explicit PlaneView(const Eigen::Isometry3d& cam_from_plane)
+      : rt_(cam_from_plane.linear().transpose()),
+        rtt_(rt_ * cam_from_plane.translation()) {}
+  // Plane point (X, Y) met by the ray (x, y, 1); false if the plane is behind
+  // the camera along this ray or parallel to it.
+  bool Intersect(double x, double y, Eigen::Vector2d* point) const {
+    const Eigen::Vector3d d = rt_ * Eigen::Vector3d(x, y, 1.0);
+    if (std::abs(d.z()) < 1e-12) return false;
+    const double lambda = rtt_.z() / d.z();
+    if (lambda <= 0) return false;
+    *point = lambda * d.head<2>() - rtt_.head<2>();
+    return true;
+  }
+  // The ray direction in plane coordinates (not normalised).
+  Eigen::Vector3d Direction(double x, double y) const { return rt_ * Eigen::Vector3d(x, y, 1.0); }
+
+ private:
+  Eigen::Matrix3d rt_;
+  Eigen::Vector3d rtt_;
+};
+
+// The plate in a calib/ image: the pattern on the plate, background beyond.
+class PlateScene {
+ public:
+  PlateScene(const CaltabPattern* pattern, const Eigen::Isometry3d& cam_from_plate, float background)
+      : pattern_(pattern), view_(cam_from_plate), background_(background) {}
+  SceneSample operator()(double x, double y) const {
+    Eigen::Vector2d p;
+    if (!view_.Intersect(x, y, &p) || !pattern_->Contains(p.x(), p.y())) {
+      return {background_, Region::kBackground};
+    }
+    return pattern_->Sample(p.x(), p.y());
+  }
+
+ private:
+  const CaltabPattern* pattern_;
+  PlaneView view_;
+  float background_;
+};
+
+// A uniform scene (the calib/ image without a plate).
+struct UniformScene {
+  float value = 0.0f;
+  SceneSample operator()(double, double) const { return {value, Region::kBackground}; }
+};
+
+struct HoleShape {
+  Eigen::Vector2d center_mm;
+  double radius_mm = 0.0;
+};
+
+// A paper AprilTag: paper square centred at center_mm, rotated by angle_rad
+// (the printed tag's +x along (cos, sin) in the part frame, its +y, down in
+// the print, along (sin, -cos)), tag cells of cell_mm.
+struct MarkerShape {
+  Eigen::Vector2d center_mm;
+  double angle_rad = 0.0;
+  double cell_mm = 0.0;
+  double paper_size_mm = 0.0;
+  TagCells cells;
+};
+
+// The workpiece: its top surface (rectangle outline, textured), through-holes
+// of thickness_mm (inside: the bore where the ray meets it, else the table),
+// paper markers and optionally the caltab plate lying on it. Zero-thickness
+// paper and plate; the part's outer walls face away from the camera and are
+// not modelled.
+class WorkpieceScene {
+ public:
+  struct Layout {
+    Eigen::Vector2d min_mm, max_mm;
+    double thickness_mm = 0.0;
+    std::vector<HoleShape> holes;
+    std::vector<MarkerShape> markers;
+    const CaltabPattern* plate = nullptr;  // may be null
+    Eigen::Isometry3d part_from_plate = Eigen::Isometry3d::Identity();
+  };
+  WorkpieceScene(Layout layout, const SurfaceTexture* texture, const Materials& materials);
+
+  // What a ray sees that meets the top surface at part point p, travelling
+  // along d_part (d_part.z < 0: downwards).
+  SceneSample Sample(const Eigen::Vector2d& p, const Eigen::Vector3d& d_part) const;
+
+ private:
+  Layout layout_;
+  const SurfaceTexture* texture_;
+  Materials materials_;
+  // plate (x, y) = plate_from_part_2d_ * (p - plate_origin_)
+  Eigen::Matrix2d plate_from_part_2d_;
+  Eigen::Vector2d plate_origin_;
+  // A uniform grid of kCellMm cells over the outline listing the holes and
+  // markers that reach into each cell: one lookup instead of a loop over all
+  // shapes for every ray.
+  static constexpr double kCellMm = 20.0;
+  struct Cell {
+    std::vector<int> holes, markers;
+  };
+  int grid_cols_ = 0, grid_rows_ = 0;
+  std::vector<Cell> grid_;
+};
+
+// The workpiece in a tile: the part moved by the table, seen from the camera.
+class TileScene {
+ public:
+  TileScene(const WorkpieceScene* scene, const Eigen::Isometry3d& cam_from_part,
+            const Eigen::Vector2d& table_pos_mm, float table_reflectance)
+      : scene_(scene), view_(cam_from_part), table_pos_mm_(table_pos_mm), table_(table_reflectance) {}
+  SceneSample operator()(double x, double y) const {
+    // The plane is fixed in the machine frame (= part frame at table 0); the
+    // part point under machine point M is M - T.
+    Eigen::Vector2d m;
+    if (!view_.Intersect(x, y, &m)) return {table_, Region::kTable};
+    return scene_->Sample(m - table_pos_mm_, view_.Direction(x, y));
+  }
+
+ private:
+  const WorkpieceScene* scene_;
+  PlaneView view_;
+  Eigen::Vector2d table_pos_mm_;
+  float table_;
+};
+
+}  // namespace omm

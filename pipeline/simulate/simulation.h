@@ -1,0 +1,121 @@
+// The ground-truth simulator's scene and images, without files: draws a whole
+// project (camera, calibration poses, workpiece, table positions, what to
+// measure) from a seed, then renders any of its images.
+//
+// Physical model (design.md, project-format.md):
+// - Camera: a mrcal lens model (LENSMODEL_OPENCV8 with a 12 mm lens's
+//   distortion and an off-centre principal point; the lens-mismatch preset uses
+//   a LENSMODEL_SPLINED_STEREOGRAPHIC truth with a strong radial plus a
+//   non-radial distortion that OPENCV8 cannot represent), 1600 x 1200 px,
+//   pitch 4.5 um, focal length within ~1.5 % of the nominal 12 mm. It looks
+//   down from ~390 mm with a 0.5-2.5 deg tilt and a rotation about its axis of
+//   k * 90 deg +- 8 deg relative to the machine axes.
+// - Calibration: the caltab plate at ~18 poses over the whole field (flat and
+//   tilted 10-35 deg, 340-440 mm away, any rotation), one partly outside the
+//   image, one image without the plate.
+// - Workpiece: a ~450 mm square plate, top surface at Z = 0, textured, with
+//   through-holes (8-60 mm), optionally paper AprilTags and the caltab lying
+//   on it; imaged as a 3 x 3 grid with 35-45 % overlap; actual table
+//   positions = commanded + N(0, table sigma).
+// - Images: ray casting with S x S supersamples per pixel (RayTable), exact
+//   analytic scenes (scene.h), then the sensor (render.h): Gaussian PSF,
+//   vignetting, gain, shot and read noise, 8-bit quantisation.
+// Everything is a deterministic function of (seed, preset, options); noise
+// and scene draws come from separate streams (random.h).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "pipeline/core/image.h"
+#include "pipeline/core/project.h"
+#include "pipeline/core/truth.h"
+#include "pipeline/simulate/ray_table.h"
+#include "pipeline/simulate/render.h"
+#include "pipeline/simulate/scene.h"
+#include "pipeline/simulate/texture.h"
+
+namespace omm {
+
+struct SimulationOptions {
+  std::uint64_t seed = 1;       // everything random is drawn from this seed
+  std::string preset = "demo";  // one of SimulationPresets()
+  // Number of calib/ images, including one with the plate partly outside the
+  // image and one without the plate (>= 3).
+  int num_calib_images = 20;
+  bool sensor_noise = true;  // shot and read noise (images are quantised either way)
+  int supersampling = 4;     // S: S x S rays per pixel (>= 4 for metrology-grade edges)
+  int edge_supersampling = 16;  // rays per axis in pixels an edge crosses (IntegrationOptions)
+  int num_threads = 2;       // rendering threads; the images do not depend on it
+
+  // Empty if valid, else what is wrong (unknown preset, ...).
+  std::string Check() const;
+};
+
+// Names of the presets: "demo", "markers", "low-texture", "sparse-texture",
+// "exposure", "lens-mismatch".
+std::vector<std::string> SimulationPresets();
+
+// What a preset changes.
+struct PresetSpec {
+  std::string name;
+  std::string description;          // one line, for --help
+  bool splined_truth = false;       // lens-mismatch: a truth OPENCV8 cannot represent
+  TextureStyle texture = TextureStyle::kRich;
+  bool markers = false;             // paper AprilTags on the part
+  bool plate_on_part = false;       // the caltab lying on the part (independent scale check)
+  bool exposure_variation = false;  // tiles of clearly different gain and vignetting
+};
+
+// The spec of a preset name from SimulationPresets() (asserts otherwise).
+PresetSpec GetPreset(const std::string& name);
+
+// A planned project: the truth and the project files' content, no pixels.
+struct SimulationPlan {
+  SimulationOptions options;
+  PresetSpec preset;
+  SimulationTruth truth;
+  // project.yaml, table.csv and cmm.csv content. dir and calib_images (which
+  // are absolute paths) are the writer's; calib image names are in truth.
+  Project project;
+  Materials materials;
+  SensorModel sensor;
+  std::uint64_t texture_seed = 0;
+};
+
+// Draws everything from options.seed. Fast (no rendering); precondition:
+// options.Check() is empty.
+SimulationPlan PlanSimulation(const SimulationOptions& options);
+
+// Renders a plan's images. Holds the scene objects shared by all images.
+class ProjectRenderer {
+ public:
+  explicit ProjectRenderer(const SimulationPlan& plan);
+  ~ProjectRenderer();
+
+  // Image of rays.rect (the whole image for files), quantised to the sensor's
+  // bit depth. `rays` must come from the plan's truth camera.
+  ImageF RenderCalibImage(int index, const RayTable& rays) const;
+  ImageF RenderTile(int index, const RayTable& rays) const;
+
+  // The noiseless, unblurred mean reflectance of each pixel (tests).
+  ImageF CalibReflectance(int index, const RayTable& rays) const;
+  ImageF TileReflectance(int index, const RayTable& rays) const;
+
+ private:
+  IntegrationOptions Integration() const;
+  ImageF Expose(const ImageF& reflectance, const RayTable& rays, const ExposureTruth& exposure,
+                std::uint64_t noise_stream) const;
+
+  const SimulationPlan& plan_;
+  CaltabPattern plate_;
+  std::unique_ptr<SurfaceTexture> texture_;
+  std::unique_ptr<WorkpieceScene> workpiece_;
+};
+
+// Ray-table options for a plan (its supersampling and threads).
+RayTableOptions RayOptionsFor(const SimulationOptions& options);
+
+}  // namespace omm
