@@ -4,7 +4,7 @@
 
 namespace omm {
 
-ImageF GaussianBlur(const ImageF& image, double sigma_px) {
+ImageF GaussianBlur(const ImageF& image, double sigma_px, int num_threads) {
   if (sigma_px <= 0) return image;
   const int radius = static_cast<int>(std::ceil(4 * sigma_px));
   std::vector<float> kernel(2 * radius + 1);
@@ -15,45 +15,54 @@ ImageF GaussianBlur(const ImageF& image, double sigma_px) {
   }
   const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
   ImageF horizontal(rows, cols), out(rows, cols);
-  for (int r = 0; r < rows; ++r) {
-    for (int c = 0; c < cols; ++c) {
-      float acc = 0.0f;
-      for (int i = -radius; i <= radius; ++i) acc += kernel[i + radius] * image(r, std::clamp(c + i, 0, cols - 1));
-      horizontal(r, c) = acc;
+  internal::ParallelRows(rows, num_threads, [&](int begin, int end) {
+    for (int r = begin; r < end; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        float acc = 0.0f;
+        for (int i = -radius; i <= radius; ++i) acc += kernel[i + radius] * image(r, std::clamp(c + i, 0, cols - 1));
+        horizontal(r, c) = acc;
+      }
     }
-  }
-  for (int r = 0; r < rows; ++r) {
-    for (int c = 0; c < cols; ++c) {
-      float acc = 0.0f;
-      for (int i = -radius; i <= radius; ++i) acc += kernel[i + radius] * horizontal(std::clamp(r + i, 0, rows - 1), c);
-      out(r, c) = acc;
+  });
+  internal::ParallelRows(rows, num_threads, [&](int begin, int end) {
+    for (int r = begin; r < end; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        float acc = 0.0f;
+        for (int i = -radius; i <= radius; ++i) acc += kernel[i + radius] * horizontal(std::clamp(r + i, 0, rows - 1), c);
+        out(r, c) = acc;
+      }
     }
-  }
+  });
   return out;
 }
 
 ImageF ExposeImage(const ImageF& reflectance, const PixelRect& rect, const ExposureTruth& exposure,
                    const Eigen::Vector2d& vignetting_centre_px, double corner_radius_px,
-                   const SensorModel& sensor, bool noise, SimRandom* random) {
-  ImageF image = GaussianBlur(reflectance, exposure.psf_sigma_px);
+                   const SensorModel& sensor, const NoiseSource& noise, int num_threads) {
+  ImageF image = GaussianBlur(reflectance, exposure.psf_sigma_px, num_threads);
   const double levels = sensor.bit_depth > 0 ? (1 << sensor.bit_depth) - 1 : 0.0;
   const double inv_r2 = 1.0 / (corner_radius_px * corner_radius_px);
-  for (int r = 0; r < rect.height; ++r) {
-    for (int c = 0; c < rect.width; ++c) {
-      const double dx = rect.x0 + c - vignetting_centre_px.x();
-      const double dy = rect.y0 + r - vignetting_centre_px.y();
-      const double v = 1.0 - exposure.vignetting * (dx * dx + dy * dy) * inv_r2;
-      double value = exposure.gain * v * image(r, c);
-      if (noise) {
-        const double electrons = std::max(0.0, value) * sensor.full_well_e;
-        const double sigma_e = std::sqrt(electrons + sensor.read_noise_e * sensor.read_noise_e);
-        value += random->Normal() * sigma_e / sensor.full_well_e;
+  internal::ParallelRows(rect.height, num_threads, [&](int begin, int end) {
+    for (int r = begin; r < end; ++r) {
+      SimRandom random(noise.seed, noise.stream * 65536 + static_cast<std::uint64_t>(rect.y0 + r));
+      // Draws of the columns left of the rect, so a crop matches the image.
+      for (int c = 0; noise.enabled && c < rect.x0; ++c) random.Normal();
+      for (int c = 0; c < rect.width; ++c) {
+        const double dx = rect.x0 + c - vignetting_centre_px.x();
+        const double dy = rect.y0 + r - vignetting_centre_px.y();
+        const double v = 1.0 - exposure.vignetting * (dx * dx + dy * dy) * inv_r2;
+        double value = exposure.gain * v * image(r, c);
+        if (noise.enabled) {
+          const double electrons = std::max(0.0, value) * sensor.full_well_e;
+          const double sigma_e = std::sqrt(electrons + sensor.read_noise_e * sensor.read_noise_e);
+          value += random.Normal() * sigma_e / sensor.full_well_e;
+        }
+        value = std::clamp(value, 0.0, 1.0);
+        if (levels > 0) value = std::round(value * levels) / levels;
+        image(r, c) = static_cast<float>(value);
       }
-      value = std::clamp(value, 0.0, 1.0);
-      if (levels > 0) value = std::round(value * levels) / levels;
-      image(r, c) = static_cast<float>(value);
     }
-  }
+  });
   return image;
 }
 

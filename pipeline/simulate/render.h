@@ -143,20 +143,28 @@ struct SensorModel {
   int bit_depth = 8;             // ADC bits; 0 keeps the float values (tests)
 };
 
+// Where the noise of an image comes from: row r (of the whole image) draws
+// from its own stream SimRandom(seed, stream * 65536 + r), so rows can be
+// exposed in parallel and a crop gets the same noise as the whole image.
+struct NoiseSource {
+  bool enabled = false;
+  std::uint64_t seed = 0;
+  std::uint64_t stream = 0;
+};
+
 // Images the integrated reflectance of `rect` (reflectance.rows() = rect
 // height): irradiance = V(q) (g * reflectance) (Gaussian PSF, sigma
 // exposure.psf_sigma_px, borders clamped), with the vignetting
 // V(q) = 1 - exposure.vignetting * |q - centre|^2 / corner_radius_px^2 and the
-// gain g = exposure.gain; then, if `noise`, shot noise (Gaussian with the
-// Poisson variance of irradiance * full_well_e electrons) and read noise; then
-// clamped to [0, 1] and quantised to the ADC's levels. `random` supplies the
-// noise (raster order) and is not used without noise.
+// gain g = exposure.gain; then, if noise.enabled, shot noise (Gaussian with
+// the Poisson variance of irradiance * full_well_e electrons) and read noise;
+// then clamped to [0, 1] and quantised to the ADC's levels.
 ImageF ExposeImage(const ImageF& reflectance, const PixelRect& rect, const ExposureTruth& exposure,
                    const Eigen::Vector2d& vignetting_centre_px, double corner_radius_px,
-                   const SensorModel& sensor, bool noise, SimRandom* random);
+                   const SensorModel& sensor, const NoiseSource& noise, int num_threads);
 
 // Separable Gaussian blur, kernel radius ceil(4 sigma), normalised; the image
 // borders are extended by their edge values. sigma <= 0 returns the input.
-ImageF GaussianBlur(const ImageF& image, double sigma_px);
+ImageF GaussianBlur(const ImageF& image, double sigma_px, int num_threads);
 
 }  // namespace omm

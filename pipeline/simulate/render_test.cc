@@ -73,8 +73,8 @@ CentroidStats CompareDotCentroids(const CameraModel& camera, const Eigen::Isomet
   exposure.psf_sigma_px = psf_sigma_px;
   SensorModel sensor;
   sensor.bit_depth = 0;
-  const ImageF image = ExposeImage(reflectance, rect, exposure, Eigen::Vector2d(800, 600), 1000.0, sensor,
-                                   /*noise=*/false, nullptr);
+  const ImageF image =
+      ExposeImage(reflectance, rect, exposure, Eigen::Vector2d(800, 600), 1000.0, sensor, NoiseSource(), 2);
 
   CentroidStats stats;
   const Eigen::Matrix3Xd marks = BoardPoints(board);
@@ -181,7 +181,7 @@ TEST(GaussianBlur, PreservesSumAndCentroid) {
   ImageF image = ImageF::Zero(41, 41);
   image(20, 17) = 1.0f;
   image(22, 25) = 2.0f;
-  const ImageF blurred = GaussianBlur(image, 0.8);
+  const ImageF blurred = GaussianBlur(image, 0.8, 2);
   double sum = 0, mx = 0, my = 0;
   for (int r = 0; r < 41; ++r) {
     for (int c = 0; c < 41; ++c) sum += blurred(r, c), mx += c * blurred(r, c), my += r * blurred(r, c);
@@ -199,8 +199,8 @@ TEST(ExposeImage, NoiseHasTheModelledVariance) {
   ExposureTruth exposure;
   SensorModel sensor;
   sensor.bit_depth = 0;
-  SimRandom random(7, 1);
-  const ImageF image = ExposeImage(flat, rect, exposure, Eigen::Vector2d(100, 100), 141.0, sensor, true, &random);
+  const ImageF image =
+      ExposeImage(flat, rect, exposure, Eigen::Vector2d(100, 100), 141.0, sensor, NoiseSource{true, 7, 1}, 2);
   const double mean = image.cast<double>().mean();
   const double var = (image.cast<double>().array() - mean).square().sum() / (image.size() - 1);
   const double expected = (0.5 * sensor.full_well_e + sensor.read_noise_e * sensor.read_noise_e) /
@@ -208,6 +208,18 @@ TEST(ExposeImage, NoiseHasTheModelledVariance) {
   EXPECT_NEAR(mean, 0.5, 5 * std::sqrt(expected / image.size()));
   // 40000 samples: the variance's relative sigma is sqrt(2 / n) = 0.7 %.
   EXPECT_NEAR(var / expected, 1.0, 0.035);
+}
+
+// A crop is exposed with the same noise as the same pixels of the whole image.
+TEST(ExposeImage, CropNoiseMatchesTheWholeImage) {
+  const ImageF flat = ImageF::Constant(60, 80, 0.4f);
+  ExposureTruth exposure;
+  const SensorModel sensor;
+  const NoiseSource noise{true, 3, 1001};
+  const ImageF whole = ExposeImage(flat, {0, 0, 80, 60}, exposure, Eigen::Vector2d(40, 30), 50.0, sensor, noise, 2);
+  const ImageF crop = ExposeImage(flat.block(10, 20, 30, 40), {20, 10, 40, 30}, exposure, Eigen::Vector2d(40, 30),
+                                  50.0, sensor, noise, 1);
+  EXPECT_EQ(crop, whole.block(10, 20, 30, 40));
 }
 
 TEST(ExposeImage, VignettingAndGainFollowTheModel) {
@@ -219,13 +231,13 @@ TEST(ExposeImage, VignettingAndGainFollowTheModel) {
   SensorModel sensor;
   sensor.bit_depth = 0;
   const Eigen::Vector2d centre(200, 150);
-  const ImageF image = ExposeImage(flat, rect, exposure, centre, 250.0, sensor, false, nullptr);
+  const ImageF image = ExposeImage(flat, rect, exposure, centre, 250.0, sensor, NoiseSource(), 2);
   for (const auto& [col, row] : {std::pair{200, 150}, std::pair{399, 249}, std::pair{100, 50}}) {
     const double r2 = (Eigen::Vector2d(col, row) - centre).squaredNorm() / (250.0 * 250.0);
     EXPECT_NEAR(image(row - rect.y0, col - rect.x0), 0.9 * 0.8 * (1 - 0.3 * r2), 1e-6);
   }
   sensor.bit_depth = 8;
-  const ImageF quantised = ExposeImage(flat, rect, exposure, centre, 250.0, sensor, false, nullptr);
+  const ImageF quantised = ExposeImage(flat, rect, exposure, centre, 250.0, sensor, NoiseSource(), 2);
   for (int i = 0; i < quantised.size(); ++i) {
     const double dn = quantised.data()[i] * 255.0;
     ASSERT_NEAR(dn, std::round(dn), 1e-3);

@@ -1,6 +1,7 @@
 #include "pipeline/simulate/simulate_project.h"
 
 #include <chrono>
+#include <future>
 #include <system_error>
 
 #include <fmt/format.h>
@@ -51,20 +52,29 @@ SimulationSummary SimulateProjectDirectory(const SimulationOptions& options,
   if (!ray_summary.ok) throw std::logic_error("simulate: the truth lens model does not unproject");
 
   const ProjectRenderer renderer(plan);
+  // Each image is encoded and written while the next one renders.
+  std::future<void> writing;
+  auto write = [&](const std::filesystem::path& path, ImageF image) {
+    if (writing.valid()) writing.get();
+    writing = std::async(std::launch::async, [path, image = std::move(image), bits = plan.sensor.bit_depth] {
+      WriteGrayImage(path, image, bits);
+    });
+  };
   int done = 1;
   for (int i = 0; i < num_calib; ++i) {
     const std::string name = truth.calib_images[i].image;
     if (progress) progress(done, total, "rendering calib/" + name);
-    WriteGrayImage(dir / "calib" / name, renderer.RenderCalibImage(i, rays), plan.sensor.bit_depth);
+    write(dir / "calib" / name, renderer.RenderCalibImage(i, rays));
     plan.project.calib_images.push_back(dir / "calib" / name);
     ++done;
   }
   for (int i = 0; i < num_tiles; ++i) {
     const std::string name = truth.tiles[i].image;
     if (progress) progress(done, total, "rendering tiles/" + name);
-    WriteGrayImage(dir / "tiles" / name, renderer.RenderTile(i, rays), plan.sensor.bit_depth);
+    write(dir / "tiles" / name, renderer.RenderTile(i, rays));
     ++done;
   }
+  if (writing.valid()) writing.get();
   plan.project.dir = dir;
   WriteProjectFiles(plan.project);
   WriteTruthJson(truth, truth_path);

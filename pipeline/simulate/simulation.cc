@@ -786,9 +786,9 @@ ImageF ProjectRenderer::Expose(const ImageF& reflectance, const RayTable& rays, 
                                        Eigen::Vector2d(camera.width_px - 1, camera.height_px - 1)}) {
     corner_radius = std::max(corner_radius, (corner - centre).norm());
   }
-  SimRandom random(plan_.options.seed, noise_stream);
-  return ExposeImage(reflectance, rays.rect, exposure, centre, corner_radius, plan_.sensor,
-                     plan_.options.sensor_noise, &random);
+  const NoiseSource noise{plan_.options.sensor_noise, plan_.options.seed, noise_stream};
+  return ExposeImage(reflectance, rays.rect, exposure, centre, corner_radius, plan_.sensor, noise,
+                     plan_.options.num_threads);
 }
 
 ImageF ProjectRenderer::RenderCalibImage(int index, const RayTable& rays) const {
