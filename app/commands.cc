@@ -60,7 +60,8 @@ std::string MeasurementBrief(const Report& report) {
     made += m.value_mm.has_value();
     if (m.deviation_sigma) worst = std::max(worst, std::abs(*m.deviation_sigma));
   }
-  return fmt::format("{}/{} made, max |dev|/sigma {:.2f}", made, report.measurements->size(), worst);
+  return fmt::format("{}/{} made, max |dev|/sigma {:.2f}", made, report.measurements->size(),
+                     worst);
 }
 
 // Project directories named by `dirs` (a project, or a folder of projects).
@@ -78,7 +79,8 @@ std::vector<fs::path> FindProjects(const std::vector<fs::path>& dirs) {
       if (fs::is_regular_file(entry.path() / "project.yaml", ec)) found.push_back(entry.path());
     }
     if (found.empty()) {
-      throw InputError(dir.string(), "neither a project (no project.yaml) nor a folder of projects");
+      throw InputError(dir.string(),
+                       "neither a project (no project.yaml) nor a folder of projects");
     }
     std::sort(found.begin(), found.end());
     projects.insert(projects.end(), found.begin(), found.end());
@@ -146,8 +148,8 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
   for (const Row& row : rows) width = std::max(width, row.project.size());
   fmt::print("{:<{}}  {:>8}  {:<34}  {}\n", "project", width, "time_s", "measurements", "result");
   for (const Row& row : rows) {
-    fmt::print("{:<{}}  {:>8.1f}  {:<34}  {}\n", row.project, width, row.seconds,
-               row.measurements, row.result);
+    fmt::print("{:<{}}  {:>8.1f}  {:<34}  {}\n", row.project, width, row.seconds, row.measurements,
+               row.result);
   }
   const auto failed = std::count_if(rows.begin(), rows.end(),
                                     [](const Row& r) { return r.result.rfind("FAILED", 0) == 0; });
@@ -192,7 +194,8 @@ int ReportCommand(const fs::path& project_dir, bool json) {
       const CalibrationReport& c = *report.calibration;
       fmt::print("calibration: {}, rms {:.3f} px, {} images used, {} rejected\n", c.lens_model,
                  c.rms_px, c.images_used, c.images_rejected.size());
-      for (const RejectedImage& r : c.images_rejected) fmt::print("  rejected {}: {}\n", r.image, r.why);
+      for (const RejectedImage& r : c.images_rejected)
+        fmt::print("  rejected {}: {}\n", r.image, r.why);
     }
     if (report.mosaic) {
       const MosaicReport& m = *report.mosaic;
@@ -205,7 +208,8 @@ int ReportCommand(const fs::path& project_dir, bool json) {
       for (const MeasurementReport& m : *report.measurements) {
         fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}{}\n", m.name,
                    MeasurementTypeName(m.type), Optional(m.value_mm), Optional(m.sigma_mm),
-                   Optional(m.cmm_mm), Optional(m.deviation_mm), Optional(m.deviation_sigma, "{:.2f}"),
+                   Optional(m.cmm_mm), Optional(m.deviation_mm),
+                   Optional(m.deviation_sigma, "{:.2f}"),
                    m.error.empty() ? "" : "  error: " + m.error);
       }
     }

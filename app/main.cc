@@ -5,9 +5,9 @@
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
 
 #include "app/commands.h"
 #include "app/exit_codes.h"
@@ -33,7 +33,7 @@ void SetUpLogging(int verbose, bool quiet) {
   auto logger = spdlog::stderr_color_mt("omm");
   logger->set_pattern("%^%l%$: %v");
   spdlog::set_default_logger(logger);
-  spdlog::set_level(quiet ? spdlog::level::warn
+  spdlog::set_level(quiet          ? spdlog::level::warn
                     : verbose >= 2 ? spdlog::level::trace
                     : verbose == 1 ? spdlog::level::debug
                                    : spdlog::level::info);
@@ -50,17 +50,19 @@ CLI::App* AddStageCommand(CLI::App& app, omm::Stage stage, const std::string& he
 
 std::string PresetList() {
   std::string list;
-  for (const std::string& preset : omm::SimulationPresets()) list += (list.empty() ? "" : ", ") + preset;
+  for (const std::string& preset : omm::SimulationPresets())
+    list += (list.empty() ? "" : ", ") + preset;
   return list;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"omm: on-machine vision metrology. Calibrates the camera over an NC machine "
-               "table, registers the tiles of a flat workpiece into an orthorectified mosaic, "
-               "and measures holes with their uncertainty.",
-               "omm"};
+  CLI::App app{
+      "omm: on-machine vision metrology. Calibrates the camera over an NC machine "
+      "table, registers the tiles of a flat workpiece into an orthorectified mosaic, "
+      "and measures holes with their uncertainty.",
+      "omm"};
   app.footer(kExitCodes);
   app.set_version_flag("--version", std::string("omm ") + omm::SoftwareVersion());
   app.require_subcommand(1);

@@ -100,7 +100,8 @@ class YamlReader {
   [[noreturn]] void Fail(const YAML::Node& node, const std::string& key,
                          const std::string& what) const {
     std::string where = file_.string();
-    if (node.IsDefined() && node.Mark().line >= 0) where += fmt::format(":{}", node.Mark().line + 1);
+    if (node.IsDefined() && node.Mark().line >= 0)
+      where += fmt::format(":{}", node.Mark().line + 1);
     throw InputError(where, key.empty() ? what : fmt::format("key '{}': {}", key, what));
   }
 
@@ -143,7 +144,8 @@ class YamlReader {
 
   double Positive(const YAML::Node& node, const std::string& key) const {
     const double value = Double(node, key);
-    if (!(value > 0.0)) Fail(node, key, fmt::format("expected a number > 0, got {}", node.Scalar()));
+    if (!(value > 0.0))
+      Fail(node, key, fmt::format("expected a number > 0, got {}", node.Scalar()));
     return value;
   }
 
@@ -203,9 +205,10 @@ CalibrationSource ReadCalibration(const YamlReader& yaml, const YAML::Node& node
     source.kind = CalibrationSource::Kind::kProject;
   } else if (fs::is_regular_file(source.path, ec)) {
     if (source.path.extension() != ".cameramodel") {
-      yaml.Fail(from, "calibration.from",
-                fmt::format("'{}' is neither an omm project directory nor a mrcal .cameramodel file",
-                            source.path.string()));
+      yaml.Fail(
+          from, "calibration.from",
+          fmt::format("'{}' is neither an omm project directory nor a mrcal .cameramodel file",
+                      source.path.string()));
     }
     source.kind = CalibrationSource::Kind::kCameraModel;
   } else {
@@ -218,8 +221,9 @@ CalibrationSource ReadCalibration(const YamlReader& yaml, const YAML::Node& node
 }
 
 BoardSpec ReadBoard(const YamlReader& yaml, const YAML::Node& node) {
-  yaml.CheckKeys(node, "board", {"type", "rows", "cols", "pitch_mm", "dot_diameter_mm", "frame_mm",
-                                 "frame_bar_mm", "triangle_mm"});
+  yaml.CheckKeys(node, "board",
+                 {"type", "rows", "cols", "pitch_mm", "dot_diameter_mm", "frame_mm", "frame_bar_mm",
+                  "triangle_mm"});
   BoardSpec board;
   const YAML::Node type_node = yaml.Required(node, "board", "type");
   const std::string type = yaml.String(type_node, "board.type");
@@ -258,7 +262,8 @@ BoardSpec ReadBoard(const YamlReader& yaml, const YAML::Node& node) {
     }
   }
   if (caltab) {
-    if (node["frame_mm"].IsDefined()) board.frame_mm = yaml.Positive(node["frame_mm"], "board.frame_mm");
+    if (node["frame_mm"].IsDefined())
+      board.frame_mm = yaml.Positive(node["frame_mm"], "board.frame_mm");
     if (node["frame_bar_mm"].IsDefined()) {
       board.frame_bar_mm = yaml.Positive(node["frame_bar_mm"], "board.frame_bar_mm");
     }
@@ -363,17 +368,19 @@ void ReadProjectYaml(const fs::path& dir, Project& project, bool& has_table_keys
   } catch (const YAML::Exception& e) {
     throw InputError(file.string(), std::string("cannot read: ") + e.what());
   }
-  if (!root.IsMap()) throw InputError(file.string(), "expected a YAML map (format: ..., name: ...)");
-  yaml.CheckKeys(root, "", {"format", "name", "camera", "calibration", "board", "table", "mosaic",
-                            "features", "measurements"});
+  if (!root.IsMap())
+    throw InputError(file.string(), "expected a YAML map (format: ..., name: ...)");
+  yaml.CheckKeys(root, "",
+                 {"format", "name", "camera", "calibration", "board", "table", "mosaic", "features",
+                  "measurements"});
 
   const YAML::Node format = yaml.Required(root, "", "format");
   if (yaml.String(format, "format") != kProjectFormat) {
     yaml.Fail(format, "format",
               fmt::format("this omm reads '{}', got '{}'", kProjectFormat, format.Scalar()));
   }
-  project.name = root["name"].IsDefined() ? yaml.String(root["name"], "name")
-                                          : dir.filename().string();
+  project.name =
+      root["name"].IsDefined() ? yaml.String(root["name"], "name") : dir.filename().string();
   project.camera = ReadCamera(yaml, yaml.Required(root, "", "camera"));
   if (root["calibration"].IsDefined()) {
     project.calibration_from = ReadCalibration(yaml, root["calibration"], dir);
@@ -460,23 +467,23 @@ std::vector<CsvRow> ReadCsv(const fs::path& file, const std::vector<std::string>
     if (!text.empty() && Trim(text).back() == ',') row.fields.push_back("");
     if (!header_seen) {
       if (row.fields != header) {
-        throw InputError(fmt::format("{}:{}", file.string(), line),
-                         fmt::format("expected the header '{}', got '{}'", Join(header),
-                                     Trim(text)));
+        throw InputError(
+            fmt::format("{}:{}", file.string(), line),
+            fmt::format("expected the header '{}', got '{}'", Join(header), Trim(text)));
       }
       header_seen = true;
       continue;
     }
     if (row.fields.size() != header.size()) {
       throw InputError(fmt::format("{}:{}", file.string(), line),
-                       fmt::format("expected {} columns ({}), got {}", header.size(),
-                                   Join(header), row.fields.size()));
+                       fmt::format("expected {} columns ({}), got {}", header.size(), Join(header),
+                                   row.fields.size()));
     }
     rows.push_back(std::move(row));
   }
   if (!header_seen) {
-    throw InputError(file.string(), fmt::format("empty file; expected the header '{}'",
-                                                Join(header)));
+    throw InputError(file.string(),
+                     fmt::format("empty file; expected the header '{}'", Join(header)));
   }
   return rows;
 }
@@ -485,9 +492,9 @@ double CsvNumber(const fs::path& file, const CsvRow& row, size_t column,
                  const std::string& column_name) {
   const auto value = ParseDouble(row.fields[column]);
   if (!value) {
-    throw InputError(fmt::format("{}:{}", file.string(), row.line),
-                     fmt::format("column '{}': expected a number, got '{}'", column_name,
-                                 row.fields[column]));
+    throw InputError(
+        fmt::format("{}:{}", file.string(), row.line),
+        fmt::format("column '{}': expected a number, got '{}'", column_name, row.fields[column]));
   }
   return *value;
 }
@@ -496,7 +503,8 @@ double CsvNumber(const fs::path& file, const CsvRow& row, size_t column,
 
 bool IsImageFile(const fs::path& path) {
   std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
   return ext == ".png" || ext == ".tif" || ext == ".tiff" || ext == ".jpg" || ext == ".jpeg";
 }
 
@@ -537,8 +545,9 @@ Project LoadProject(const fs::path& dir_in) {
   const bool has_table = fs::is_regular_file(table_file, ec);
   if (has_tiles != has_table) {
     throw InputError(has_tiles ? table_file.string() : tiles_dir.string(),
-                     has_tiles ? "table.csv not found (tiles/ needs the table position of each tile)"
-                               : "tiles/ not found (table.csv lists tiles)");
+                     has_tiles
+                         ? "table.csv not found (tiles/ needs the table position of each tile)"
+                         : "tiles/ not found (table.csv lists tiles)");
   }
   if (!has_tiles && !project.features.empty()) {
     throw InputError(tiles_dir.string(),
@@ -582,11 +591,11 @@ Project LoadProject(const fs::path& dir_in) {
     for (size_t i = 0; i < project.features.size(); ++i) {
       const FeatureSpec& feature = project.features[i];
       if (positions.count(feature.image) == 0) {
-        throw InputError(yaml_file.string(),
-                         fmt::format("key 'features[{}].image': feature '{}' is seen in '{}', "
-                                     "which is not a tile in tiles/ and table.csv{}",
-                                     i, feature.name, feature.image,
-                                     Suggest(feature.image, images)));
+        throw InputError(
+            yaml_file.string(),
+            fmt::format("key 'features[{}].image': feature '{}' is seen in '{}', "
+                        "which is not a tile in tiles/ and table.csv{}",
+                        i, feature.name, feature.image, Suggest(feature.image, images)));
       }
     }
   }
@@ -651,8 +660,8 @@ Project LoadProject(const fs::path& dir_in) {
       throw InputError(yaml_file.string(),
                        fmt::format("key 'features[{}].near_px': [{}, {}] is outside the {} x {} "
                                    "px tile '{}'",
-                                   i, q.x(), q.y(), project.image_width_px,
-                                   project.image_height_px, feature.image));
+                                   i, q.x(), q.y(), project.image_width_px, project.image_height_px,
+                                   feature.image));
     }
   }
   return project;

@@ -37,17 +37,15 @@ Json ToJson(const ReportValue& value) {
       value.data());
 }
 
-Json Optional(const std::optional<double>& value) {
-  return value ? Json(*value) : Json(nullptr);
-}
+Json Optional(const std::optional<double>& value) { return value ? Json(*value) : Json(nullptr); }
 
 // Appends `extra` after the named fields; a name clash is a bug of the stage
 // that filled `extra`.
 void AppendExtra(Json& section, const ReportObject& extra, const char* section_name) {
   for (const auto& [key, value] : extra) {
     if (section.contains(key)) {
-      throw std::logic_error(fmt::format("report: extra member '{}' of '{}' hides a named field",
-                                         key, section_name));
+      throw std::logic_error(
+          fmt::format("report: extra member '{}' of '{}' hides a named field", key, section_name));
     }
     section[key] = ToJson(value);
   }
@@ -59,7 +57,8 @@ ReportValue FromJson(const Json& json) {
   switch (json.type()) {
     case Json::value_t::boolean: return json.get<bool>();
     case Json::value_t::number_integer: return json.get<std::int64_t>();
-    case Json::value_t::number_unsigned: return static_cast<std::int64_t>(json.get<std::uint64_t>());
+    case Json::value_t::number_unsigned:
+      return static_cast<std::int64_t>(json.get<std::uint64_t>());
     case Json::value_t::number_float: return json.get<double>();
     case Json::value_t::string: return json.get<std::string>();
     case Json::value_t::array: {

@@ -33,15 +33,15 @@ class ReportValue {
   using Data = std::variant<std::nullptr_t, bool, std::int64_t, double, std::string, Array, Object>;
 
   ReportValue() : data_(nullptr) {}
-  ReportValue(std::nullptr_t) : data_(nullptr) {}                        // NOLINT: implicit by design
-  ReportValue(bool value) : data_(value) {}                              // NOLINT
-  ReportValue(int value) : data_(static_cast<std::int64_t>(value)) {}    // NOLINT
-  ReportValue(std::int64_t value) : data_(value) {}                      // NOLINT
-  ReportValue(double value) : data_(value) {}                            // NOLINT
-  ReportValue(std::string value) : data_(std::move(value)) {}            // NOLINT
-  ReportValue(const char* value) : data_(std::string(value)) {}          // NOLINT
-  ReportValue(Array value) : data_(std::move(value)) {}                  // NOLINT
-  ReportValue(Object value) : data_(std::move(value)) {}                 // NOLINT
+  ReportValue(std::nullptr_t) : data_(nullptr) {}                      // NOLINT: implicit by design
+  ReportValue(bool value) : data_(value) {}                            // NOLINT
+  ReportValue(int value) : data_(static_cast<std::int64_t>(value)) {}  // NOLINT
+  ReportValue(std::int64_t value) : data_(value) {}                    // NOLINT
+  ReportValue(double value) : data_(value) {}                          // NOLINT
+  ReportValue(std::string value) : data_(std::move(value)) {}          // NOLINT
+  ReportValue(const char* value) : data_(std::string(value)) {}        // NOLINT
+  ReportValue(Array value) : data_(std::move(value)) {}                // NOLINT
+  ReportValue(Object value) : data_(std::move(value)) {}               // NOLINT
 
   const Data& data() const { return data_; }
   bool operator==(const ReportValue& other) const { return data_ == other.data_; }
@@ -66,21 +66,21 @@ struct CalibrationReport {
 };
 
 struct MosaicReport {
-  std::string file;         // e.g. "mosaic.tif", relative to out/
-  double rms_px = 0.0;      // RMS reprojection residual of the adjustment
-  double gsd_mm = 0.0;      // mosaic pixel size
-  Eigen::Vector2i size_px = Eigen::Vector2i::Zero();      // width, height
-  Eigen::Vector2d origin_mm = Eigen::Vector2d::Zero();    // part-frame outer corner of pixel (0, 0)
+  std::string file;                                   // e.g. "mosaic.tif", relative to out/
+  double rms_px = 0.0;                                // RMS reprojection residual of the adjustment
+  double gsd_mm = 0.0;                                // mosaic pixel size
+  Eigen::Vector2i size_px = Eigen::Vector2i::Zero();  // width, height
+  Eigen::Vector2d origin_mm = Eigen::Vector2d::Zero();  // part-frame outer corner of pixel (0, 0)
   ReportObject extra;
 };
 
 struct MeasurementReport {
   std::string name;
   MeasurementType type = MeasurementType::kDistance;
-  std::optional<double> value_mm;  // absent when it could not be made (then `error` says why)
-  std::optional<double> sigma_mm;  // 1-sigma standard uncertainty of value_mm
-  std::optional<double> cmm_mm;    // reference value from cmm.csv
-  std::optional<double> deviation_mm;     // value_mm - cmm_mm
+  std::optional<double> value_mm;      // absent when it could not be made (then `error` says why)
+  std::optional<double> sigma_mm;      // 1-sigma standard uncertainty of value_mm
+  std::optional<double> cmm_mm;        // reference value from cmm.csv
+  std::optional<double> deviation_mm;  // value_mm - cmm_mm
   std::optional<double> deviation_sigma;  // deviation_mm / sigma_mm
   std::string error;                      // empty when value_mm is set
   ReportObject extra;

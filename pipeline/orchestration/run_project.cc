@@ -5,8 +5,8 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cstring>
 #include <chrono>
+#include <cstring>
 #include <system_error>
 
 #include <fmt/format.h>
@@ -47,8 +47,7 @@ Report StartingReport(const Project& project, const std::string& inputs_sha256) 
   if (fs::is_regular_file(path, ec)) {
     try {
       Report earlier = ReadReportJson(path);
-      if (earlier.inputs_sha256 == inputs_sha256 &&
-          earlier.software_version == SoftwareVersion()) {
+      if (earlier.inputs_sha256 == inputs_sha256 && earlier.software_version == SoftwareVersion()) {
         report = std::move(earlier);
       } else {
         spdlog::info("{} is from other inputs or another omm version; starting afresh",
@@ -87,8 +86,8 @@ void Commit(const fs::path& staging_dir, const fs::path& out_dir) {
     }
     fs::rename(staging_dir / kReportName, out_dir / kReportName);
   } catch (const fs::filesystem_error& e) {
-    throw InputError(out_dir.string(), std::string("cannot move the results into place: ") +
-                                           e.code().message());
+    throw InputError(out_dir.string(),
+                     std::string("cannot move the results into place: ") + e.code().message());
   }
 }
 
@@ -109,7 +108,8 @@ std::string RunOptions::Check() const {
   auto at = all.begin();
   for (const Stage stage : stages) {
     at = std::find(at, all.end(), stage);
-    if (at == all.end()) return "stages must be distinct and in run order (calibrate, mosaic, measure)";
+    if (at == all.end())
+      return "stages must be distinct and in run order (calibrate, mosaic, measure)";
     ++at;
   }
   return "";
@@ -117,7 +117,8 @@ std::string RunOptions::Check() const {
 
 std::string RunSummary::Brief() const {
   std::string names;
-  for (const Stage stage : stages_run) names += (names.empty() ? "" : ", ") + std::string(StageName(stage));
+  for (const Stage stage : stages_run)
+    names += (names.empty() ? "" : ", ") + std::string(StageName(stage));
   return fmt::format("{} done in {:.1f} s: {}", names, seconds, report_path.string());
 }
 
@@ -160,8 +161,7 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
   }
   fs::remove_all(staging_dir, ec);
   summary.report_path = out_dir / kReportName;
-  summary.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }
 
@@ -171,9 +171,8 @@ bool ReportIsCurrent(const Project& project) {
   if (!fs::is_regular_file(path, ec)) return false;
   try {
     const Report report = ReadReportJson(path);
-    return report.software_version == SoftwareVersion() && report.calibration &&
-           report.mosaic && report.measurements &&
-           report.inputs_sha256 == HashProjectInputs(project);
+    return report.software_version == SoftwareVersion() && report.calibration && report.mosaic &&
+           report.measurements && report.inputs_sha256 == HashProjectInputs(project);
   } catch (const InputError&) {
     return false;
   }

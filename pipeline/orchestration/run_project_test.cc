@@ -55,9 +55,7 @@ void FakeStage(Stage stage, StageContext& context, const std::string& content) {
       context.report.mosaic->file = "mosaic.png";
       break;
     }
-    case Stage::kMeasure:
-      context.report.measurements = std::vector<MeasurementReport>{};
-      break;
+    case Stage::kMeasure: context.report.measurements = std::vector<MeasurementReport>{}; break;
   }
 }
 
@@ -125,8 +123,8 @@ TEST_F(RunProjectTest, SingleStageRunKeepsEarlierSectionsAndDropsLaterOnes) {
   options.stages = {Stage::kMosaic};
   options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v2"); };
   const RunSummary summary = RunProject(project_, options);
-  EXPECT_TRUE(summary.report.calibration.has_value());   // from the earlier run
-  EXPECT_TRUE(summary.report.mosaic.has_value());        // rerun
+  EXPECT_TRUE(summary.report.calibration.has_value());    // from the earlier run
+  EXPECT_TRUE(summary.report.mosaic.has_value());         // rerun
   EXPECT_FALSE(summary.report.measurements.has_value());  // stale, dropped
   EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v2");
   EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
