@@ -160,11 +160,14 @@ EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const E
     // Every upward crossing on the grid; keep the ray only if there is one.
     int crossings = 0;
     double lo = 0, hi = 0, f_lo = 0, f_hi = 0;
-    double s_prev = search_lo, f_prev;
-    profile(ray, s_prev, &f_prev);
+    double s_prev = search_lo, f_prev = 0.0;
+    if (!profile(ray, s_prev, &f_prev)) continue;  // the ray leaves the image
     for (double s = search_lo + options.sample_step_px; s <= search_hi + 1e-9; s += options.sample_step_px) {
-      double f;
-      profile(ray, s, &f);
+      double f = 0.0;
+      if (!profile(ray, s, &f)) {
+        crossings = -1;
+        break;
+      }
       if (f_prev < 0.0 && f >= 0.0) {
         ++crossings;
         lo = s_prev, hi = s, f_lo = f_prev, f_hi = f;
@@ -180,8 +183,8 @@ EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const E
     double s_root = lo;
     for (int it = 0; it < 40 && hi - lo > 1e-5; ++it) {
       s_root = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
-      double f;
-      profile(ray, s_root, &f);
+      double f = 0.0;
+      if (!profile(ray, s_root, &f)) break;  // unreachable: [lo, hi] was sampled
       if (f < 0.0) {
         lo = s_root, f_lo = f;
         if (side == -1) f_hi *= 0.5;
