@@ -30,7 +30,8 @@ TEST(AprilTag36h11, CellsMatchApriltagToImage) {
     ASSERT_EQ(cells.cols(), static_cast<int>(im->width));
     for (int r = 0; r < cells.rows(); ++r) {
       for (int c = 0; c < cells.cols(); ++c) {
-        EXPECT_EQ(cells(r, c), im->buf[r * im->stride + c] > 127) << "id " << id << " cell " << r << "," << c;
+        EXPECT_EQ(cells(r, c), im->buf[r * im->stride + c] > 127)
+            << "id " << id << " cell " << r << "," << c;
       }
     }
     // libapriltag does not export image_u8_destroy; it allocates with calloc.

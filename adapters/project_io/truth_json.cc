@@ -250,7 +250,8 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
     } else {
       in.Fail(path + ".kind", "expected full, partial or plate-absent");
     }
-    image.cam_from_plate = in.Pose(in.At(calib[i], "cam_from_plate", path), path + ".cam_from_plate");
+    image.cam_from_plate =
+        in.Pose(in.At(calib[i], "cam_from_plate", path), path + ".cam_from_plate");
     image.exposure = in.Exposure(in.At(calib[i], "exposure", path), path + ".exposure");
     truth.calib_images.push_back(image);
   }
@@ -311,8 +312,8 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
   const json& measurements = in.Array(root, "measurements", "");
   for (size_t i = 0; i < measurements.size(); ++i) {
     const std::string path = "measurements[" + std::to_string(i) + "]";
-    truth.measurements.push_back({in.String(measurements[i], "name", path),
-                                  in.Number(measurements[i], "value_mm", path)});
+    truth.measurements.push_back(
+        {in.String(measurements[i], "name", path), in.Number(measurements[i], "value_mm", path)});
   }
   return truth;
 }

@@ -13,7 +13,8 @@ namespace {
 
 Eigen::Isometry3d SomePose(double a, double z) {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  pose.linear() = Eigen::AngleAxisd(a, Eigen::Vector3d(0.3, -0.2, 1.0).normalized()).toRotationMatrix();
+  pose.linear() =
+      Eigen::AngleAxisd(a, Eigen::Vector3d(0.3, -0.2, 1.0).normalized()).toRotationMatrix();
   pose.translation() << 0.1 * a, -1.0 / 3.0, z;
   return pose;
 }
@@ -30,10 +31,12 @@ SimulationTruth SomeTruth() {
   truth.camera.focal_length_mm = 12.1 / 3.0;
   truth.camera.psf_sigma_px = 0.77;
   truth.plate_size_mm = 120.0;
-  truth.calib_images.push_back({"calib_00.png", CalibImageTruth::Kind::kFull, SomePose(0.4, 390.0),
-                                {1.02, 0.15, 0.8}});
-  truth.calib_images.push_back({"calib_01.png", CalibImageTruth::Kind::kPlateAbsent,
-                                Eigen::Isometry3d::Identity(), {0.97, 0.15, 0.7}});
+  truth.calib_images.push_back(
+      {"calib_00.png", CalibImageTruth::Kind::kFull, SomePose(0.4, 390.0), {1.02, 0.15, 0.8}});
+  truth.calib_images.push_back({"calib_01.png",
+                                CalibImageTruth::Kind::kPlateAbsent,
+                                Eigen::Isometry3d::Identity(),
+                                {0.97, 0.15, 0.7}});
   truth.cam_from_part = SomePose(2.9, 391.25);
   truth.part_min_mm << -1.5, 0.25;
   truth.part_max_mm << 451.0, 449.0;
@@ -67,7 +70,8 @@ void ExpectPoseEq(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
 TEST(TruthJson, RoundTripIsExact) {
   const SimulationTruth truth = SomeTruth();
   const std::filesystem::path path =
-      std::filesystem::temp_directory_path() / ("omm_truth_json_test_" + std::to_string(::getpid()) + ".json");
+      std::filesystem::temp_directory_path() /
+      ("omm_truth_json_test_" + std::to_string(::getpid()) + ".json");
   WriteTruthJson(truth, path);
   const SimulationTruth back = ReadTruthJson(path);
   std::filesystem::remove(path);

@@ -20,7 +20,8 @@ class CoarseRays {
   static Eigen::Matrix2Xd Nodes(double x_min, double y_min, double step, int nx, int ny) {
     Eigen::Matrix2Xd q(2, nx * ny);
     for (int j = 0; j < ny; ++j) {
-      for (int i = 0; i < nx; ++i) q.col(j * nx + i) << x_min + (i - 1) * step, y_min + (j - 1) * step;
+      for (int i = 0; i < nx; ++i)
+        q.col(j * nx + i) << x_min + (i - 1) * step, y_min + (j - 1) * step;
     }
     return q;
   }
@@ -79,8 +80,7 @@ struct RowsResult {
 
 // Refines the supersamples of rect rows [row_begin, row_end) in place.
 RowsResult RefineRows(const CameraModel& camera, const CoarseRays& coarse,
-                      const RayTableOptions& options, int row_begin, int row_end,
-                      RayTable* table) {
+                      const RayTableOptions& options, int row_begin, int row_end, RayTable* table) {
   RowsResult result;
   const PixelRect& rect = table->rect;
   const int s = table->supersampling;
@@ -192,7 +192,8 @@ RayTable ComputeRayTable(const CameraModel& camera, const PixelRect& rect,
   summary->ok = true;
   for (const RowsResult& r : results) {
     summary->ok = summary->ok && r.ok;
-    summary->max_initial_residual_px = std::max(summary->max_initial_residual_px, r.max_initial_residual_px);
+    summary->max_initial_residual_px =
+        std::max(summary->max_initial_residual_px, r.max_initial_residual_px);
     summary->max_residual_px = std::max(summary->max_residual_px, r.max_residual_px);
   }
   summary->num_rays = num_pixels * table.SamplesPerPixel();

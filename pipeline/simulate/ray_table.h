@@ -43,7 +43,7 @@ struct RayTableOptions {
   // Every this many supersample rows the refined rays are projected once more
   // to measure their error (RayTableSummary::max_residual_px).
   int check_every_rows = 16;
-  int num_threads = 2;      // the result does not depend on it
+  int num_threads = 2;  // the result does not depend on it
 
   // Empty if valid, else what is wrong.
   std::string Check() const;

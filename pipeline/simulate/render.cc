@@ -19,7 +19,8 @@ ImageF GaussianBlur(const ImageF& image, double sigma_px, int num_threads) {
     for (int r = begin; r < end; ++r) {
       for (int c = 0; c < cols; ++c) {
         float acc = 0.0f;
-        for (int i = -radius; i <= radius; ++i) acc += kernel[i + radius] * image(r, std::clamp(c + i, 0, cols - 1));
+        for (int i = -radius; i <= radius; ++i)
+          acc += kernel[i + radius] * image(r, std::clamp(c + i, 0, cols - 1));
         horizontal(r, c) = acc;
       }
     }
@@ -28,7 +29,8 @@ ImageF GaussianBlur(const ImageF& image, double sigma_px, int num_threads) {
     for (int r = begin; r < end; ++r) {
       for (int c = 0; c < cols; ++c) {
         float acc = 0.0f;
-        for (int i = -radius; i <= radius; ++i) acc += kernel[i + radius] * horizontal(std::clamp(r + i, 0, rows - 1), c);
+        for (int i = -radius; i <= radius; ++i)
+          acc += kernel[i + radius] * horizontal(std::clamp(r + i, 0, rows - 1), c);
         out(r, c) = acc;
       }
     }

@@ -36,7 +36,8 @@ void ParallelRows(int height, int num_threads, const Rows& rows) {
   std::vector<std::thread> threads;
   for (int t = 0; t < num_threads; ++t) {
     threads.emplace_back([&, t] {
-      for (int b = t * kBlock; b < height; b += num_threads * kBlock) rows(b, std::min(b + kBlock, height));
+      for (int b = t * kBlock; b < height; b += num_threads * kBlock)
+        rows(b, std::min(b + kBlock, height));
     });
   }
   for (std::thread& thread : threads) thread.join();
@@ -57,7 +58,8 @@ void ParallelRows(int height, int num_threads, const Rows& rows) {
 // q -> (x/z, y/z) fitted to the pixel's own S x S rays (the lens map is that
 // smooth: over a pixel it departs from affine by < 1e-4 px).
 template <typename Scene>
-ImageF IntegratePixels(const RayTable& rays, const Scene& scene, const IntegrationOptions& options) {
+ImageF IntegratePixels(const RayTable& rays, const Scene& scene,
+                       const IntegrationOptions& options) {
   const PixelRect& rect = rays.rect;
   ImageF image(rect.height, rect.width);
   const int s = rays.supersampling;

@@ -27,13 +27,15 @@ CameraModel TruthCamera(const std::string& preset) {
 // Area centroid of the image of the plate circle (centre, radius): the dense
 // boundary projected through the model, then the polygon's centroid.
 // Also returns the largest distance of the boundary from that centroid.
-Eigen::Vector2d ExactImageCentroid(const CameraModel& camera, const Eigen::Isometry3d& cam_from_plate,
+Eigen::Vector2d ExactImageCentroid(const CameraModel& camera,
+                                   const Eigen::Isometry3d& cam_from_plate,
                                    const Eigen::Vector2d& centre, double radius, double* reach_px) {
   constexpr int kN = 4096;
   Eigen::Matrix3Xd p(3, kN);
   for (int k = 0; k < kN; ++k) {
     const double a = 2 * std::numbers::pi * k / kN;
-    p.col(k) = cam_from_plate * Eigen::Vector3d(centre.x() + radius * std::cos(a), centre.y() + radius * std::sin(a), 0);
+    p.col(k) = cam_from_plate * Eigen::Vector3d(centre.x() + radius * std::cos(a),
+                                                centre.y() + radius * std::sin(a), 0);
   }
   Eigen::Matrix2Xd q;
   EXPECT_TRUE(ProjectPoints(camera, p, &q));
@@ -59,8 +61,9 @@ struct CentroidStats {
 // off, gain 1) over `rect`, and compares each dot fully inside it with the
 // exact centroid of its image. The intensity centroid weights each pixel by
 // white - I: zero on the white ground, proportional to the dot's coverage.
-CentroidStats CompareDotCentroids(const CameraModel& camera, const Eigen::Isometry3d& cam_from_plate,
-                                  const PixelRect& rect, double psf_sigma_px) {
+CentroidStats CompareDotCentroids(const CameraModel& camera,
+                                  const Eigen::Isometry3d& cam_from_plate, const PixelRect& rect,
+                                  double psf_sigma_px) {
   const BoardSpec board;
   const Materials materials;
   const CaltabPattern pattern(board, 120.0, materials);
@@ -68,13 +71,14 @@ CentroidStats CompareDotCentroids(const CameraModel& camera, const Eigen::Isomet
   RayTableSummary ray_summary;
   const RayTable rays = ComputeRayTable(camera, rect, ray_options, &ray_summary);
   EXPECT_TRUE(ray_summary.ok);
-  const ImageF reflectance = IntegratePixels(rays, PlateScene(&pattern, cam_from_plate, 0.2f), IntegrationOptions());
+  const ImageF reflectance =
+      IntegratePixels(rays, PlateScene(&pattern, cam_from_plate, 0.2f), IntegrationOptions());
   ExposureTruth exposure;
   exposure.psf_sigma_px = psf_sigma_px;
   SensorModel sensor;
   sensor.bit_depth = 0;
-  const ImageF image =
-      ExposeImage(reflectance, rect, exposure, Eigen::Vector2d(800, 600), 1000.0, sensor, NoiseSource(), 2);
+  const ImageF image = ExposeImage(reflectance, rect, exposure, Eigen::Vector2d(800, 600), 1000.0,
+                                   sensor, NoiseSource(), 2);
 
   CentroidStats stats;
   const Eigen::Matrix3Xd marks = BoardPoints(board);
@@ -87,7 +91,8 @@ CentroidStats CompareDotCentroids(const CameraModel& camera, const Eigen::Isomet
     // corner triangle next to mark (0, 0) is ~9 px beyond its edge.
     const double window = reach_px + 4.0;
     if (exact.x() - window < rect.x0 || exact.y() - window < rect.y0 ||
-        exact.x() + window > rect.x0 + rect.width - 1 || exact.y() + window > rect.y0 + rect.height - 1) {
+        exact.x() + window > rect.x0 + rect.width - 1 ||
+        exact.y() + window > rect.y0 + rect.height - 1) {
       continue;
     }
     double sum = 0;
@@ -136,10 +141,12 @@ TEST(RenderedDots, CentroidsMatchTheExactImageNearTheCorner) {
 TEST(RenderedDots, CentroidsMatchTheExactImageOfATiltedPlate) {
   const CameraModel camera = TruthCamera("demo");
   const Eigen::Matrix3d tilt =
-      Eigen::AngleAxisd(30 * std::numbers::pi / 180, Eigen::Vector3d(1, 1, 0).normalized()).toRotationMatrix();
+      Eigen::AngleAxisd(30 * std::numbers::pi / 180, Eigen::Vector3d(1, 1, 0).normalized())
+          .toRotationMatrix();
   const Eigen::Isometry3d pose = PlateAt(camera, {800, 600}, 400.0, tilt);
   const CentroidStats stats = CompareDotCentroids(camera, pose, {600, 400, 400, 400}, 0.0);
-  std::printf("tilted, no blur: %d dots, max centroid error %.4f px\n", stats.num_dots, stats.max_error_px);
+  std::printf("tilted, no blur: %d dots, max centroid error %.4f px\n", stats.num_dots,
+              stats.max_error_px);
   EXPECT_GE(stats.num_dots, 4);
   EXPECT_LT(stats.max_error_px, 0.003);
 }
@@ -148,7 +155,8 @@ TEST(RenderedDots, CentroidsMatchThroughTheSplinedLens) {
   const CameraModel camera = TruthCamera("lens-mismatch");
   const Eigen::Isometry3d pose = PlateAt(camera, {1170, 180}, 390.0, Eigen::Matrix3d::Identity());
   const CentroidStats stats = CompareDotCentroids(camera, pose, {1180, 0, 420, 300}, 0.8);
-  std::printf("splined lens: %d dots, max centroid error %.4f px\n", stats.num_dots, stats.max_error_px);
+  std::printf("splined lens: %d dots, max centroid error %.4f px\n", stats.num_dots,
+              stats.max_error_px);
   EXPECT_GE(stats.num_dots, 4);
   EXPECT_LT(stats.max_error_px, 0.003);
 }
@@ -184,7 +192,8 @@ TEST(GaussianBlur, PreservesSumAndCentroid) {
   const ImageF blurred = GaussianBlur(image, 0.8, 2);
   double sum = 0, mx = 0, my = 0;
   for (int r = 0; r < 41; ++r) {
-    for (int c = 0; c < 41; ++c) sum += blurred(r, c), mx += c * blurred(r, c), my += r * blurred(r, c);
+    for (int c = 0; c < 41; ++c)
+      sum += blurred(r, c), mx += c * blurred(r, c), my += r * blurred(r, c);
   }
   EXPECT_NEAR(sum, 3.0, 1e-5);
   EXPECT_NEAR(mx / sum, (17 + 2 * 25) / 3.0, 1e-5);
@@ -199,8 +208,8 @@ TEST(ExposeImage, NoiseHasTheModelledVariance) {
   ExposureTruth exposure;
   SensorModel sensor;
   sensor.bit_depth = 0;
-  const ImageF image =
-      ExposeImage(flat, rect, exposure, Eigen::Vector2d(100, 100), 141.0, sensor, NoiseSource{true, 7, 1}, 2);
+  const ImageF image = ExposeImage(flat, rect, exposure, Eigen::Vector2d(100, 100), 141.0, sensor,
+                                   NoiseSource{true, 7, 1}, 2);
   const double mean = image.cast<double>().mean();
   const double var = (image.cast<double>().array() - mean).square().sum() / (image.size() - 1);
   const double expected = (0.5 * sensor.full_well_e + sensor.read_noise_e * sensor.read_noise_e) /
@@ -216,9 +225,10 @@ TEST(ExposeImage, CropNoiseMatchesTheWholeImage) {
   ExposureTruth exposure;
   const SensorModel sensor;
   const NoiseSource noise{true, 3, 1001};
-  const ImageF whole = ExposeImage(flat, {0, 0, 80, 60}, exposure, Eigen::Vector2d(40, 30), 50.0, sensor, noise, 2);
-  const ImageF crop = ExposeImage(flat.block(10, 20, 30, 40), {20, 10, 40, 30}, exposure, Eigen::Vector2d(40, 30),
-                                  50.0, sensor, noise, 1);
+  const ImageF whole =
+      ExposeImage(flat, {0, 0, 80, 60}, exposure, Eigen::Vector2d(40, 30), 50.0, sensor, noise, 2);
+  const ImageF crop = ExposeImage(flat.block(10, 20, 30, 40), {20, 10, 40, 30}, exposure,
+                                  Eigen::Vector2d(40, 30), 50.0, sensor, noise, 1);
   EXPECT_EQ(crop, whole.block(10, 20, 30, 40));
 }
 
@@ -237,7 +247,8 @@ TEST(ExposeImage, VignettingAndGainFollowTheModel) {
     EXPECT_NEAR(image(row - rect.y0, col - rect.x0), 0.9 * 0.8 * (1 - 0.3 * r2), 1e-6);
   }
   sensor.bit_depth = 8;
-  const ImageF quantised = ExposeImage(flat, rect, exposure, centre, 250.0, sensor, NoiseSource(), 2);
+  const ImageF quantised =
+      ExposeImage(flat, rect, exposure, centre, 250.0, sensor, NoiseSource(), 2);
   for (int i = 0; i < quantised.size(); ++i) {
     const double dn = quantised.data()[i] * 255.0;
     ASSERT_NEAR(dn, std::round(dn), 1e-3);

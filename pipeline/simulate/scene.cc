@@ -5,7 +5,8 @@
 
 namespace omm {
 
-CaltabPattern::CaltabPattern(const BoardSpec& board, double plate_size_mm, const Materials& materials)
+CaltabPattern::CaltabPattern(const BoardSpec& board, double plate_size_mm,
+                             const Materials& materials)
     : board_(board),
       half_plate_(0.5 * plate_size_mm),
       half_frame_(0.5 * board.frame_mm),
@@ -17,7 +18,7 @@ CaltabPattern::CaltabPattern(const BoardSpec& board, double plate_size_mm, const
 SceneSample CaltabPattern::Sample(double x, double y) const {
   const SceneSample white{white_, Region::kPlateWhite}, black{black_, Region::kPlateBlack};
   const double ax = std::abs(x), ay = std::abs(y);
-  if (ax > half_frame_ || ay > half_frame_) return white;  // margin
+  if (ax > half_frame_ || ay > half_frame_) return white;    // margin
   if (ax >= half_inner_ || ay >= half_inner_) return black;  // frame bar
   // Corner triangle in the inner corner next to mark (0, 0), i.e. at -x, -y.
   const double tx = x + half_inner_, ty = y + half_inner_;
@@ -32,7 +33,8 @@ SceneSample CaltabPattern::Sample(double x, double y) const {
   return dx * dx + dy * dy <= dot_r2_ ? black : white;
 }
 
-WorkpieceScene::WorkpieceScene(Layout layout, const SurfaceTexture* texture, const Materials& materials)
+WorkpieceScene::WorkpieceScene(Layout layout, const SurfaceTexture* texture,
+                               const Materials& materials)
     : layout_(std::move(layout)), texture_(texture), materials_(materials) {
   // part (X, Y) = t + R2 (x, y) with R2 the upper-left 2x2 of part_from_plate
   // (the plate lies in the part's Z = 0 plane).
@@ -58,7 +60,8 @@ WorkpieceScene::WorkpieceScene(Layout layout, const SurfaceTexture* texture, con
     add(layout_.holes[i].center_mm, layout_.holes[i].radius_mm, &Cell::holes, i);
   }
   for (int i = 0; i < static_cast<int>(layout_.markers.size()); ++i) {
-    add(layout_.markers[i].center_mm, layout_.markers[i].paper_size_mm / std::sqrt(2.0), &Cell::markers, i);
+    add(layout_.markers[i].center_mm, layout_.markers[i].paper_size_mm / std::sqrt(2.0),
+        &Cell::markers, i);
   }
 }
 
@@ -71,20 +74,23 @@ SceneSample WorkpieceScene::Sample(const Eigen::Vector2d& p, const Eigen::Vector
     const Eigen::Vector2d q = plate_from_part_2d_ * (p - plate_origin_);
     if (layout_.plate->Contains(q.x(), q.y())) return layout_.plate->Sample(q.x(), q.y());
   }
-  const int col = std::min(grid_cols_ - 1, static_cast<int>((p.x() - layout_.min_mm.x()) / kCellMm));
-  const int row = std::min(grid_rows_ - 1, static_cast<int>((p.y() - layout_.min_mm.y()) / kCellMm));
+  const int col =
+      std::min(grid_cols_ - 1, static_cast<int>((p.x() - layout_.min_mm.x()) / kCellMm));
+  const int row =
+      std::min(grid_rows_ - 1, static_cast<int>((p.y() - layout_.min_mm.y()) / kCellMm));
   const Cell& cell = grid_[static_cast<size_t>(row) * grid_cols_ + col];
   for (const int m : cell.markers) {
     const MarkerShape& marker = layout_.markers[m];
     const Eigen::Vector2d v = p - marker.center_mm;
     const double c = std::cos(marker.angle_rad), s = std::sin(marker.angle_rad);
-    const double u = c * v.x() + s * v.y();   // along the print's +x
-    const double w = s * v.x() - c * v.y();   // along the print's +y (down)
+    const double u = c * v.x() + s * v.y();  // along the print's +x
+    const double w = s * v.x() - c * v.y();  // along the print's +y (down)
     const double half = 0.5 * marker.paper_size_mm;
     if (std::abs(u) > half || std::abs(w) > half) continue;
     const int n = static_cast<int>(marker.cells.rows());
     const double fc = u / marker.cell_mm + 0.5 * n, fr = w / marker.cell_mm + 0.5 * n;
-    if (fc < 0 || fr < 0 || fc >= n || fr >= n || marker.cells(static_cast<int>(fr), static_cast<int>(fc))) {
+    if (fc < 0 || fr < 0 || fc >= n || fr >= n ||
+        marker.cells(static_cast<int>(fr), static_cast<int>(fc))) {
       return {materials_.paper, Region::kPaper};
     }
     return {materials_.ink, Region::kInk};

@@ -71,8 +71,7 @@ class CaltabPattern {
 class PlaneView {
  public:
   explicit PlaneView(const Eigen::Isometry3d& cam_from_plane)
-      : rt_(cam_from_plane.linear().transpose()),
-        rtt_(rt_ * cam_from_plane.translation()) {}
+      : rt_(cam_from_plane.linear().transpose()), rtt_(rt_ * cam_from_plane.translation()) {}
   // Plane point (X, Y) met by the ray (x, y, 1); false if the plane is behind
   // the camera along this ray or parallel to it.
   bool Intersect(double x, double y, Eigen::Vector2d* point) const {
@@ -94,7 +93,8 @@ class PlaneView {
 // The plate in a calib/ image: the pattern on the plate, background beyond.
 class PlateScene {
  public:
-  PlateScene(const CaltabPattern* pattern, const Eigen::Isometry3d& cam_from_plate, float background)
+  PlateScene(const CaltabPattern* pattern, const Eigen::Isometry3d& cam_from_plate,
+             float background)
       : pattern_(pattern), view_(cam_from_plate), background_(background) {}
   SceneSample operator()(double x, double y) const {
     Eigen::Vector2d p;
@@ -176,7 +176,10 @@ class TileScene {
  public:
   TileScene(const WorkpieceScene* scene, const Eigen::Isometry3d& cam_from_part,
             const Eigen::Vector2d& table_pos_mm, float table_reflectance)
-      : scene_(scene), view_(cam_from_part), table_pos_mm_(table_pos_mm), table_(table_reflectance) {}
+      : scene_(scene),
+        view_(cam_from_part),
+        table_pos_mm_(table_pos_mm),
+        table_(table_reflectance) {}
   SceneSample operator()(double x, double y) const {
     // The plane is fixed in the machine frame (= part frame at table 0); the
     // part point under machine point M is M - T.

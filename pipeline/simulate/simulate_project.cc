@@ -56,9 +56,10 @@ SimulationSummary SimulateProjectDirectory(const SimulationOptions& options,
   std::future<void> writing;
   auto write = [&](const std::filesystem::path& path, ImageF image) {
     if (writing.valid()) writing.get();
-    writing = std::async(std::launch::async, [path, image = std::move(image), bits = plan.sensor.bit_depth] {
-      WriteGrayImage(path, image, bits);
-    });
+    writing = std::async(std::launch::async,
+                         [path, image = std::move(image), bits = plan.sensor.bit_depth] {
+                           WriteGrayImage(path, image, bits);
+                         });
   };
   int done = 1;
   for (int i = 0; i < num_calib; ++i) {
@@ -86,10 +87,11 @@ SimulationSummary SimulateProjectDirectory(const SimulationOptions& options,
   summary.num_rays = ray_summary.num_rays;
   summary.max_ray_residual_px = ray_summary.max_residual_px;
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  summary.brief = fmt::format("simulated '{}' seed {}: {} calib images, {} tiles, {} rays/image "
-                              "(max ray error {:.1e} px) in {:.1f} s",
-                              options.preset, options.seed, num_calib, num_tiles, summary.num_rays,
-                              summary.max_ray_residual_px, summary.seconds);
+  summary.brief = fmt::format(
+      "simulated '{}' seed {}: {} calib images, {} tiles, {} rays/image "
+      "(max ray error {:.1e} px) in {:.1f} s",
+      options.preset, options.seed, num_calib, num_tiles, summary.num_rays,
+      summary.max_ray_residual_px, summary.seconds);
   return summary;
 }
 

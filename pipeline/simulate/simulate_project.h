@@ -18,10 +18,10 @@ namespace omm {
 struct SimulationSummary {
   int num_calib_images = 0;
   int num_tiles = 0;
-  std::size_t num_rays = 0;              // supersample rays cast per image
-  double max_ray_residual_px = 0.0;      // RayTableSummary::max_residual_px
-  double seconds = 0.0;                  // wall time of the whole run
-  std::string brief;                     // one line for the log
+  std::size_t num_rays = 0;          // supersample rays cast per image
+  double max_ray_residual_px = 0.0;  // RayTableSummary::max_residual_px
+  double seconds = 0.0;              // wall time of the whole run
+  std::string brief;                 // one line for the log
 };
 
 // Renders the project into `project_dir` (created; must not exist or be

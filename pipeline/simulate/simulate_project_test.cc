@@ -21,7 +21,8 @@ class ScratchDir {
  public:
   ScratchDir() {
     std::random_device device;
-    path_ = std::filesystem::temp_directory_path() / ("omm_simulate_test_" + std::to_string(device()));
+    path_ =
+        std::filesystem::temp_directory_path() / ("omm_simulate_test_" + std::to_string(device()));
     std::filesystem::create_directories(path_);
   }
   ~ScratchDir() {
@@ -50,8 +51,9 @@ TEST(SimulateProjectDirectory, RefusesBadOptionsAndNonEmptyDirectories) {
   const ScratchDir scratch;
   SimulationOptions options;
   options.preset = "no-such-preset";
-  EXPECT_THROW(SimulateProjectDirectory(options, scratch.path() / "p", scratch.path() / "t.json", nullptr),
-               InputError);
+  EXPECT_THROW(
+      SimulateProjectDirectory(options, scratch.path() / "p", scratch.path() / "t.json", nullptr),
+      InputError);
   std::ofstream(scratch.path() / "occupied.txt") << "x";
   options.preset = "demo";
   try {
@@ -81,7 +83,8 @@ TEST(SimulateProjectDirectory, WritesALoadableDeterministicProject) {
         last_done = done;
         ++progress_calls;
       });
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const double cpu = static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
   std::printf("%s\n(wall %.1f s, cpu %.1f s)\n", summary.brief.c_str(), wall, cpu);
   EXPECT_EQ(summary.num_calib_images, 20);

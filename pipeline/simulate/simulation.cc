@@ -97,7 +97,8 @@ CameraTruth DrawCamera(const PresetSpec& preset, SimRandom* random) {
   camera.focal_length_mm = kNominalFocalMm * (1.0 + sign * random->Uniform(0.005, 0.015));
   const double fx = camera.focal_length_mm / (camera.pixel_pitch_um * 1e-3);
   const double fy = fx * (1.0 + random->Normal(0.0, 2e-4));
-  const double pp_offset = random->Uniform(12.0, 35.0), pp_angle = random->Uniform(0, 2 * std::numbers::pi);
+  const double pp_offset = random->Uniform(12.0, 35.0),
+               pp_angle = random->Uniform(0, 2 * std::numbers::pi);
   const double cx = 0.5 * (kWidthPx - 1) + pp_offset * std::cos(pp_angle);
   const double cy = 0.5 * (kHeightPx - 1) + pp_offset * std::sin(pp_angle);
   camera.psf_sigma_px = random->Uniform(0.6, 0.85);
@@ -108,15 +109,14 @@ CameraTruth DrawCamera(const PresetSpec& preset, SimRandom* random) {
     // A 12 mm C-mount lens on a 1/1.8" sensor: ~1 % barrel at the corners.
     model.lens_model = "LENSMODEL_OPENCV8";
     model.intrinsics.resize(12);
-    model.intrinsics << fx, fy, cx, cy,
-        random->Uniform(-0.12, -0.05),   // k1
-        random->Uniform(0.05, 0.2),      // k2
-        random->Uniform(-4e-4, 4e-4),    // p1
-        random->Uniform(-4e-4, 4e-4),    // p2
-        random->Uniform(-0.15, 0.05),    // k3
-        random->Uniform(-0.02, 0.02),    // k4
-        random->Uniform(-0.005, 0.005),  // k5
-        random->Uniform(-0.005, 0.005);  // k6
+    model.intrinsics << fx, fy, cx, cy, random->Uniform(-0.12, -0.05),  // k1
+        random->Uniform(0.05, 0.2),                                     // k2
+        random->Uniform(-4e-4, 4e-4),                                   // p1
+        random->Uniform(-4e-4, 4e-4),                                   // p2
+        random->Uniform(-0.15, 0.05),                                   // k3
+        random->Uniform(-0.02, 0.02),                                   // k4
+        random->Uniform(-0.005, 0.005),                                 // k5
+        random->Uniform(-0.005, 0.005);                                 // k6
     return camera;
   }
   // Spline control points are the offsets du of the stereographic u at the
@@ -137,7 +137,8 @@ CameraTruth DrawCamera(const PresetSpec& preset, SimRandom* random) {
       const double ux = (i - 0.5 * (kNx - 1)) * spacing, uy = (j - 0.5 * (kNy - 1)) * spacing;
       const double r2 = ux * ux + uy * uy;
       const double radial = k1 * r2 + k2 * r2 * r2;
-      const double w = wave * std::sin(2 * std::numbers::pi * (ux + 0.5 * uy) / wave_period + wave_phase);
+      const double w =
+          wave * std::sin(2 * std::numbers::pi * (ux + 0.5 * uy) / wave_period + wave_phase);
       model.intrinsics[4 + 2 * (j * kNx + i)] = radial * ux + a * uy * uy + w;
       model.intrinsics[4 + 2 * (j * kNx + i) + 1] = radial * uy + b * ux * uy - 0.5 * w;
     }
@@ -148,7 +149,8 @@ CameraTruth DrawCamera(const PresetSpec& preset, SimRandom* random) {
 // ---------------------------------------------------------------- geometry helpers
 
 // Projects plane points (2 x N, z = 0 of the plane whose pose is cam_from_plane).
-Eigen::Matrix2Xd ProjectPlanePoints(const CameraModel& camera, const Eigen::Isometry3d& cam_from_plane,
+Eigen::Matrix2Xd ProjectPlanePoints(const CameraModel& camera,
+                                    const Eigen::Isometry3d& cam_from_plane,
                                     const Eigen::Matrix2Xd& points) {
   Eigen::Matrix3Xd p(3, points.cols());
   for (Eigen::Index i = 0; i < points.cols(); ++i) {
@@ -200,7 +202,8 @@ Eigen::Matrix2Xd SquareOutline(double size, int per_side) {
 
 // Camera pose relative to the part at a table position: P + T in the machine
 // frame, cam_from_machine = cam_from_part (table 0).
-Eigen::Isometry3d CamFromPartAt(const Eigen::Isometry3d& cam_from_part, const Eigen::Vector2d& table_pos_mm) {
+Eigen::Isometry3d CamFromPartAt(const Eigen::Isometry3d& cam_from_part,
+                                const Eigen::Vector2d& table_pos_mm) {
   return cam_from_part * Eigen::Translation3d(table_pos_mm.x(), table_pos_mm.y(), 0.0);
 }
 
@@ -222,8 +225,8 @@ Eigen::Vector2d PixelOnPlane(const CameraModel& camera, const Eigen::Isometry3d&
 
 // A plate pose whose projected plate centre is near `target_px`, at depth
 // `z_mm`, or false if the plate does not fit the image there.
-Eigen::Isometry3d PlatePose(const CameraModel& camera, const Eigen::Vector2d& target_px, double z_mm,
-                            const Eigen::Matrix3d& rotation) {
+Eigen::Isometry3d PlatePose(const CameraModel& camera, const Eigen::Vector2d& target_px,
+                            double z_mm, const Eigen::Matrix3d& rotation) {
   Eigen::Matrix3Xd v;
   UnprojectPixels(camera, target_px, &v);
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
@@ -232,7 +235,8 @@ Eigen::Isometry3d PlatePose(const CameraModel& camera, const Eigen::Vector2d& ta
   return pose;
 }
 
-std::vector<CalibImageTruth> DrawCalibration(const CameraTruth& camera, int num_images, SimRandom* random) {
+std::vector<CalibImageTruth> DrawCalibration(const CameraTruth& camera, int num_images,
+                                             SimRandom* random) {
   const Eigen::Matrix2Xd outline = SquareOutline(kPlateSizeMm, 12);
   const Eigen::Vector2d centre(0.5 * (kWidthPx - 1), 0.5 * (kHeightPx - 1));
   // Positions of the partial and the plate-absent images in the sequence.
@@ -264,8 +268,9 @@ std::vector<CalibImageTruth> DrawCalibration(const CameraTruth& camera, int num_
         default: target << along * kWidthPx, kHeightPx - 1 - inside; break;
       }
       z_mm = random->Uniform(370.0, 410.0);
-      const Eigen::Matrix3d rotation = Tilt(random->Uniform(0, 10 * kDeg), random->Uniform(0, 2 * std::numbers::pi)) *
-                                       RotZ(random->Uniform(0, 2 * std::numbers::pi));
+      const Eigen::Matrix3d rotation =
+          Tilt(random->Uniform(0, 10 * kDeg), random->Uniform(0, 2 * std::numbers::pi)) *
+          RotZ(random->Uniform(0, 2 * std::numbers::pi));
       image.cam_from_plate = PlatePose(camera.model, target, z_mm, rotation);
     } else {
       image.kind = CalibImageTruth::Kind::kFull;
@@ -277,13 +282,15 @@ std::vector<CalibImageTruth> DrawCalibration(const CameraTruth& camera, int num_
       Eigen::Vector2d target((0.15 + 0.35 * (cell % 3) + random->Uniform(-0.05, 0.05)) * kWidthPx,
                              (0.15 + 0.35 * (cell / 3) + random->Uniform(-0.05, 0.05)) * kHeightPx);
       z_mm = random->Uniform(340.0, 440.0);
-      const double tilt = flat ? random->Uniform(0, 4 * kDeg) : random->Uniform(10 * kDeg, 35 * kDeg);
+      const double tilt =
+          flat ? random->Uniform(0, 4 * kDeg) : random->Uniform(10 * kDeg, 35 * kDeg);
       const Eigen::Matrix3d rotation = Tilt(tilt, random->Uniform(0, 2 * std::numbers::pi)) *
                                        RotZ(random->Uniform(0, 2 * std::numbers::pi));
       // Pull the plate towards the centre, then back, until all of it shows.
       for (int attempt = 0;; ++attempt) {
         image.cam_from_plate = PlatePose(camera.model, target, z_mm, rotation);
-        if (ImageMargin(ProjectPlanePoints(camera.model, image.cam_from_plate, outline)) >= 3.0) break;
+        if (ImageMargin(ProjectPlanePoints(camera.model, image.cam_from_plate, outline)) >= 3.0)
+          break;
         target = centre + 0.85 * (target - centre);
         if (attempt % 6 == 5) z_mm += 15.0;
         assert(attempt < 100);
@@ -298,14 +305,14 @@ std::vector<CalibImageTruth> DrawCalibration(const CameraTruth& camera, int num_
 // ---------------------------------------------------------------- workpiece
 
 struct Footprint {
-  Eigen::Vector2d centre_mm;         // machine point on the optical axis (image centre ray), Z = 0
+  Eigen::Vector2d centre_mm;        // machine point on the optical axis (image centre ray), Z = 0
   double extent_x_mm, extent_y_mm;  // chords through it along machine X and Y
 };
 
 Footprint MeasureFootprint(const CameraModel& camera, const Eigen::Isometry3d& cam_from_part) {
   Footprint footprint;
-  footprint.centre_mm =
-      PixelOnPlane(camera, cam_from_part, Eigen::Vector2d(0.5 * (kWidthPx - 1), 0.5 * (kHeightPx - 1)));
+  footprint.centre_mm = PixelOnPlane(camera, cam_from_part,
+                                     Eigen::Vector2d(0.5 * (kWidthPx - 1), 0.5 * (kHeightPx - 1)));
   auto reach = [&](const Eigen::Vector2d& direction) {
     double lo = 0.0, hi = 500.0;  // mm; inside at lo, outside at hi
     for (int i = 0; i < 50; ++i) {
@@ -323,13 +330,14 @@ Footprint MeasureFootprint(const CameraModel& camera, const Eigen::Isometry3d& c
 
 // Smallest margin, px, of part points in the tile (table position T).
 double TileMargin(const SimulationTruth& truth, int tile, const Eigen::Matrix2Xd& part_points) {
-  return ImageMargin(ProjectPlanePoints(truth.camera.model,
-                                        CamFromPartAt(truth.cam_from_part, truth.tiles[tile].actual_mm),
-                                        part_points));
+  return ImageMargin(ProjectPlanePoints(
+      truth.camera.model, CamFromPartAt(truth.cam_from_part, truth.tiles[tile].actual_mm),
+      part_points));
 }
 
 // Part-frame point at the centre of a tile's image.
-Eigen::Vector2d TileCentreOnPart(const SimulationTruth& truth, const Footprint& footprint, int tile) {
+Eigen::Vector2d TileCentreOnPart(const SimulationTruth& truth, const Footprint& footprint,
+                                 int tile) {
   return footprint.centre_mm - truth.tiles[tile].actual_mm;
 }
 
@@ -346,7 +354,8 @@ double DistanceToPlate(const SimulationTruth& truth, const Eigen::Vector2d& p) {
 Eigen::Matrix2Xd MarkerPaperOutline(const MarkerShape& marker) {
   Eigen::Matrix2Xd points = SquareOutline(marker.paper_size_mm, 2);
   const Eigen::Matrix2d rot = Eigen::Rotation2Dd(marker.angle_rad).toRotationMatrix();
-  for (Eigen::Index i = 0; i < points.cols(); ++i) points.col(i) = marker.center_mm + rot * points.col(i);
+  for (Eigen::Index i = 0; i < points.cols(); ++i)
+    points.col(i) = marker.center_mm + rot * points.col(i);
   return points;
 }
 
@@ -359,8 +368,9 @@ void PlacePlateOnPart(const Footprint& footprint, SimulationTruth* truth, SimRan
   const Eigen::Matrix2Xd outline = SquareOutline(kPlateSizeMm, 8);
   for (int attempt = 0; attempt < 1000; ++attempt) {
     const int tile = random->UniformInt(static_cast<int>(truth->tiles.size()));
-    const Eigen::Vector2d centre = TileCentreOnPart(*truth, footprint, tile) +
-                                   Eigen::Vector2d(random->Uniform(-20, 20), random->Uniform(-20, 20));
+    const Eigen::Vector2d centre =
+        TileCentreOnPart(*truth, footprint, tile) +
+        Eigen::Vector2d(random->Uniform(-20, 20), random->Uniform(-20, 20));
     const double angle = random->UniformInt(4) * 90 * kDeg + random->Uniform(-15 * kDeg, 15 * kDeg);
     // Face up: plate x along the part's rotated X, plate y (down in print)
     // along the rotated -Y, plate +z into the part (-Z).
@@ -369,10 +379,12 @@ void PlacePlateOnPart(const Footprint& footprint, SimulationTruth* truth, SimRan
     part_from_plate.translation() << centre, 0.0;
     Eigen::Matrix2Xd part_points(2, outline.cols());
     for (Eigen::Index i = 0; i < outline.cols(); ++i) {
-      part_points.col(i) = (part_from_plate * Eigen::Vector3d(outline(0, i), outline(1, i), 0)).head<2>();
+      part_points.col(i) =
+          (part_from_plate * Eigen::Vector3d(outline(0, i), outline(1, i), 0)).head<2>();
     }
     bool on_part = true;
-    for (Eigen::Index i = 0; i < part_points.cols(); ++i) on_part = on_part && InsideOutline(*truth, part_points.col(i), 5.0);
+    for (Eigen::Index i = 0; i < part_points.cols(); ++i)
+      on_part = on_part && InsideOutline(*truth, part_points.col(i), 5.0);
     if (on_part && TileMargin(*truth, tile, part_points) >= 15.0) {
       truth->part_from_plate = part_from_plate;
       return;
@@ -381,9 +393,10 @@ void PlacePlateOnPart(const Footprint& footprint, SimulationTruth* truth, SimRan
   assert(false && "no place for the plate on the part");
 }
 
-std::vector<MarkerShape> PlaceMarkers(const Footprint& footprint, SimulationTruth* truth, SimRandom* random) {
+std::vector<MarkerShape> PlaceMarkers(const Footprint& footprint, SimulationTruth* truth,
+                                      SimRandom* random) {
   constexpr int kNumMarkers = 16;
-  constexpr double kCellMm = 2.5;      // 8 cells across the black border: 20 mm tags
+  constexpr double kCellMm = 2.5;  // 8 cells across the black border: 20 mm tags
   constexpr double kPaperMm = 30.0;
   const TagFamilyLayout layout = AprilTag36h11Layout();
   // Distinct ids: a partial Fisher-Yates shuffle.
@@ -435,28 +448,32 @@ std::vector<MarkerShape> PlaceMarkers(const Footprint& footprint, SimulationTrut
   return markers;
 }
 
-void PlaceHoles(const Footprint& footprint, const std::vector<MarkerShape>& markers, SimulationTruth* truth,
-                SimRandom* random) {
+void PlaceHoles(const Footprint& footprint, const std::vector<MarkerShape>& markers,
+                SimulationTruth* truth, SimRandom* random) {
   // Every nominal size once, then four more at random.
   std::vector<double> nominal = {8, 10, 12, 16, 20, 25, 30, 40, 50, 60};
   for (int k = 0; k < 4; ++k) nominal.push_back(nominal[random->UniformInt(10)]);
-  for (int i = static_cast<int>(nominal.size()) - 1; i > 0; --i) std::swap(nominal[i], nominal[random->UniformInt(i + 1)]);
+  for (int i = static_cast<int>(nominal.size()) - 1; i > 0; --i)
+    std::swap(nominal[i], nominal[random->UniformInt(i + 1)]);
   const int num_tiles = static_cast<int>(truth->tiles.size());
   for (size_t h = 0; h < nominal.size(); ++h) {
     const double radius = 0.5 * nominal[h];
     for (int attempt = 0; attempt < 2000; ++attempt) {
       const int tile = static_cast<int>((h + attempt) % num_tiles);
-      const Eigen::Vector2d centre = TileCentreOnPart(*truth, footprint, tile) +
-                                     Eigen::Vector2d(random->Uniform(-0.4, 0.4) * footprint.extent_x_mm,
-                                                     random->Uniform(-0.4, 0.4) * footprint.extent_y_mm);
+      const Eigen::Vector2d centre =
+          TileCentreOnPart(*truth, footprint, tile) +
+          Eigen::Vector2d(random->Uniform(-0.4, 0.4) * footprint.extent_x_mm,
+                          random->Uniform(-0.4, 0.4) * footprint.extent_y_mm);
       if (!InsideOutline(*truth, centre, radius + 10.0)) continue;
       if (DistanceToPlate(*truth, centre) < radius + 8.0) continue;
       bool clear = true;
       for (const HoleTruth& other : truth->holes) {
-        clear = clear && (other.center_part_mm - centre).norm() > radius + 0.5 * other.diameter_mm + 8.0;
+        clear = clear &&
+                (other.center_part_mm - centre).norm() > radius + 0.5 * other.diameter_mm + 8.0;
       }
       for (const MarkerShape& marker : markers) {
-        clear = clear && (marker.center_mm - centre).norm() > radius + marker.paper_size_mm / std::sqrt(2.0) + 5.0;
+        clear = clear && (marker.center_mm - centre).norm() >
+                             radius + marker.paper_size_mm / std::sqrt(2.0) + 5.0;
       }
       if (!clear || TileMargin(*truth, tile, CirclePoints(centre, radius, 32)) < 40.0) continue;
       HoleTruth hole;
@@ -470,8 +487,9 @@ void PlaceHoles(const Footprint& footprint, const std::vector<MarkerShape>& mark
   }
   // Names in a stable order (by position) so that they read well.
   std::sort(truth->holes.begin(), truth->holes.end(), [](const HoleTruth& a, const HoleTruth& b) {
-    return a.center_part_mm.y() != b.center_part_mm.y() ? a.center_part_mm.y() > b.center_part_mm.y()
-                                                        : a.center_part_mm.x() < b.center_part_mm.x();
+    return a.center_part_mm.y() != b.center_part_mm.y()
+               ? a.center_part_mm.y() > b.center_part_mm.y()
+               : a.center_part_mm.x() < b.center_part_mm.x();
   });
   for (size_t h = 0; h < truth->holes.size(); ++h) {
     char name[32];
@@ -495,12 +513,17 @@ void DrawFeaturesAndMeasurements(SimulationPlan* plan, SimRandom* random) {
       if (margin > best_margin) best_margin = margin, best = t;
     }
     feature_tile.push_back(best);
-    const Eigen::Isometry3d cam_from_part = CamFromPartAt(truth.cam_from_part, truth.tiles[best].actual_mm);
+    const Eigen::Isometry3d cam_from_part =
+        CamFromPartAt(truth.cam_from_part, truth.tiles[best].actual_mm);
     Eigen::Matrix2Xd centre(2, 1);
     centre.col(0) = hole.center_part_mm;
-    const Eigen::Vector2d q_centre = ProjectPlanePoints(truth.camera.model, cam_from_part, centre).col(0);
+    const Eigen::Vector2d q_centre =
+        ProjectPlanePoints(truth.camera.model, cam_from_part, centre).col(0);
     const double diameter_px =
-        2.0 * (ProjectPlanePoints(truth.camera.model, cam_from_part, rim).colwise() - q_centre).colwise().norm().mean();
+        2.0 * (ProjectPlanePoints(truth.camera.model, cam_from_part, rim).colwise() - q_centre)
+                  .colwise()
+                  .norm()
+                  .mean();
     // A rough position, as a user would click it: up to 0.1 diameter off.
     const double angle = random->Uniform(0, 2 * std::numbers::pi);
     const double offset = random->Uniform(0.0, 0.09) * diameter_px;
@@ -515,17 +538,21 @@ void DrawFeaturesAndMeasurements(SimulationPlan* plan, SimRandom* random) {
   }
 
   const int n = static_cast<int>(truth.holes.size());
-  auto distance = [&](int a, int b) { return (truth.holes[a].center_part_mm - truth.holes[b].center_part_mm).norm(); };
+  auto distance = [&](int a, int b) {
+    return (truth.holes[a].center_part_mm - truth.holes[b].center_part_mm).norm();
+  };
   std::vector<std::pair<int, int>> pairs;
   for (int a = 0; a < n; ++a) {
     for (int b = a + 1; b < n; ++b) pairs.emplace_back(a, b);
   }
-  for (int i = static_cast<int>(pairs.size()) - 1; i > 0; --i) std::swap(pairs[i], pairs[random->UniformInt(i + 1)]);
+  for (int i = static_cast<int>(pairs.size()) - 1; i > 0; --i)
+    std::swap(pairs[i], pairs[random->UniformInt(i + 1)]);
   std::vector<std::pair<int, int>> chosen;
   auto take = [&](auto predicate, int count) {
     for (const auto& pair : pairs) {
       if (count == 0) break;
-      if (std::find(chosen.begin(), chosen.end(), pair) != chosen.end() || !predicate(pair)) continue;
+      if (std::find(chosen.begin(), chosen.end(), pair) != chosen.end() || !predicate(pair))
+        continue;
       chosen.push_back(pair);
       --count;
     }
@@ -533,14 +560,21 @@ void DrawFeaturesAndMeasurements(SimulationPlan* plan, SimRandom* random) {
   // The two farthest holes (across the whole mosaic), three pairs far apart
   // in different tiles, one in neighbouring regions, two within one tile.
   if (!pairs.empty()) {
-    chosen.push_back(*std::max_element(pairs.begin(), pairs.end(), [&](const auto& x, const auto& y) {
-      return distance(x.first, x.second) < distance(y.first, y.second);
-    }));
+    chosen.push_back(
+        *std::max_element(pairs.begin(), pairs.end(), [&](const auto& x, const auto& y) {
+          return distance(x.first, x.second) < distance(y.first, y.second);
+        }));
   }
-  take([&](const auto& p) { return feature_tile[p.first] != feature_tile[p.second] && distance(p.first, p.second) > 200; }, 3);
-  take([&](const auto& p) {
-    return feature_tile[p.first] != feature_tile[p.second] && distance(p.first, p.second) < 150;
-  }, 1);
+  take(
+      [&](const auto& p) {
+        return feature_tile[p.first] != feature_tile[p.second] && distance(p.first, p.second) > 200;
+      },
+      3);
+  take(
+      [&](const auto& p) {
+        return feature_tile[p.first] != feature_tile[p.second] && distance(p.first, p.second) < 150;
+      },
+      1);
   take([&](const auto& p) { return feature_tile[p.first] == feature_tile[p.second]; }, 2);
   for (const auto& [a, b] : chosen) {
     MeasurementSpec m;
@@ -560,7 +594,8 @@ void DrawFeaturesAndMeasurements(SimulationPlan* plan, SimRandom* random) {
   if (n > 0) diameters = {by_size.front(), by_size.back()};
   while (n > 3 && diameters.size() < 4) {
     const int pick = by_size[1 + random->UniformInt(n - 2)];
-    if (std::find(diameters.begin(), diameters.end(), pick) == diameters.end()) diameters.push_back(pick);
+    if (std::find(diameters.begin(), diameters.end(), pick) == diameters.end())
+      diameters.push_back(pick);
   }
   for (int h : diameters) {
     MeasurementSpec m;
@@ -601,7 +636,8 @@ std::string SimulationOptions::Check() const {
     return "num_calib_images must be in 3..100 (one partial, one without the plate, the rest full)";
   }
   if (supersampling < 1 || supersampling > 16) return "supersampling must be in 1..16";
-  if (edge_supersampling < 1 || edge_supersampling > 64) return "edge_supersampling must be in 1..64";
+  if (edge_supersampling < 1 || edge_supersampling > 64)
+    return "edge_supersampling must be in 1..64";
   if (num_threads < 1) return "num_threads must be >= 1";
   return "";
 }
@@ -636,10 +672,11 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   // The camera over the machine: height, tilt, rotation about its axis.
   SimRandom part_random(options.seed, kPartStream);
   const double height_mm = part_random.Uniform(385.0, 395.0);
-  const double roll = part_random.UniformInt(4) * 90 * kDeg + part_random.Uniform(-8 * kDeg, 8 * kDeg);
-  const Eigen::Matrix3d cam_from_machine_r =
-      Tilt(part_random.Uniform(0.5 * kDeg, 2.5 * kDeg), part_random.Uniform(0, 2 * std::numbers::pi)) *
-      RotZ(roll) * Eigen::Vector3d(1, -1, -1).asDiagonal();
+  const double roll =
+      part_random.UniformInt(4) * 90 * kDeg + part_random.Uniform(-8 * kDeg, 8 * kDeg);
+  const Eigen::Matrix3d cam_from_machine_r = Tilt(part_random.Uniform(0.5 * kDeg, 2.5 * kDeg),
+                                                  part_random.Uniform(0, 2 * std::numbers::pi)) *
+                                             RotZ(roll) * Eigen::Vector3d(1, -1, -1).asDiagonal();
   Eigen::Isometry3d cam_from_part = Eigen::Isometry3d::Identity();
   cam_from_part.linear() = cam_from_machine_r;
   cam_from_part.translation() = -cam_from_machine_r * Eigen::Vector3d(0, 0, height_mm);
@@ -647,16 +684,21 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
 
   // The part, and the grid of table positions centred on it.
   truth.part_min_mm.setZero();
-  truth.part_max_mm << std::round(part_random.Uniform(430, 470)), std::round(part_random.Uniform(430, 470));
+  truth.part_max_mm << std::round(part_random.Uniform(430, 470)),
+      std::round(part_random.Uniform(430, 470));
   truth.part_thickness_mm = std::round(part_random.Uniform(8, 16));
   const Eigen::Vector2d part_centre = 0.5 * (truth.part_min_mm + truth.part_max_mm);
-  const Eigen::Vector2d table_centre(std::round(part_random.Uniform(150, 300)), std::round(part_random.Uniform(80, 200)));
-  const double step_x = 0.5 * std::round(2.0 * (1.0 - part_random.Uniform(0.35, 0.45)) * footprint0.extent_x_mm);
-  const double step_y = 0.5 * std::round(2.0 * (1.0 - part_random.Uniform(0.35, 0.45)) * footprint0.extent_y_mm);
+  const Eigen::Vector2d table_centre(std::round(part_random.Uniform(150, 300)),
+                                     std::round(part_random.Uniform(80, 200)));
+  const double step_x =
+      0.5 * std::round(2.0 * (1.0 - part_random.Uniform(0.35, 0.45)) * footprint0.extent_x_mm);
+  const double step_y =
+      0.5 * std::round(2.0 * (1.0 - part_random.Uniform(0.35, 0.45)) * footprint0.extent_y_mm);
   // Tile (1, 1) looks at the part centre (within 8 mm): move the camera so
   // that its axis meets the machine plane at part centre + table centre.
-  const Eigen::Vector2d axis_mm = part_centre + table_centre +
-                                  Eigen::Vector2d(part_random.Uniform(-8, 8), part_random.Uniform(-8, 8));
+  const Eigen::Vector2d axis_mm =
+      part_centre + table_centre +
+      Eigen::Vector2d(part_random.Uniform(-8, 8), part_random.Uniform(-8, 8));
   const Eigen::Vector2d shift = axis_mm - footprint0.centre_mm;
   cam_from_part.translation() -= cam_from_machine_r * Eigen::Vector3d(shift.x(), shift.y(), 0.0);
   truth.cam_from_part = cam_from_part;
@@ -693,8 +735,9 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   }
 
   if (plan.preset.plate_on_part) PlacePlateOnPart(footprint, &truth, &part_random);
-  const std::vector<MarkerShape> markers =
-      plan.preset.markers ? PlaceMarkers(footprint, &truth, &part_random) : std::vector<MarkerShape>();
+  const std::vector<MarkerShape> markers = plan.preset.markers
+                                               ? PlaceMarkers(footprint, &truth, &part_random)
+                                               : std::vector<MarkerShape>();
   PlaceHoles(footprint, markers, &truth, &part_random);
 
   Project& project = plan.project;
@@ -707,7 +750,8 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   project.board = truth.board;
   project.table_sigma_mm = kTableSigmaMm;
   project.mosaic_gsd_mm = kMosaicGsdMm;
-  for (const TileTruth& tile : truth.tiles) project.tiles.push_back({tile.image, tile.commanded_mm});
+  for (const TileTruth& tile : truth.tiles)
+    project.tiles.push_back({tile.image, tile.commanded_mm});
   project.image_width_px = kWidthPx;
   project.image_height_px = kHeightPx;
 
@@ -715,7 +759,8 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   DrawFeaturesAndMeasurements(&plan, &feature_random);
   SimRandom cmm_random(options.seed, kCmmStream);
   for (const MeasurementTruth& m : truth.measurements) {
-    project.cmm.push_back({m.name, RoundDecimals(m.value_mm + cmm_random.Normal(0.0, kCmmSigmaMm), 4)});
+    project.cmm.push_back(
+        {m.name, RoundDecimals(m.value_mm + cmm_random.Normal(0.0, kCmmSigmaMm), 4)});
   }
   return plan;
 }
@@ -731,7 +776,8 @@ ProjectRenderer::ProjectRenderer(const SimulationPlan& plan)
   layout.min_mm = truth.part_min_mm;
   layout.max_mm = truth.part_max_mm;
   layout.thickness_mm = truth.part_thickness_mm;
-  for (const HoleTruth& hole : truth.holes) layout.holes.push_back({hole.center_part_mm, 0.5 * hole.diameter_mm});
+  for (const HoleTruth& hole : truth.holes)
+    layout.holes.push_back({hole.center_part_mm, 0.5 * hole.diameter_mm});
   for (const MarkerTruth& marker : truth.markers) {
     MarkerShape shape;
     shape.center_mm = marker.corners_part_mm.rowwise().mean();
@@ -765,25 +811,28 @@ ImageF ProjectRenderer::CalibReflectance(int index, const RayTable& rays) const 
   if (image.kind == CalibImageTruth::Kind::kPlateAbsent) {
     return IntegratePixels(rays, UniformScene{plan_.materials.calib_background}, Integration());
   }
-  return IntegratePixels(rays, PlateScene(&plate_, image.cam_from_plate, plan_.materials.calib_background),
-                         Integration());
+  return IntegratePixels(
+      rays, PlateScene(&plate_, image.cam_from_plate, plan_.materials.calib_background),
+      Integration());
 }
 
 ImageF ProjectRenderer::TileReflectance(int index, const RayTable& rays) const {
   const TileTruth& tile = plan_.truth.tiles.at(index);
   return IntegratePixels(
-      rays, TileScene(workpiece_.get(), plan_.truth.cam_from_part, tile.actual_mm, plan_.materials.table),
+      rays,
+      TileScene(workpiece_.get(), plan_.truth.cam_from_part, tile.actual_mm, plan_.materials.table),
       Integration());
 }
 
-ImageF ProjectRenderer::Expose(const ImageF& reflectance, const RayTable& rays, const ExposureTruth& exposure,
-                               std::uint64_t noise_stream) const {
+ImageF ProjectRenderer::Expose(const ImageF& reflectance, const RayTable& rays,
+                               const ExposureTruth& exposure, std::uint64_t noise_stream) const {
   const CameraModel& camera = plan_.truth.camera.model;
   const Eigen::Vector2d centre(camera.intrinsics[2], camera.intrinsics[3]);
   double corner_radius = 0.0;
-  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera.width_px - 1, 0),
-                                       Eigen::Vector2d(0, camera.height_px - 1),
-                                       Eigen::Vector2d(camera.width_px - 1, camera.height_px - 1)}) {
+  for (const Eigen::Vector2d& corner :
+       {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera.width_px - 1, 0),
+        Eigen::Vector2d(0, camera.height_px - 1),
+        Eigen::Vector2d(camera.width_px - 1, camera.height_px - 1)}) {
     corner_radius = std::max(corner_radius, (corner - centre).norm());
   }
   const NoiseSource noise{plan_.options.sensor_noise, plan_.options.seed, noise_stream};
@@ -797,7 +846,8 @@ ImageF ProjectRenderer::RenderCalibImage(int index, const RayTable& rays) const 
 }
 
 ImageF ProjectRenderer::RenderTile(int index, const RayTable& rays) const {
-  return Expose(TileReflectance(index, rays), rays, plan_.truth.tiles.at(index).exposure, kTileNoiseStream + index);
+  return Expose(TileReflectance(index, rays), rays, plan_.truth.tiles.at(index).exposure,
+                kTileNoiseStream + index);
 }
 
 }  // namespace omm

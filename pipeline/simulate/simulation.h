@@ -45,10 +45,10 @@ struct SimulationOptions {
   // Number of calib/ images, including one with the plate partly outside the
   // image and one without the plate (>= 3).
   int num_calib_images = 20;
-  bool sensor_noise = true;  // shot and read noise (images are quantised either way)
-  int supersampling = 4;     // S: S x S rays per pixel (>= 4 for metrology-grade edges)
+  bool sensor_noise = true;     // shot and read noise (images are quantised either way)
+  int supersampling = 4;        // S: S x S rays per pixel (>= 4 for metrology-grade edges)
   int edge_supersampling = 16;  // rays per axis in pixels an edge crosses (IntegrationOptions)
-  int num_threads = 2;       // rendering threads; the images do not depend on it
+  int num_threads = 2;          // rendering threads; the images do not depend on it
 
   // Empty if valid, else what is wrong (unknown preset, ...).
   std::string Check() const;
@@ -61,8 +61,8 @@ std::vector<std::string> SimulationPresets();
 // What a preset changes.
 struct PresetSpec {
   std::string name;
-  std::string description;          // one line, for --help
-  bool splined_truth = false;       // lens-mismatch: a truth OPENCV8 cannot represent
+  std::string description;     // one line, for --help
+  bool splined_truth = false;  // lens-mismatch: a truth OPENCV8 cannot represent
   TextureStyle texture = TextureStyle::kRich;
   bool markers = false;             // paper AprilTags on the part
   bool plate_on_part = false;       // the caltab lying on the part (independent scale check)

@@ -31,16 +31,19 @@ Eigen::Isometry3d CamFromPartAt(const SimulationTruth& truth, const Eigen::Vecto
 }
 
 // Pixels of part-frame points (Z = 0) in tile `tile`.
-Eigen::Matrix2Xd ProjectPart(const SimulationTruth& truth, int tile, const Eigen::Matrix2Xd& part_mm) {
+Eigen::Matrix2Xd ProjectPart(const SimulationTruth& truth, int tile,
+                             const Eigen::Matrix2Xd& part_mm) {
   const Eigen::Isometry3d pose = CamFromPartAt(truth, truth.tiles[tile].actual_mm);
   Eigen::Matrix3Xd p(3, part_mm.cols());
-  for (Eigen::Index i = 0; i < part_mm.cols(); ++i) p.col(i) = pose * Eigen::Vector3d(part_mm(0, i), part_mm(1, i), 0);
+  for (Eigen::Index i = 0; i < part_mm.cols(); ++i)
+    p.col(i) = pose * Eigen::Vector3d(part_mm(0, i), part_mm(1, i), 0);
   Eigen::Matrix2Xd q;
   EXPECT_TRUE(ProjectPoints(truth.camera.model, p, &q));
   return q;
 }
 
-Eigen::Vector2d ProjectPartPoint(const SimulationTruth& truth, int tile, const Eigen::Vector2d& part_mm) {
+Eigen::Vector2d ProjectPartPoint(const SimulationTruth& truth, int tile,
+                                 const Eigen::Vector2d& part_mm) {
   return ProjectPart(truth, tile, Eigen::Matrix2Xd(part_mm)).col(0);
 }
 
@@ -73,7 +76,8 @@ int TileIndex(const SimulationTruth& truth, const std::string& image) {
 Eigen::Vector2d PartAtPixel(const SimulationTruth& truth, int tile, const Eigen::Vector2d& q) {
   Eigen::Matrix3Xd v;
   EXPECT_TRUE(UnprojectPixels(truth.camera.model, q, &v));
-  const Eigen::Isometry3d part_from_cam = CamFromPartAt(truth, truth.tiles[tile].actual_mm).inverse();
+  const Eigen::Isometry3d part_from_cam =
+      CamFromPartAt(truth, truth.tiles[tile].actual_mm).inverse();
   const Eigen::Vector3d origin = part_from_cam.translation();
   const Eigen::Vector3d direction = part_from_cam.linear() * v.col(0);
   return (origin - origin.z() / direction.z() * direction).head<2>();
@@ -91,7 +95,8 @@ TEST(SimulationOptions, CheckNamesTheProblem) {
 
 TEST(SimulationPresets, HasTheRequiredOnes) {
   const std::vector<std::string> presets = SimulationPresets();
-  for (const char* name : {"demo", "markers", "low-texture", "exposure", "lens-mismatch", "sparse-texture"}) {
+  for (const char* name :
+       {"demo", "markers", "low-texture", "exposure", "lens-mismatch", "sparse-texture"}) {
     EXPECT_NE(std::find(presets.begin(), presets.end(), name), presets.end()) << name;
   }
 }
@@ -106,6 +111,20 @@ TEST(PlanSimulation, IsDeterminedByTheSeed) {
   }
 }
 
+// Placement never runs out of room: every preset and seed gets its holes,
+// markers and plate.
+TEST(PlanSimulation, EverySeedGetsAFullScene) {
+  for (const std::string& preset : SimulationPresets()) {
+    for (std::uint64_t seed = 1; seed <= 25; ++seed) {
+      const SimulationPlan plan = Plan(preset, seed);
+      EXPECT_GE(plan.truth.holes.size(), 12u) << preset << " " << seed;
+      EXPECT_GE(plan.truth.measurements.size(), 8u) << preset << " " << seed;
+      EXPECT_EQ(plan.truth.part_from_plate.has_value(), plan.preset.plate_on_part) << preset << " " << seed;
+      if (plan.preset.markers) EXPECT_GE(plan.truth.markers.size(), 12u) << preset << " " << seed;
+    }
+  }
+}
+
 TEST(PlanSimulation, CameraIsRealisticAndDiffersFromNominal) {
   for (const std::string& preset : SimulationPresets()) {
     const SimulationPlan plan = Plan(preset, 3);
@@ -113,11 +132,14 @@ TEST(PlanSimulation, CameraIsRealisticAndDiffersFromNominal) {
     EXPECT_EQ(camera.model.width_px, 1600);
     EXPECT_EQ(camera.model.height_px, 1200);
     EXPECT_EQ(camera.model.intrinsics.size(), LensModelNumParams(camera.model.lens_model));
-    const double deviation = std::abs(camera.focal_length_mm / plan.project.camera.focal_length_mm - 1.0);
+    const double deviation =
+        std::abs(camera.focal_length_mm / plan.project.camera.focal_length_mm - 1.0);
     EXPECT_GE(deviation, 0.005) << preset;
     EXPECT_LE(deviation, 0.015) << preset;
-    EXPECT_NEAR(camera.model.intrinsics[0], camera.focal_length_mm / (camera.pixel_pitch_um * 1e-3), 10.0);
-    const Eigen::Vector2d pp_offset(camera.model.intrinsics[2] - 799.5, camera.model.intrinsics[3] - 599.5);
+    EXPECT_NEAR(camera.model.intrinsics[0], camera.focal_length_mm / (camera.pixel_pitch_um * 1e-3),
+                10.0);
+    const Eigen::Vector2d pp_offset(camera.model.intrinsics[2] - 799.5,
+                                    camera.model.intrinsics[3] - 599.5);
     EXPECT_GE(pp_offset.norm(), 12.0);
     EXPECT_GE(camera.psf_sigma_px, 0.6);
     EXPECT_LE(camera.psf_sigma_px, 0.9);
@@ -150,7 +172,8 @@ TEST(PlanSimulation, LensMismatchTruthIsStrongAndNotRadial) {
     const Eigen::Vector2d d = q.col(k) - pinhole;
     const Eigen::Vector2d radial_dir = (pinhole - c).normalized();
     max_distortion = std::max(max_distortion, d.norm());
-    max_tangential = std::max(max_tangential, std::abs(radial_dir.x() * d.y() - radial_dir.y() * d.x()));
+    max_tangential =
+        std::max(max_tangential, std::abs(radial_dir.x() * d.y() - radial_dir.y() * d.x()));
   }
   EXPECT_GT(max_distortion, 20.0);
   EXPECT_GT(max_tangential, 1.0);
@@ -189,7 +212,8 @@ TEST(PlanSimulation, CalibrationPosesCoverTheField) {
     ++count[image.kind];
     if (image.kind == CalibImageTruth::Kind::kPlateAbsent) continue;
     Eigen::Matrix3Xd p(3, outline.cols());
-    for (Eigen::Index k = 0; k < outline.cols(); ++k) p.col(k) = image.cam_from_plate * Eigen::Vector3d(outline(0, k), outline(1, k), 0);
+    for (Eigen::Index k = 0; k < outline.cols(); ++k)
+      p.col(k) = image.cam_from_plate * Eigen::Vector3d(outline(0, k), outline(1, k), 0);
     Eigen::Matrix2Xd q;
     ASSERT_TRUE(ProjectPoints(truth.camera.model, p, &q));
     const double margin = Margin(truth, q);
@@ -305,7 +329,8 @@ TEST(PlanSimulation, HolesAreWhereTheFeaturesSay) {
       const int tile = TileIndex(truth, feature.image);
       ASSERT_GE(tile, 0) << feature.image;
       // The whole rim comfortably inside the stated tile.
-      const Eigen::Matrix2Xd rim = ProjectPart(truth, tile, Circle(hole.center_part_mm, 0.5 * hole.diameter_mm));
+      const Eigen::Matrix2Xd rim =
+          ProjectPart(truth, tile, Circle(hole.center_part_mm, 0.5 * hole.diameter_mm));
       EXPECT_GE(Margin(truth, rim), 30.0) << preset << " " << hole.name;
       // near_px within 0.1 diameter (+ rounding to 0.1 px) of the centre's image.
       const Eigen::Vector2d q = ProjectPartPoint(truth, tile, hole.center_part_mm);
@@ -342,7 +367,9 @@ TEST(PlanSimulation, MeasurementsAreTheTruthsDistancesAndDiameters) {
     EXPECT_NEAR(plan.project.cmm[i].value_mm, truth.measurements[i].value_mm, 0.005);
     if (spec.type == MeasurementType::kDistance) {
       ++distances;
-      const double d = (holes.at(spec.features[0]).center_part_mm - holes.at(spec.features[1]).center_part_mm).norm();
+      const double d =
+          (holes.at(spec.features[0]).center_part_mm - holes.at(spec.features[1]).center_part_mm)
+              .norm();
       EXPECT_DOUBLE_EQ(truth.measurements[i].value_mm, d);
       far_across_tiles += d > 200 && tile_of.at(spec.features[0]) != tile_of.at(spec.features[1]);
     } else {
@@ -366,14 +393,17 @@ TEST(PlanSimulation, DemoPlateLiesOnThePartInView) {
   Eigen::Matrix2Xd corners(2, 4);
   corners << -h, h, h, -h, -h, -h, h, h;
   Eigen::Matrix2Xd part(2, 4);
-  for (int k = 0; k < 4; ++k) part.col(k) = (part_from_plate * Eigen::Vector3d(corners(0, k), corners(1, k), 0)).head<2>();
+  for (int k = 0; k < 4; ++k)
+    part.col(k) = (part_from_plate * Eigen::Vector3d(corners(0, k), corners(1, k), 0)).head<2>();
   int seen_whole = 0;
   for (int t = 0; t < 9; ++t) seen_whole += Margin(truth, ProjectPart(truth, t, part)) >= 0;
   EXPECT_GE(seen_whole, 1);
   EXPECT_LE(seen_whole, 3);
   for (const HoleTruth& hole : truth.holes) {
-    const Eigen::Vector3d q = part_from_plate.inverse() * Eigen::Vector3d(hole.center_part_mm.x(), hole.center_part_mm.y(), 0);
-    const double outside = std::hypot(std::max(std::abs(q.x()) - h, 0.0), std::max(std::abs(q.y()) - h, 0.0));
+    const Eigen::Vector3d q = part_from_plate.inverse() *
+                              Eigen::Vector3d(hole.center_part_mm.x(), hole.center_part_mm.y(), 0);
+    const double outside =
+        std::hypot(std::max(std::abs(q.x()) - h, 0.0), std::max(std::abs(q.y()) - h, 0.0));
     EXPECT_GT(outside, 0.5 * hole.diameter_mm) << hole.name;
   }
   EXPECT_FALSE(Plan("markers", 8).truth.part_from_plate.has_value());
@@ -392,7 +422,8 @@ TEST(PlanSimulation, MarkersAreDistinctAndInView) {
                   marker.tag_size_mm, 1e-9);
     }
     int seen = 0;
-    for (int t = 0; t < 9; ++t) seen += Margin(truth, ProjectPart(truth, t, marker.corners_part_mm)) >= 10;
+    for (int t = 0; t < 9; ++t)
+      seen += Margin(truth, ProjectPart(truth, t, marker.corners_part_mm)) >= 10;
     EXPECT_GE(seen, 1);
   }
   EXPECT_EQ(ids.size(), truth.markers.size());
@@ -401,15 +432,18 @@ TEST(PlanSimulation, MarkersAreDistinctAndInView) {
 // ---------------------------------------------------------------- rendering
 
 // The reflectance image of a crop of a tile or calib image.
-ImageF TileCrop(const SimulationPlan& plan, const ProjectRenderer& renderer, int tile, const PixelRect& rect) {
+ImageF TileCrop(const SimulationPlan& plan, const ProjectRenderer& renderer, int tile,
+                const PixelRect& rect) {
   RayTableSummary summary;
-  const RayTable rays = ComputeRayTable(plan.truth.camera.model, rect, RayOptionsFor(plan.options), &summary);
+  const RayTable rays =
+      ComputeRayTable(plan.truth.camera.model, rect, RayOptionsFor(plan.options), &summary);
   EXPECT_TRUE(summary.ok);
   return renderer.TileReflectance(tile, rays);
 }
 
 PixelRect RectAround(const Eigen::Matrix2Xd& q, int margin) {
-  const Eigen::Vector2d lo = q.rowwise().minCoeff().array() - margin, hi = q.rowwise().maxCoeff().array() + margin;
+  const Eigen::Vector2d lo = q.rowwise().minCoeff().array() - margin,
+                        hi = q.rowwise().maxCoeff().array() + margin;
   PixelRect rect;
   rect.x0 = std::max(0, static_cast<int>(lo.x()));
   rect.y0 = std::max(0, static_cast<int>(lo.y()));
@@ -419,7 +453,8 @@ PixelRect RectAround(const Eigen::Matrix2Xd& q, int margin) {
 }
 
 float At(const ImageF& image, const PixelRect& rect, const Eigen::Vector2d& q) {
-  return image(static_cast<int>(std::lround(q.y())) - rect.y0, static_cast<int>(std::lround(q.x())) - rect.x0);
+  return image(static_cast<int>(std::lround(q.y())) - rect.y0,
+               static_cast<int>(std::lround(q.x())) - rect.x0);
 }
 
 // Every cell of every marker shows the colour of libapriltag's rendering of
@@ -471,8 +506,10 @@ TEST(ProjectRenderer, HolesAreWhereTheTruthSays) {
   for (size_t i = 0; i < truth.holes.size(); i += 3) {
     const HoleTruth& hole = truth.holes[i];
     const int tile = TileIndex(truth, plan.project.features[i].image);
-    const Eigen::Matrix2Xd inside = ProjectPart(truth, tile, Circle(hole.center_part_mm, 0.5 * hole.diameter_mm - 0.6, 16));
-    const Eigen::Matrix2Xd outside = ProjectPart(truth, tile, Circle(hole.center_part_mm, 0.5 * hole.diameter_mm + 0.6, 16));
+    const Eigen::Matrix2Xd inside =
+        ProjectPart(truth, tile, Circle(hole.center_part_mm, 0.5 * hole.diameter_mm - 0.6, 16));
+    const Eigen::Matrix2Xd outside =
+        ProjectPart(truth, tile, Circle(hole.center_part_mm, 0.5 * hole.diameter_mm + 0.6, 16));
     const PixelRect rect = RectAround(outside, 3);
     const ImageF image = TileCrop(plan, renderer, tile, rect);
     for (int k = 0; k < 16; ++k) {
@@ -493,14 +530,16 @@ TEST(ProjectRenderer, PlateOnPartIsWhereTheTruthSays) {
   Eigen::Matrix2Xd dots(2, marks.cols()), between(2, marks.cols());
   for (Eigen::Index i = 0; i < marks.cols(); ++i) {
     dots.col(i) = (*truth.part_from_plate * marks.col(i)).head<2>();
-    between.col(i) = (*truth.part_from_plate * (marks.col(i) + Eigen::Vector3d(6.25, 0, 0))).head<2>();
+    between.col(i) =
+        (*truth.part_from_plate * (marks.col(i) + Eigen::Vector3d(6.25, 0, 0))).head<2>();
   }
   int tile = -1;
   for (int t = 0; t < 9 && tile < 0; ++t) {
     if (Margin(truth, ProjectPart(truth, t, dots)) >= 50) tile = t;
   }
   ASSERT_GE(tile, 0);
-  const Eigen::Matrix2Xd q_dots = ProjectPart(truth, tile, dots), q_between = ProjectPart(truth, tile, between);
+  const Eigen::Matrix2Xd q_dots = ProjectPart(truth, tile, dots),
+                         q_between = ProjectPart(truth, tile, between);
   const PixelRect rect = RectAround(q_dots, 50);
   const ImageF image = TileCrop(plan, renderer, tile, rect);
   for (Eigen::Index i = 0; i < marks.cols(); ++i) {
@@ -520,8 +559,10 @@ TEST(ProjectRenderer, ImagesAreDeterministic) {
   const SimulationPlan two = PlanSimulation(options);
   const PixelRect rect{700, 500, 96, 80};
   RayTableSummary summary;
-  const RayTable rays_one = ComputeRayTable(one.truth.camera.model, rect, RayOptionsFor(one.options), &summary);
-  const RayTable rays_two = ComputeRayTable(two.truth.camera.model, rect, RayOptionsFor(two.options), &summary);
+  const RayTable rays_one =
+      ComputeRayTable(one.truth.camera.model, rect, RayOptionsFor(one.options), &summary);
+  const RayTable rays_two =
+      ComputeRayTable(two.truth.camera.model, rect, RayOptionsFor(two.options), &summary);
   const ProjectRenderer renderer_one(one), renderer_two(two);
   EXPECT_EQ(renderer_one.RenderTile(4, rays_one), renderer_two.RenderTile(4, rays_two));
   EXPECT_EQ(renderer_one.RenderCalibImage(3, rays_one), renderer_two.RenderCalibImage(3, rays_two));

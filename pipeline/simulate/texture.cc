@@ -89,8 +89,8 @@ double SurfaceTexture::Octaves(double x_mm, double y_mm) const {
   double sum = 0.0;
   for (const TextureOctave& o : octaves_) {
     const double x = o.frequency_per_mm * x_mm, y = o.frequency_per_mm * y_mm;
-    sum += o.amplitude * noise_(o.cos_a * x - o.sin_a * y + o.offset_x,
-                                o.sin_a * x + o.cos_a * y + o.offset_y);
+    sum += o.amplitude *
+           noise_(o.cos_a * x - o.sin_a * y + o.offset_x, o.sin_a * x + o.cos_a * y + o.offset_y);
   }
   return sum;
 }
@@ -102,14 +102,14 @@ float SurfaceTexture::Reflectance(double x_mm, double y_mm) const {
       // The soft threshold x / sqrt(1 + x^2) (a cheap tanh) turns blotches
       // into blobs with well-defined but smooth rims: corners for Harris.
       return static_cast<float>(0.5 + 0.25 * (5.0 * n) / std::sqrt(1.0 + 25.0 * n * n));
-    case TextureStyle::kLow:
-      return static_cast<float>(0.55 + 0.06 * n);
-    case TextureStyle::kSparse:
-      return static_cast<float>(0.62 - 0.4 * SmoothStep(0.28, 0.4, n));
+    case TextureStyle::kLow: return static_cast<float>(0.55 + 0.06 * n);
+    case TextureStyle::kSparse: return static_cast<float>(0.62 - 0.4 * SmoothStep(0.28, 0.4, n));
   }
   return 0.5f;
 }
 
-double SurfaceTexture::FinestWavelengthMm() const { return 1.0 / octaves_.front().frequency_per_mm; }
+double SurfaceTexture::FinestWavelengthMm() const {
+  return 1.0 / octaves_.front().frequency_per_mm;
+}
 
 }  // namespace omm

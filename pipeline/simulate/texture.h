@@ -38,7 +38,7 @@ enum class TextureStyle {
 struct TextureOctave {
   double frequency_per_mm = 0.0;  // lattice cells per mm
   double amplitude = 0.0;
-  double cos_a = 1.0, sin_a = 0.0;  // rotation of this octave's lattice
+  double cos_a = 1.0, sin_a = 0.0;        // rotation of this octave's lattice
   double offset_x = 0.0, offset_y = 0.0;  // shift, lattice cells
 };
 
