@@ -1,11 +1,11 @@
 #include "adapters/project_io/project_writer.h"
 
 #include <charconv>
-#include <fstream>
 #include <system_error>
 
 #include <yaml-cpp/yaml.h>
 
+#include "adapters/project_io/text_file.h"
 #include "pipeline/core/error.h"
 
 namespace omm {
@@ -17,24 +17,6 @@ std::string Number(double value) {
   char buffer[32];
   const auto result = std::to_chars(buffer, buffer + sizeof(buffer), value);
   return std::string(buffer, result.ptr);
-}
-
-// Writes `text` to a temporary file beside `path` and renames it into place.
-void WriteTextFile(const std::filesystem::path& path, const std::string& text) {
-  std::filesystem::path tmp = path;
-  tmp += ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << text;
-    out.flush();
-    if (!out) throw InputError(path.string(), "cannot write file");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw InputError(path.string(), "cannot write file: " + ec.message());
-  }
 }
 
 std::string ProjectYaml(const Project& project) {
@@ -130,7 +112,7 @@ void WriteProjectFiles(const Project& project) {
   std::filesystem::create_directories(project.dir, ec);
   if (ec) throw InputError(project.dir.string(), "cannot create directory: " + ec.message());
 
-  WriteTextFile(project.dir / "project.yaml", ProjectYaml(project));
+  WriteTextFileAtomically(project.dir / "project.yaml", ProjectYaml(project));
 
   if (!project.tiles.empty()) {
     std::string table = "image,x_mm,y_mm\n";
@@ -138,7 +120,7 @@ void WriteProjectFiles(const Project& project) {
       table += tile.image + "," + Number(tile.table_pos_mm.x()) + "," +
                Number(tile.table_pos_mm.y()) + "\n";
     }
-    WriteTextFile(project.dir / "table.csv", table);
+    WriteTextFileAtomically(project.dir / "table.csv", table);
   }
 
   if (!project.cmm.empty()) {
@@ -146,7 +128,7 @@ void WriteProjectFiles(const Project& project) {
     for (const CmmValue& value : project.cmm) {
       cmm += value.measurement + "," + Number(value.value_mm) + "\n";
     }
-    WriteTextFile(project.dir / "cmm.csv", cmm);
+    WriteTextFileAtomically(project.dir / "cmm.csv", cmm);
   }
 }
 

@@ -1,14 +1,12 @@
 #include "adapters/project_io/report_json.h"
 
-#include <fstream>
 #include <set>
-#include <sstream>
 #include <stdexcept>
-#include <system_error>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "adapters/project_io/text_file.h"
 #include "pipeline/core/error.h"
 
 namespace omm {
@@ -290,29 +288,11 @@ Report ReportFromJson(const std::string& text, const std::string& where) {
 }
 
 void WriteReportJson(const std::filesystem::path& path, const Report& report) {
-  const std::string text = ReportToJson(report);
-  std::filesystem::path tmp = path;
-  tmp += ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << text;
-    out.flush();
-    if (!out) throw InputError(path.string(), "cannot write file");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw InputError(path.string(), "cannot write file: " + ec.message());
-  }
+  WriteTextFileAtomically(path, ReportToJson(report));
 }
 
 Report ReadReportJson(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path.string(), "report not found");
-  std::stringstream text;
-  text << in.rdbuf();
-  return ReportFromJson(text.str(), path.string());
+  return ReportFromJson(ReadTextFile(path, "report not found"), path.string());
 }
 
 }  // namespace omm
