@@ -168,8 +168,10 @@ int SimulateCommand(const fs::path& project_dir, std::uint64_t seed, const std::
     }
     const fs::path truth_path = truth ? *truth : DefaultTruthPath(project_dir);
     TerminalProgress progress(IsStderrTerminal());
-    SimulateProjectDirectory(options, project_dir, truth_path, progress.Callback());
+    const SimulationSummary summary =
+        SimulateProjectDirectory(options, project_dir, truth_path, progress.Callback());
     progress.Finish();
+    spdlog::info("{}", summary.brief);
     spdlog::info("simulated project '{}' (preset {}, seed {}); truth in {}", project_dir.string(),
                  preset, seed, truth_path.string());
     fmt::print("{}\n", project_dir.string());
