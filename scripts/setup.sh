@@ -9,7 +9,7 @@ packages=(
   # build tools
   cmake ninja-build g++ pkg-config
   # calibration, geometry, optimisation
-  libmrcal-dev python3-mrcal libopencv-dev libceres-dev libeigen3-dev libapriltag-dev colmap
+  libmrcal-dev python3-mrcal libsuitesparse-dev libopencv-dev libceres-dev libeigen3-dev libapriltag-dev colmap
   # files, command line, logging
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev libsqlite3-dev
   # tests and benchmarks
