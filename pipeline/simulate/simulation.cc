@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <stdexcept>
 #include <utility>
 
 #include "adapters/apriltag/tag_family.h"
@@ -274,8 +275,9 @@ std::vector<CalibImageTruth> DrawCalibration(const CameraTruth& camera, int num_
       image.cam_from_plate = PlatePose(camera.model, target, z_mm, rotation);
     } else {
       image.kind = CalibImageTruth::Kind::kFull;
-      // Targets cycle over a 3 x 3 grid of the field, so the plate reaches
-      // every corner; every fourth pose is nearly flat, the others tilted.
+      // Poses cycle over the 3 x 3 cells of the field (a corner, an edge or
+      // the centre), so the plate reaches every corner and edge; every fourth
+      // pose is nearly flat, the others tilted.
       const int cell = full_count % 9;
       const bool flat = full_count % 4 == 0;
       ++full_count;
@@ -284,16 +286,45 @@ std::vector<CalibImageTruth> DrawCalibration(const CameraTruth& camera, int num_
       z_mm = random->Uniform(340.0, 440.0);
       const double tilt =
           flat ? random->Uniform(0, 4 * kDeg) : random->Uniform(10 * kDeg, 35 * kDeg);
-      const Eigen::Matrix3d rotation = Tilt(tilt, random->Uniform(0, 2 * std::numbers::pi)) *
-                                       RotZ(random->Uniform(0, 2 * std::numbers::pi));
-      // Pull the plate towards the centre, then back, until all of it shows.
+      // In the field's corners the plate is turned by a multiple of 90 deg
+      // (+- 10 deg), so that its own corner, not an edge, fills the image's.
+      const bool corner_cell = cell != 4 && cell % 2 == 0;
+      const double spin = corner_cell
+                              ? random->UniformInt(4) * 90 * kDeg + random->Uniform(-10, 10) * kDeg
+                              : random->Uniform(0, 2 * std::numbers::pi);
+      const Eigen::Matrix3d rotation =
+          Tilt(tilt, random->Uniform(0, 2 * std::numbers::pi)) * RotZ(spin);
+      // Slide the plate until it hugs the cell's sides of the image (a few px
+      // off them) and all of it shows; back off if it cannot fit.
+      const double gap_x = 3.0 + random->Uniform(0, 25), gap_y = 3.0 + random->Uniform(0, 25);
       for (int attempt = 0;; ++attempt) {
+        if (attempt == 100) throw std::logic_error("simulate: no calibration pose fits the image");
         image.cam_from_plate = PlatePose(camera.model, target, z_mm, rotation);
-        if (ImageMargin(ProjectPlanePoints(camera.model, image.cam_from_plate, outline)) >= 3.0)
-          break;
-        target = centre + 0.85 * (target - centre);
-        if (attempt % 6 == 5) z_mm += 15.0;
-        assert(attempt < 100);
+        const Eigen::Matrix2Xd q = ProjectPlanePoints(camera.model, image.cam_from_plate, outline);
+        if (!q.allFinite()) {
+          z_mm += 10.0;
+          continue;
+        }
+        const Eigen::Vector2d lo = q.rowwise().minCoeff(), hi = q.rowwise().maxCoeff();
+        const Eigen::Vector2d far(kWidthPx - 1.0, kHeightPx - 1.0);
+        if ((hi - lo).x() > far.x() - gap_x - 6 || (hi - lo).y() > far.y() - gap_y - 6) {
+          z_mm += 10.0;  // too big for the image at this distance
+          continue;
+        }
+        Eigen::Vector2d shift;
+        for (int axis = 0; axis < 2; ++axis) {
+          const int side = axis == 0 ? cell % 3 : cell / 3;  // 0: low side, 2: high side
+          const double gap = axis == 0 ? gap_x : gap_y;
+          if (side == 0) {
+            shift[axis] = gap - lo[axis];
+          } else if (side == 2) {
+            shift[axis] = far[axis] - gap - hi[axis];
+          } else {
+            shift[axis] = std::max(0.0, 3.0 - lo[axis]) + std::min(0.0, far[axis] - 3.0 - hi[axis]);
+          }
+        }
+        if (shift.norm() < 0.5 && lo.minCoeff() >= 2.5 && (far - hi).minCoeff() >= 2.5) break;
+        target += shift;
       }
     }
     // Defocus grows away from the focused working distance.

@@ -119,8 +119,11 @@ TEST(PlanSimulation, EverySeedGetsAFullScene) {
       const SimulationPlan plan = Plan(preset, seed);
       EXPECT_GE(plan.truth.holes.size(), 12u) << preset << " " << seed;
       EXPECT_GE(plan.truth.measurements.size(), 8u) << preset << " " << seed;
-      EXPECT_EQ(plan.truth.part_from_plate.has_value(), plan.preset.plate_on_part) << preset << " " << seed;
-      if (plan.preset.markers) EXPECT_GE(plan.truth.markers.size(), 12u) << preset << " " << seed;
+      EXPECT_EQ(plan.truth.part_from_plate.has_value(), plan.preset.plate_on_part)
+          << preset << " " << seed;
+      if (plan.preset.markers) {
+        EXPECT_GE(plan.truth.markers.size(), 12u) << preset << " " << seed;
+      }
     }
   }
 }
@@ -187,14 +190,16 @@ TEST(PlanSimulation, LensMismatchTruthIsStrongAndNotRadial) {
   EXPECT_LT((back - corners).cwiseAbs().maxCoeff(), 1e-6);
 }
 
-TEST(PlanSimulation, CalibrationPosesCoverTheField) {
-  const SimulationPlan plan = Plan("demo", 4);
+void ExpectCalibrationPosesCoverTheField(std::uint64_t seed) {
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const SimulationPlan plan = Plan("demo", seed);
   const SimulationTruth& truth = plan.truth;
   ASSERT_EQ(truth.calib_images.size(), 20u);
   std::map<CalibImageTruth::Kind, int> count;
   int flat = 0, tilted = 0;
   Eigen::Vector2d q_min(1e9, 1e9), q_max(-1e9, -1e9);
   double z_min = 1e9, z_max = 0;
+  double closest_to_corner[2][2] = {{1e9, 1e9}, {1e9, 1e9}};
   const double h = 0.5 * truth.plate_size_mm;
   Eigen::Matrix2Xd outline(2, 4 * 30);
   for (int k = 0; k < 30; ++k) {
@@ -221,6 +226,14 @@ TEST(PlanSimulation, CalibrationPosesCoverTheField) {
       EXPECT_GE(margin, 2.0) << image.image;  // the whole plate is in the image
       q_min = q_min.cwiseMin(q.rowwise().minCoeff());
       q_max = q_max.cwiseMax(q.rowwise().maxCoeff());
+      for (int cx = 0; cx < 2; ++cx) {
+        for (int cy = 0; cy < 2; ++cy) {
+          const Eigen::Vector2d corner(cx * 1599.0, cy * 1199.0);
+          // Corner-to-plate distance is at most the distance to an outline point.
+          closest_to_corner[cx][cy] = std::min(closest_to_corner[cx][cy],
+                                               (q.colwise() - corner).colwise().norm().minCoeff());
+        }
+      }
       const double tilt = std::acos(image.cam_from_plate.linear()(2, 2)) / kDeg;
       if (tilt < 5) ++flat;
       if (tilt >= 10 && tilt <= 35) ++tilted;
@@ -242,12 +255,22 @@ TEST(PlanSimulation, CalibrationPosesCoverTheField) {
   EXPECT_EQ(count[CalibImageTruth::Kind::kPlateAbsent], 1);
   EXPECT_GE(flat, 4);
   EXPECT_GE(tilted, 12);
-  // Over all poses the plate reaches within 60 px of every image edge.
+  // Over all poses the plate reaches within 60 px of every image edge, and
+  // into every corner's 150 x 150 px square.
   EXPECT_LT(q_min.x(), 60);
   EXPECT_LT(q_min.y(), 60);
   EXPECT_GT(q_max.x(), 1539);
   EXPECT_GT(q_max.y(), 1139);
+  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(1599, 0),
+                                        Eigen::Vector2d(0, 1199), Eigen::Vector2d(1599, 1199)}) {
+    EXPECT_LT(closest_to_corner[corner.x() > 0][corner.y() > 0], 150.0 * std::sqrt(2.0))
+        << corner.transpose();
+  }
   EXPECT_GT(z_max - z_min, 40.0);
+}
+
+TEST(PlanSimulation, CalibrationPosesCoverTheField) {
+  for (std::uint64_t seed = 1; seed <= 8; ++seed) ExpectCalibrationPosesCoverTheField(seed);
 }
 
 // Fraction of tile a's image that tile b also sees (pixels on a grid).
