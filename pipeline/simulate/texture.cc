@@ -108,8 +108,4 @@ float SurfaceTexture::Reflectance(double x_mm, double y_mm) const {
   return 0.5f;
 }
 
-double SurfaceTexture::FinestWavelengthMm() const {
-  return 1.0 / octaves_.front().frequency_per_mm;
-}
-
 }  // namespace omm

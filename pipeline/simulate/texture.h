@@ -47,8 +47,6 @@ class SurfaceTexture {
  public:
   SurfaceTexture(TextureStyle style, std::uint64_t seed);
   float Reflectance(double x_mm, double y_mm) const;
-  // Shortest wavelength present, mm (the finest octave's lattice cell).
-  double FinestWavelengthMm() const;
 
  private:
   double Octaves(double x_mm, double y_mm) const;
