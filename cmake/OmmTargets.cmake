@@ -44,3 +44,13 @@ function(omm_test name)
                        PROPERTIES ${props} DISCOVERY_TIMEOUT 60)
 endfunction()
 include(GoogleTest)
+
+# ccache, when installed, makes rebuilds (CI's second, sanitizer build of the
+# same sources, later runs on the same machine) cheap; scripts/test.sh sets
+# CCACHE_BASEDIR so clones in other directories share the cache.
+option(OMM_CCACHE "Compile through ccache when it is installed" ON)
+find_program(OMM_CCACHE_PROGRAM ccache)
+if(OMM_CCACHE AND OMM_CCACHE_PROGRAM)
+  set(CMAKE_C_COMPILER_LAUNCHER ${OMM_CCACHE_PROGRAM})
+  set(CMAKE_CXX_COMPILER_LAUNCHER ${OMM_CCACHE_PROGRAM})
+endif()

@@ -7,7 +7,7 @@ set -euo pipefail
 
 packages=(
   # build tools
-  cmake ninja-build g++ pkg-config
+  cmake ninja-build g++ pkg-config ccache
   # calibration, geometry, optimisation
   libmrcal-dev python3-mrcal libsuitesparse-dev libopencv-dev libceres-dev libeigen3-dev libapriltag-dev colmap
   # files, command line, logging

@@ -15,6 +15,8 @@ werror=OFF
 if [ "${CI:-}" = "true" ]; then werror=ON; fi
 
 bash scripts/setup.sh
+# Share ccache hits between clones in different directories (CI's fresh clone).
+export CCACHE_BASEDIR="$PWD" CCACHE_NOHASHDIR=true
 
 echo "== Release build and tests (build/)"
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DOMM_WERROR=$werror
