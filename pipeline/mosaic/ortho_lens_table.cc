@@ -1,0 +1,105 @@
+#include "pipeline/mosaic/ortho_lens_table.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+
+#include "adapters/mrcal/lens.h"
+
+namespace omm {
+
+std::string LensTableOptions::Check() const {
+  if (!(node_spacing_px > 0.0)) return "node_spacing_px must be > 0";
+  if (!(max_error_px > 0.0)) return "max_error_px must be > 0";
+  if (!(margin_px >= 0.0)) return "margin_px must be >= 0";
+  return "";
+}
+
+namespace {
+
+// Range of normalised rays over the image border pushed out by margin_px.
+void RayRange(const CameraModel& camera, double margin_px, Eigen::Vector2d* u_min,
+              Eigen::Vector2d* u_max) {
+  const double x0 = -margin_px, y0 = -margin_px;
+  const double x1 = camera.width_px - 1 + margin_px, y1 = camera.height_px - 1 + margin_px;
+  constexpr int kPerSide = 64;
+  Eigen::Matrix2Xd border(2, 4 * kPerSide);
+  for (int k = 0; k < kPerSide; ++k) {
+    const double s = static_cast<double>(k) / kPerSide;
+    border.col(k) = Eigen::Vector2d(x0 + s * (x1 - x0), y0);
+    border.col(kPerSide + k) = Eigen::Vector2d(x1, y0 + s * (y1 - y0));
+    border.col(2 * kPerSide + k) = Eigen::Vector2d(x1 - s * (x1 - x0), y1);
+    border.col(3 * kPerSide + k) = Eigen::Vector2d(x0, y1 - s * (y1 - y0));
+  }
+  Eigen::Matrix3Xd v;
+  const bool ok = UnprojectPixels(camera, border, &v);
+  assert(ok);
+  (void)ok;
+  const Eigen::Matrix2Xd u = v.topRows<2>().array().rowwise() / v.row(2).array();
+  *u_min = u.rowwise().minCoeff();
+  *u_max = u.rowwise().maxCoeff();
+}
+
+}  // namespace
+
+LensTable BuildLensTable(const CameraModel& camera, const LensTableOptions& options) {
+  assert(options.Check().empty());
+  Eigen::Vector2d u_min, u_max;
+  RayRange(camera, options.margin_px, &u_min, &u_max);
+  const Eigen::Vector2d focal(camera.intrinsics[0], camera.intrinsics[1]);
+
+  LensTable table;
+  double spacing_px = options.node_spacing_px;
+  for (int attempt = 0; attempt < 5; ++attempt, spacing_px *= 0.5) {
+    const Eigen::Vector2d step = Eigen::Vector2d::Constant(spacing_px).cwiseQuotient(focal);
+    // One node outside the range on each side for Catmull-Rom's support, one
+    // more for rounding.
+    table.u0_ = u_min - 2.0 * step;
+    table.nx_ = static_cast<int>(std::ceil((u_max.x() - u_min.x()) / step.x())) + 5;
+    table.ny_ = static_cast<int>(std::ceil((u_max.y() - u_min.y()) / step.y())) + 5;
+    table.inv_step_ = step.cwiseInverse();
+    table.node_spacing_px_ = spacing_px;
+
+    const int n = table.nx_ * table.ny_;
+    Eigen::Matrix3Xd p(3, n);
+    for (int j = 0; j < table.ny_; ++j) {
+      for (int i = 0; i < table.nx_; ++i) {
+        p.col(j * table.nx_ + i) << table.u0_.x() + i * step.x(), table.u0_.y() + j * step.y(), 1.0;
+      }
+    }
+    Eigen::Matrix2Xd q;
+    const bool ok = ProjectPoints(camera, p, &q);
+    assert(ok);
+    (void)ok;
+    table.nodes_.assign(q.data(), q.data() + 2 * n);
+
+    // Check points: the centre and the two edge midpoints of every inner cell.
+    std::vector<Eigen::Vector2d> check;
+    for (int j = 1; j + 2 < table.ny_; ++j) {
+      for (int i = 1; i + 2 < table.nx_; ++i) {
+        for (const auto& [dx, dy] : {std::pair{0.5, 0.5}, {0.5, 0.0}, {0.0, 0.5}}) {
+          check.emplace_back(table.u0_.x() + (i + dx) * step.x(),
+                             table.u0_.y() + (j + dy) * step.y());
+        }
+      }
+    }
+    Eigen::Matrix3Xd pc(3, check.size());
+    for (size_t k = 0; k < check.size(); ++k) pc.col(k) << check[k], 1.0;
+    Eigen::Matrix2Xd qc;
+    const bool ok_check = ProjectPoints(camera, pc, &qc);
+    assert(ok_check);
+    (void)ok_check;
+    double max_error = 0.0;
+    for (size_t k = 0; k < check.size(); ++k) {
+      Eigen::Vector2d q_interp;
+      if (table.Project(check[k], &q_interp)) {
+        max_error = std::max(max_error, (q_interp - qc.col(k)).norm());
+      }
+    }
+    table.max_error_px_ = max_error;
+    if (max_error <= options.max_error_px) break;
+  }
+  return table;
+}
+
+}  // namespace omm

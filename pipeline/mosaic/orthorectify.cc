@@ -1,0 +1,393 @@
+#include "pipeline/mosaic/orthorectify.h"
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <numeric>
+#include <thread>
+
+#include <Eigen/Geometry>
+
+#include "adapters/mrcal/lens.h"
+#include "pipeline/core/error.h"
+
+namespace omm {
+
+std::string OrthoOptions::Check() const {
+  if (!(gsd_mm > 0.0)) return "gsd_mm must be > 0";
+  if (const std::string e = lens_table.Check(); !e.empty()) return "lens_table: " + e;
+  if (!(blend_band_px > 0.0)) return "blend_band_px must be > 0";
+  if (const std::string e = exposure.Check(); !e.empty()) return "exposure: " + e;
+  if (num_threads < 1) return "num_threads must be >= 1";
+  return "";
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Runs fn(i) for i in [0, n), interleaved over num_threads threads, and
+// returns when all are done.
+void ParallelFor(int num_threads, int n, const std::function<void(int)>& fn) {
+  num_threads = std::max(1, std::min(num_threads, n));
+  std::vector<std::thread> threads;
+  for (int k = 1; k < num_threads; ++k) {
+    threads.emplace_back([&, k] {
+      for (int i = k; i < n; i += num_threads) fn(i);
+    });
+  }
+  for (int i = 0; i < n; i += num_threads) fn(i);
+  for (std::thread& t : threads) t.join();
+}
+
+Eigen::Matrix3d RotationFromAngleAxis(const Eigen::Vector3d& r) {
+  const double angle = r.norm();
+  if (angle == 0.0) return Eigen::Matrix3d::Identity();
+  return Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
+}
+
+// Catmull-Rom sample of `image` at q, which must satisfy BorderDistancePx > 0.
+float SampleCatmullRom(const ImageF& image, const Eigen::Vector2d& q) {
+  const int ix = static_cast<int>(q.x()), iy = static_cast<int>(q.y());
+  double wx[4], wy[4];
+  LensTable::CatmullRomWeights(q.x() - ix, wx);
+  LensTable::CatmullRomWeights(q.y() - iy, wy);
+  double sum = 0.0;
+  for (int j = 0; j < 4; ++j) {
+    const float* row =
+        image.data() + static_cast<std::ptrdiff_t>(iy - 1 + j) * image.cols() + ix - 1;
+    sum += wy[j] * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
+  }
+  return static_cast<float>(sum);
+}
+
+float SampleBilinear(const ImageF& image, const Eigen::Vector2d& q) {
+  const int ix = static_cast<int>(q.x()), iy = static_cast<int>(q.y());
+  const float fx = static_cast<float>(q.x() - ix), fy = static_cast<float>(q.y() - iy);
+  const float* r0 = image.data() + static_cast<std::ptrdiff_t>(iy) * image.cols() + ix;
+  const float* r1 = r0 + image.cols();
+  return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+}
+
+// (2r+1)^2 box mean with clamped borders: running sums along rows, then a
+// running sum of whole rows (cache-friendly).
+ImageF BoxFilter(const ImageF& image, int r) {
+  if (r == 0) return image;
+  const int h = static_cast<int>(image.rows()), w = static_cast<int>(image.cols());
+  ImageF tmp(h, w), out(h, w);
+  const double norm = 1.0 / ((2 * r + 1) * (2 * r + 1));
+  for (int y = 0; y < h; ++y) {
+    double sum = 0.0;
+    for (int k = -r; k <= r; ++k) sum += image(y, std::clamp(k, 0, w - 1));
+    for (int x = 0; x < w; ++x) {
+      tmp(y, x) = static_cast<float>(sum);
+      sum += image(y, std::min(x + r + 1, w - 1)) - image(y, std::max(x - r, 0));
+    }
+  }
+  Eigen::ArrayXd column_sum = Eigen::ArrayXd::Zero(w);
+  for (int k = -r; k <= r; ++k)
+    column_sum += tmp.row(std::clamp(k, 0, h - 1)).cast<double>().transpose().array();
+  for (int y = 0; y < h; ++y) {
+    out.row(y) = (column_sum * norm).cast<float>().transpose();
+    column_sum += tmp.row(std::min(y + r + 1, h - 1)).cast<double>().transpose().array() -
+                  tmp.row(std::max(y - r, 0)).cast<double>().transpose().array();
+  }
+  return out;
+}
+
+// Observations of the tiles' (smoothed) intensities at every sample_step-th
+// mosaic pixel seen by >= 2 tiles, min_border_px inside their borders.
+std::vector<ExposureObservation> CollectExposureObservations(const OrthoGeometry& geometry,
+                                                             const std::vector<ImageF>& tiles,
+                                                             const OrthoOptions& options) {
+  const ExposureOptions& eo = options.exposure;
+  const int num_tiles = static_cast<int>(tiles.size());
+  std::vector<ImageF> smoothed(num_tiles);
+  ParallelFor(options.num_threads, num_tiles,
+              [&](int i) { smoothed[i] = BoxFilter(tiles[i], eo.smoothing_radius_px); });
+  const VignettingFrame& frame = geometry.vignetting;
+  const int step = eo.sample_step_px;
+  const int num_rows = (geometry.grid.size_px.y() + step - 1) / step;
+  const int num_cols = (geometry.grid.size_px.x() + step - 1) / step;
+  const double min_border = std::max(eo.min_border_px, 1.0);
+  std::vector<std::vector<ExposureObservation>> per_row(num_rows);
+  ParallelFor(options.num_threads, num_rows, [&](int sample_row) {
+    const int row = sample_row * step;
+    std::vector<ExposureObservation> here;
+    for (int sample_col = 0; sample_col < num_cols; ++sample_col) {
+      const int col = sample_col * step;
+      here.clear();
+      for (int i = 0; i < num_tiles; ++i) {
+        const TileOrthoMap& map = geometry.tiles[i];
+        if (col < map.min_px.x() || col > map.max_px.x() || row < map.min_px.y() ||
+            row > map.max_px.y())
+          continue;
+        Eigen::Vector2d q;
+        if (!geometry.TilePixel(i, col, row, &q) || geometry.BorderDistancePx(q) < min_border)
+          continue;
+        const double value = SampleBilinear(smoothed[i], q);
+        if (value < eo.min_value || value > eo.max_value) continue;
+        here.push_back({sample_col, i, value, frame.Rho2(q)});
+      }
+      if (here.size() >= 2)
+        per_row[sample_row].insert(per_row[sample_row].end(), here.begin(), here.end());
+    }
+  });
+  std::vector<ExposureObservation> obs;
+  int sample = -1;
+  for (const std::vector<ExposureObservation>& row : per_row) {
+    for (size_t k = 0; k < row.size(); ++k) {
+      if (k == 0 || row[k].sample != row[k - 1].sample) ++sample;
+      obs.push_back(row[k]);
+      obs.back().sample = sample;
+    }
+  }
+  return obs;
+}
+
+}  // namespace
+
+void OrthoGeometry::TileRowPixels(int tile, int row, int col0, int n,
+                                  std::vector<Eigen::Vector2d>* q_px,
+                                  std::vector<char>* valid) const {
+  constexpr int kStep = kRowNodeStep;
+  const int num_nodes = (n - 1) / kStep + 4;  // node j at column col0 + (j - 1) kStep
+  std::vector<Eigen::Vector2d> nq(num_nodes);
+  std::vector<char> nok(num_nodes);
+  for (int j = 0; j < num_nodes; ++j) nok[j] = TilePixel(tile, col0 + (j - 1) * kStep, row, &nq[j]);
+  q_px->resize(n);
+  valid->resize(n);
+  double w[kStep][4];
+  for (int phase = 0; phase < kStep; ++phase)
+    LensTable::CatmullRomWeights(static_cast<double>(phase) / kStep, w[phase]);
+  for (int k = 0; k < n; ++k) {
+    const int j = k / kStep + 1, phase = k % kStep;
+    const bool ok = nok[j - 1] && nok[j] && nok[j + 1] && nok[j + 2];
+    (*valid)[k] = ok;
+    if (ok) {
+      (*q_px)[k] = w[phase][0] * nq[j - 1] + w[phase][1] * nq[j] + w[phase][2] * nq[j + 1] +
+                   w[phase][3] * nq[j + 2];
+    }
+  }
+}
+
+OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& scene,
+                                   const OrthoOptions& options) {
+  if (const std::string e = options.Check(); !e.empty()) throw InputError("mosaic options", e);
+  if (camera.intrinsics.size() != LensModelNumParams(camera.lens_model))
+    throw InputError("camera", "lens model '" + camera.lens_model + "' does not fit its " +
+                                   std::to_string(camera.intrinsics.size()) + " intrinsics");
+  if (camera.width_px < 4 || camera.height_px < 4)
+    throw InputError("camera", "image size must be at least 4 x 4 px");
+  if (scene.table_pos_mm.empty()) throw InputError("scene", "no tiles");
+
+  OrthoGeometry geometry;
+  geometry.image_width_px = camera.width_px;
+  geometry.image_height_px = camera.height_px;
+  geometry.lens = BuildLensTable(camera, options.lens_table);
+  geometry.vignetting = VignettingFrame::Of(camera);
+
+  // The border of the sampled region [1, W - 2] x [1, H - 2], as rays.
+  const double x0 = 1.0, y0 = 1.0, x1 = camera.width_px - 2.0, y1 = camera.height_px - 2.0;
+  constexpr int kPerSide = 32;
+  Eigen::Matrix2Xd border(2, 4 * kPerSide);
+  for (int k = 0; k < kPerSide; ++k) {
+    const double s = static_cast<double>(k) / kPerSide;
+    border.col(k) = Eigen::Vector2d(x0 + s * (x1 - x0), y0);
+    border.col(kPerSide + k) = Eigen::Vector2d(x1, y0 + s * (y1 - y0));
+    border.col(2 * kPerSide + k) = Eigen::Vector2d(x1 - s * (x1 - x0), y1);
+    border.col(3 * kPerSide + k) = Eigen::Vector2d(x0, y1 - s * (y1 - y0));
+  }
+  Eigen::Matrix3Xd rays;
+  if (!UnprojectPixels(camera, border, &rays))
+    throw InputError("camera", "cannot unproject the image border");
+
+  // Footprints: X = R^T (lambda v - t) with X_z = 0, then P = X - T_i.
+  const Eigen::Matrix3d cam_from_part = RotationFromAngleAxis(scene.cam_from_part_r);
+  const Eigen::Vector3d& t = scene.cam_from_part_t_mm;
+  const Eigen::Vector3d part_t = cam_from_part.transpose() * t;
+  const int num_tiles = static_cast<int>(scene.table_pos_mm.size());
+  geometry.tiles.resize(num_tiles);
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(INFINITY), hi = -lo;
+  for (int i = 0; i < num_tiles; ++i) {
+    Eigen::Matrix2Xd& footprint = geometry.tiles[i].footprint_mm;
+    footprint.resize(2, rays.cols());
+    for (Eigen::Index k = 0; k < rays.cols(); ++k) {
+      const Eigen::Vector3d v = cam_from_part.transpose() * rays.col(k);
+      const double lambda = part_t.z() / v.z();
+      if (!(lambda > 0.0))
+        throw InputError("scene", "tile " + std::to_string(i) +
+                                      ": the image border does not meet the part plane");
+      footprint.col(k) = (lambda * v - part_t).head<2>() - scene.table_pos_mm[i];
+    }
+    lo = lo.cwiseMin(footprint.rowwise().minCoeff());
+    hi = hi.cwiseMax(footprint.rowwise().maxCoeff());
+  }
+
+  OrthoGrid& grid = geometry.grid;
+  const double gsd = options.gsd_mm;
+  grid.gsd_mm = gsd;
+  grid.origin_mm = {std::floor(lo.x() / gsd) * gsd, std::ceil(hi.y() / gsd) * gsd};
+  grid.size_px = {static_cast<int>(std::ceil((hi.x() - grid.origin_mm.x()) / gsd)),
+                  static_cast<int>(std::ceil((grid.origin_mm.y() - lo.y()) / gsd))};
+
+  for (int i = 0; i < num_tiles; ++i) {
+    TileOrthoMap& map = geometry.tiles[i];
+    const Eigen::Vector3d table(scene.table_pos_mm[i].x(), scene.table_pos_mm[i].y(), 0.0);
+    const Eigen::Vector3d p_first(grid.origin_mm.x() + 0.5 * gsd, grid.origin_mm.y() - 0.5 * gsd,
+                                  0.0);
+    map.p0_mm = cam_from_part * (p_first + table) + t;
+    map.dcol_mm = gsd * cam_from_part.col(0);
+    map.drow_mm = -gsd * cam_from_part.col(1);
+    Eigen::Vector2d min_px = Eigen::Vector2d::Constant(INFINITY), max_px = -min_px;
+    for (Eigen::Index k = 0; k < map.footprint_mm.cols(); ++k) {
+      const Eigen::Vector2d m = grid.MosaicFromPart(map.footprint_mm.col(k));
+      min_px = min_px.cwiseMin(m);
+      max_px = max_px.cwiseMax(m);
+    }
+    // The border between the footprint's vertices bulges by the distortion's
+    // curvature over 1/32 of a side: a few pixels at most.
+    constexpr double kMarginPx = 4.0;
+    map.min_px = {std::max(0, static_cast<int>(std::floor(min_px.x() - kMarginPx))),
+                  std::max(0, static_cast<int>(std::floor(min_px.y() - kMarginPx)))};
+    map.max_px = {
+        std::min(grid.size_px.x() - 1, static_cast<int>(std::ceil(max_px.x() + kMarginPx))),
+        std::min(grid.size_px.y() - 1, static_cast<int>(std::ceil(max_px.y() + kMarginPx)))};
+  }
+  return geometry;
+}
+
+ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles,
+                      const std::vector<TileExposure>& exposure, const OrthoOptions& options,
+                      ResampleCounts* counts) {
+  const int num_tiles = static_cast<int>(tiles.size());
+  assert(num_tiles == static_cast<int>(geometry.tiles.size()));
+  assert(exposure.empty() || static_cast<int>(exposure.size()) == num_tiles);
+  const int width = geometry.grid.size_px.x(), height = geometry.grid.size_px.y();
+  ImageF mosaic = ImageF::Zero(height, width);
+  const VignettingFrame& frame = geometry.vignetting;
+  const double band = options.blend_band_px;
+  std::vector<std::int64_t> covered(height, 0), clipped(height, 0);
+
+  ParallelFor(options.num_threads, height, [&](int row) {
+    // Per tile: value and border distance of each column (d <= 0: unseen).
+    std::vector<float> value(static_cast<size_t>(num_tiles) * width);
+    std::vector<float> dist(static_cast<size_t>(num_tiles) * width, -1.0f);
+    std::vector<float> best(width, -1.0f);
+    std::vector<Eigen::Vector2d> q_row;
+    std::vector<char> q_ok;
+    for (int i = 0; i < num_tiles; ++i) {
+      const TileOrthoMap& map = geometry.tiles[i];
+      if (row < map.min_px.y() || row > map.max_px.y()) continue;
+      geometry.TileRowPixels(i, row, map.min_px.x(), map.max_px.x() - map.min_px.x() + 1, &q_row,
+                             &q_ok);
+      for (int col = map.min_px.x(); col <= map.max_px.x(); ++col) {
+        if (!q_ok[col - map.min_px.x()]) continue;
+        const Eigen::Vector2d& q = q_row[col - map.min_px.x()];
+        const double d = geometry.BorderDistancePx(q);
+        if (!(d > 0.0)) continue;
+        double v = SampleCatmullRom(tiles[i], q);
+        if (!exposure.empty()) v /= exposure[i].Factor(frame.Rho2(q));
+        value[static_cast<size_t>(i) * width + col] = static_cast<float>(v);
+        dist[static_cast<size_t>(i) * width + col] = static_cast<float>(d);
+        best[col] = std::max(best[col], static_cast<float>(d));
+      }
+    }
+    for (int col = 0; col < width; ++col) {
+      if (!(best[col] > 0.0f)) continue;
+      double sum_w = 0.0, sum_wv = 0.0;
+      for (int i = 0; i < num_tiles; ++i) {
+        const float d = dist[static_cast<size_t>(i) * width + col];
+        if (!(d > 0.0f)) continue;
+        const double w = std::min(d / band, 1.0) * std::exp((d - best[col]) / band);
+        sum_w += w;
+        sum_wv += w * value[static_cast<size_t>(i) * width + col];
+      }
+      const double v = sum_wv / sum_w;
+      ++covered[row];
+      if (v < 0.0 || v > 1.0) ++clipped[row];
+      mosaic(row, col) = static_cast<float>(std::clamp(v, 0.0, 1.0));
+    }
+  });
+  if (counts) {
+    counts->covered_px = std::accumulate(covered.begin(), covered.end(), std::int64_t{0});
+    counts->clipped_px = std::accumulate(clipped.begin(), clipped.end(), std::int64_t{0});
+  }
+  return mosaic;
+}
+
+OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
+                         const std::vector<ImageF>& tiles, const OrthoOptions& options) {
+  const Clock::time_point start = Clock::now();
+  if (tiles.size() != scene.table_pos_mm.size())
+    throw InputError("tiles", std::to_string(tiles.size()) + " images for " +
+                                  std::to_string(scene.table_pos_mm.size()) + " tile positions");
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    if (tiles[i].cols() != camera.width_px || tiles[i].rows() != camera.height_px)
+      throw InputError(
+          "tiles", "tile " + std::to_string(i) + " is " + std::to_string(tiles[i].cols()) + " x " +
+                       std::to_string(tiles[i].rows()) + " px, the camera " +
+                       std::to_string(camera.width_px) + " x " + std::to_string(camera.height_px));
+  }
+  OrthoResult result;
+  OrthoSummary& summary = result.summary;
+  const OrthoGeometry geometry = ComputeOrthoGeometry(camera, scene, options);
+  summary.lens_table_max_error_px = geometry.lens.max_error_px();
+  summary.lens_table_nodes = geometry.lens.num_nodes();
+  double px_per_px = 0.0;
+  int n = 0;
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    const Eigen::Vector2d centre =
+        geometry.grid.MosaicFromPart(geometry.tiles[i].footprint_mm.rowwise().mean());
+    Eigen::Vector2d q0, q1;
+    if (geometry.TilePixel(static_cast<int>(i), centre.x(), centre.y(), &q0) &&
+        geometry.TilePixel(static_cast<int>(i), centre.x() + 1.0, centre.y(), &q1)) {
+      px_per_px += (q1 - q0).norm();
+      ++n;
+    }
+  }
+  summary.tile_px_per_mosaic_px = n > 0 ? px_per_px / n : 0.0;
+  summary.geometry_seconds = SecondsSince(start);
+
+  const Clock::time_point exposure_start = Clock::now();
+  if (options.compensate_exposure) {
+    summary.exposure = EstimateExposure(CollectExposureObservations(geometry, tiles, options),
+                                        static_cast<int>(tiles.size()), options.exposure);
+  }
+  summary.exposure_seconds = SecondsSince(exposure_start);
+
+  const Clock::time_point resample_start = Clock::now();
+  ResampleCounts counts;
+  ImageF pixels = ResampleMosaic(geometry, tiles, summary.exposure.tiles, options, &counts);
+  const std::int64_t covered = counts.covered_px, clipped = counts.clipped_px;
+  summary.resample_seconds = SecondsSince(resample_start);
+  summary.covered_fraction = pixels.size() > 0 ? static_cast<double>(covered) / pixels.size() : 0.0;
+  summary.clipped_fraction = covered > 0 ? static_cast<double>(clipped) / covered : 0.0;
+  summary.usable = covered > 0 &&
+                   summary.lens_table_max_error_px <= options.lens_table.max_error_px &&
+                   (!options.compensate_exposure || summary.exposure.usable);
+
+  char line[320];
+  std::snprintf(line, sizeof(line),
+                "mosaic %d x %d px at %.4g mm (origin %.3f, %.3f mm), %.1f %% covered, "
+                "%.2f tile px per mosaic px, map error <= %.1e px, %.3f s%s%s",
+                geometry.grid.size_px.x(), geometry.grid.size_px.y(), geometry.grid.gsd_mm,
+                geometry.grid.origin_mm.x(), geometry.grid.origin_mm.y(),
+                100.0 * summary.covered_fraction, summary.tile_px_per_mosaic_px,
+                summary.lens_table_max_error_px, SecondsSince(start),
+                options.compensate_exposure ? "; " : "",
+                options.compensate_exposure ? summary.exposure.brief.c_str() : "");
+  summary.brief = line;
+  result.mosaic.grid = geometry.grid;
+  result.mosaic.pixels = std::move(pixels);
+  return result;
+}
+
+}  // namespace omm

@@ -1,0 +1,173 @@
+// The orthorectified mosaic: a metric top view of the part's top surface
+// (Z = 0) at `gsd_mm` per pixel, resampled from the tiles through the adjusted
+// planar scene.
+//
+// Geometry (pure, no pixels: ComputeOrthoGeometry). The mosaic pixel
+// (col, row) has its centre at the part-frame point
+//     P(col, row) = (origin_x + (col + 1/2) gsd, origin_y - (row + 1/2) gsd, 0)
+// (project-format.md: columns along +X, rows along -Y, not mirrored; origin_mm
+// is the outer corner of pixel (0, 0)). With the table at T_i the point is, in
+// the camera frame,
+//     p_cam = R (P + T_i) + t  =  p0_i + col * dcol + row * drow,
+// affine in (col, row) (dcol = gsd R e_x, drow = -gsd R e_y), and its pixel in
+// tile i is q = L(p_cam.xy / p_cam.z), L the lens model's projection, taken
+// from a LensTable (ortho_lens_table.h; its error bound is in the summary).
+// The grid covers the union of the tiles' footprints: the image border
+// unprojected onto the plane Z = 0 of each tile's scene.
+//
+// Pixels (Resample). A tile sees a mosaic pixel when its q lies inside
+// [1, W - 2] x [1, H - 2] (the full 4 x 4 support of the Catmull-Rom
+// interpolator that samples it; bilinear would blur edges and bias them).
+// Tiles are blended by a soft choice of the tile that sees the pixel farthest
+// from its border: with d_i the distance of q to that border (tile px),
+//     w_i = min(d_i / band, 1) exp((d_i - max_j d_j) / band),
+// so each pixel comes from essentially one tile except in a smooth band of a
+// few `blend_band_px` around the line where two tiles' border distances are
+// equal (the middle of their overlap): a feature is never cut, and far from
+// the seams the mosaic is one tile's pixels, not an average of two slightly
+// different blurs. Before blending, each tile's intensity is divided by its
+// exposure (exposure_compensation.h: gain and vignetting estimated from the
+// overlaps). Pixels no tile sees are 0; values are clamped to [0, 1].
+//
+// Sampling. Catmull-Rom is an interpolator, not a low-pass filter: at a gsd
+// well above the tiles' ground pixel size (summary.tile_px_per_mosaic_px > ~1.5)
+// the mosaic aliases fine texture; edges stay unbiased.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/camera.h"
+#include "pipeline/core/image.h"
+#include "pipeline/core/plane_scene.h"
+#include "pipeline/mosaic/exposure_compensation.h"
+#include "pipeline/mosaic/ortho_lens_table.h"
+
+namespace omm {
+
+// The mosaic's pixel grid on the part plane (project-format.md, out/ table).
+struct OrthoGrid {
+  double gsd_mm = 0.0;                                  // pixel size, mm
+  Eigen::Vector2d origin_mm = Eigen::Vector2d::Zero();  // part-frame outer corner of pixel (0, 0)
+  Eigen::Vector2i size_px = Eigen::Vector2i::Zero();    // width (cols), height (rows)
+
+  // Part-frame point (Z = 0) at mosaic position (col, row), pixel centres at
+  // integers; and the inverse.
+  Eigen::Vector2d PartFromMosaic(const Eigen::Vector2d& col_row) const {
+    return {origin_mm.x() + (col_row.x() + 0.5) * gsd_mm,
+            origin_mm.y() - (col_row.y() + 0.5) * gsd_mm};
+  }
+  Eigen::Vector2d MosaicFromPart(const Eigen::Vector2d& part_mm) const {
+    return {(part_mm.x() - origin_mm.x()) / gsd_mm - 0.5,
+            (origin_mm.y() - part_mm.y()) / gsd_mm - 0.5};
+  }
+};
+
+struct OrthoOptions {
+  double gsd_mm = 0.1;  // mosaic pixel size (project.yaml mosaic.gsd_mm), mm
+  LensTableOptions lens_table;
+  // Width of the blend between tiles (see the header comment), tile px.
+  double blend_band_px = 12.0;
+  bool compensate_exposure = true;  // false: tiles are blended as recorded
+  ExposureOptions exposure;
+  int num_threads = 2;  // rows are split between threads; the result does not depend on it
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+// Where one tile's scene puts the mosaic's pixels.
+struct TileOrthoMap {
+  // Camera-frame point of mosaic pixel (col, row): p0 + col dcol + row drow, mm.
+  Eigen::Vector3d p0_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d dcol_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d drow_mm = Eigen::Vector3d::Zero();
+  // Mosaic pixels that may see the tile: cols [min.x, max.x], rows [min.y, max.y].
+  Eigen::Vector2i min_px = Eigen::Vector2i::Zero();
+  Eigen::Vector2i max_px = Eigen::Vector2i::Constant(-1);
+  // The footprint: the image border unprojected onto the part plane, part mm.
+  Eigen::Matrix2Xd footprint_mm;
+};
+
+struct OrthoGeometry {
+  OrthoGrid grid;
+  LensTable lens;
+  std::vector<TileOrthoMap> tiles;
+  int image_width_px = 0, image_height_px = 0;
+  VignettingFrame vignetting;  // where the exposure model's rho is measured from
+
+  // Pixel of tile `tile` at mosaic position (col, row) (fractional allowed).
+  // False if the lens table does not cover it (far outside the image).
+  bool TilePixel(int tile, double col, double row, Eigen::Vector2d* q_px) const {
+    const TileOrthoMap& map = tiles[tile];
+    const Eigen::Vector3d p = map.p0_mm + col * map.dcol_mm + row * map.drow_mm;
+    if (!(p.z() > 0.0)) return false;
+    return lens.Project(Eigen::Vector2d(p.x() / p.z(), p.y() / p.z()), q_px);
+  }
+  // Tile pixels of the mosaic pixels (col0 + k, row), k < n: the lens table
+  // at every kRowNodeStep-th column, 1-D Catmull-Rom between (the map is
+  // smooth along a row: its error is below 1e-5 px; orthorectify_test.cc).
+  // valid[k] is false where the table does not cover a node.
+  static constexpr int kRowNodeStep = 8;
+  void TileRowPixels(int tile, int row, int col0, int n, std::vector<Eigen::Vector2d>* q_px,
+                     std::vector<char>* valid) const;
+  // Distance of q to the border of the region a tile is sampled in,
+  // [1, W - 2] x [1, H - 2]; > 0 inside, tile px.
+  double BorderDistancePx(const Eigen::Vector2d& q_px) const {
+    return std::min(std::min(q_px.x() - 1.0, image_width_px - 2.0 - q_px.x()),
+                    std::min(q_px.y() - 1.0, image_height_px - 2.0 - q_px.y()));
+  }
+};
+
+// The grid covering every tile's footprint and each tile's map. Pure;
+// throws InputError if options are invalid or the scene does not fit the
+// camera (intrinsics, a tile whose image border does not meet the plane).
+OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& scene,
+                                   const OrthoOptions& options);
+
+struct OrthoMosaic {
+  OrthoGrid grid;
+  ImageF pixels;  // grid.size_px.y() rows x grid.size_px.x() cols, [0, 1]; 0 where no tile sees
+};
+
+struct OrthoSummary {
+  bool usable = false;
+  std::string brief;  // one line: size, gsd, coverage, exposure fit, time
+
+  double lens_table_max_error_px = 0.0;  // the map's interpolation error bound, px
+  int lens_table_nodes = 0;
+  double tile_px_per_mosaic_px = 0.0;  // mean tile pixels per mosaic pixel (along a row)
+  double covered_fraction = 0.0;       // of the mosaic's pixels, seen by a tile
+  double clipped_fraction = 0.0;       // of the covered ones, clamped to 0 or 1
+  ExposureSummary exposure;            // empty tiles vector if not compensated
+  double geometry_seconds = 0.0;
+  double exposure_seconds = 0.0;
+  double resample_seconds = 0.0;
+};
+
+struct OrthoResult {
+  OrthoMosaic mosaic;
+  OrthoSummary summary;
+};
+
+struct ResampleCounts {
+  std::int64_t covered_px = 0;  // mosaic pixels some tile sees
+  std::int64_t clipped_px = 0;  // ... whose blend fell outside [0, 1] and was clamped
+};
+
+// Blends the tiles (gray, [0, 1], all camera.width_px x camera.height_px, in
+// the scene's tile order) into the mosaic `geometry` describes, each divided
+// by its exposure (`exposure` empty: as recorded). Pure.
+ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles,
+                      const std::vector<TileExposure>& exposure, const OrthoOptions& options,
+                      ResampleCounts* counts = nullptr);
+
+// Geometry, exposure compensation and resampling. Throws InputError for
+// invalid options or tiles that do not fit the camera or the scene (count, size).
+OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
+                         const std::vector<ImageF>& tiles, const OrthoOptions& options);
+
+}  // namespace omm
