@@ -253,8 +253,18 @@ PlateObservation DetectCaltab(const GrayImage& image, const BoardSpec& board, co
     if (!best || frame.dots.size() > best->dots.size()) best = std::move(frame);
   }
   if (!best || best->dots.empty()) {
-    return Rejected(n, cut_dark_region ? "plate not found (a dark region runs off the image: plate partly outside?)"
-                                       : "plate not found");
+    // A frame cut by the image border has no hole; if a dark region runs off
+    // the image and a good share of the dots is seen, the plate is there.
+    if (cut_dark_region) {
+      int dots = 0;
+      for (size_t i = 0; i < coarse.contours.size(); ++i) {
+        if (coarse.hierarchy[i][2] >= 0) continue;  // dots have no holes
+        const std::optional<Blob> blob = AsBlob(coarse.contours[i], size, options);
+        dots += blob && !blob->touches_border;
+      }
+      if (dots >= n / 4) return Rejected(n, "plate partly outside the image");
+    }
+    return Rejected(n, "plate not found");
   }
   if (best->cut) return Rejected(n, "plate partly outside the image");
 

@@ -270,9 +270,13 @@ EllipseFit FitEllipse(const Eigen::Matrix2Xd& points_px, const EllipseFitOptions
   fit.num_inliers = static_cast<int>(use.size());
   fit.rms_px = std::sqrt(d.squaredNorm() / fit.num_inliers);
   const double s2 = d.squaredNorm() / (fit.num_inliers - 5);
-  const Eigen::Matrix<double, 5, 5> cov =
-      s2 * (jacobian.transpose() * jacobian).ldlt().solve(Eigen::Matrix<double, 5, 5>::Identity());
-  fit.centre_cov_px2 = cov.topLeftCorner<2, 2>();
+  const Eigen::Matrix<double, 5, 5> jtj_inv =
+      (jacobian.transpose() * jacobian).ldlt().solve(Eigen::Matrix<double, 5, 5>::Identity());
+  fit.centre_cov_px2 = s2 * jtj_inv.topLeftCorner<2, 2>();
+  const Eigen::Matrix<double, 2, Eigen::Dynamic> sensitivity =
+      -jtj_inv.topRows<2>() * jacobian.transpose();
+  fit.centre_sensitivity.setZero(2, n);
+  for (size_t k = 0; k < use.size(); ++k) fit.centre_sensitivity.col(use[k]) = sensitivity.col(static_cast<Eigen::Index>(k));
   fit.ok = fit.centre_cov_px2.allFinite();
   if (!fit.ok) fit.why_failed = "degenerate edge-point configuration";
   return fit;

@@ -79,6 +79,12 @@ struct EllipseFit {
   double rms_px = 0.0;        // RMS Sampson distance of the inliers
   int num_inliers = 0;
   std::vector<bool> inlier;  // per input point
+  // Linear response of the centre to the data, 2 x (number of input points):
+  // column i is d centre / d d_i, the centre's move per px that point i moves
+  // across the curve (along the curve's normal), -[(J^T J)^-1 J^T]_c; zero for
+  // outliers. With correlated or unequal edge-point noise, the centre's
+  // covariance is S cov(d) S^T (subpixel_edges.h propagates pixel noise this way).
+  Eigen::Matrix2Xd centre_sensitivity;
 };
 
 // Direct fit, then geometric refinement with outlier rejection.

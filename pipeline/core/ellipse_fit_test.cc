@@ -86,6 +86,34 @@ TEST(EllipseFit, CentreCovarianceMatchesScatter) {
   EXPECT_NEAR(scatter(1, 1) / predicted(1, 1), 1.0, 0.25);
 }
 
+// centre_sensitivity is the centre's derivative with respect to each point's
+// move across the curve: compare with refits after moving single points.
+TEST(EllipseFit, CentreSensitivityMatchesFiniteDifferences) {
+  const Ellipse truth = Ellipse::FromAxes({50.0, 40.0}, 21.5, 16.0, 0.7);
+  const int n = 60;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  Eigen::Matrix2Xd points = PointsOn(truth, n);
+  for (int i = 0; i < n; ++i) points.col(i) += truth.NormalAt(2.0 * std::numbers::pi * i / n) * noise(rng);
+  EllipseFitOptions options;
+  options.max_rejection_rounds = 0;
+  const EllipseFit fit = FitEllipse(points, options);
+  ASSERT_TRUE(fit.ok);
+  ASSERT_EQ(fit.centre_sensitivity.cols(), n);
+  const double step_px = 1e-4;
+  for (int i : {0, 7, 23, 41}) {
+    // The curve's normal at the point (the Sampson distance's gradient).
+    const Eigen::Vector2d normal = (fit.ellipse.shape * (points.col(i) - fit.ellipse.centre_px)).normalized();
+    Eigen::Matrix2Xd moved = points;
+    moved.col(i) += step_px * normal;
+    const EllipseFit refit = FitEllipse(moved, options);
+    const Eigen::Vector2d numeric = (refit.ellipse.centre_px - fit.ellipse.centre_px) / step_px;
+    // First order in the step and in the residuals (0.05 px on a ~20 px ellipse).
+    EXPECT_LT((numeric - fit.centre_sensitivity.col(i)).norm(), 0.02 * fit.centre_sensitivity.col(i).norm() + 1e-6)
+        << i;
+  }
+}
+
 TEST(EllipseFit, FailsCleanlyOnTooFewPoints) {
   const EllipseFit fit = FitEllipse(PointsOn(Ellipse::FromAxes({0, 0}, 5, 4, 0), 5));
   EXPECT_FALSE(fit.ok);

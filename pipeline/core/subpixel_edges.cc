@@ -52,48 +52,78 @@ double Median(std::vector<double> values) {
 struct LevelPlane {
   Eigen::Vector3d coeffs = Eigen::Vector3d::Zero();
   Eigen::Vector2d origin = Eigen::Vector2d::Zero();
-  double At(const Eigen::Vector2d& p) const { return coeffs(0) + coeffs.tail<2>().dot(p - origin); }
+  Eigen::Matrix3d normal_inverse = Eigen::Matrix3d::Zero();  // (A^T A)^-1 of the final round
+  std::vector<bool> use;                                     // samples of the final round
+  Eigen::Vector3d Row(const Eigen::Vector2d& p) const { return {1.0, p.x() - origin.x(), p.y() - origin.y()}; }
+  double At(const Eigen::Vector2d& p) const { return coeffs.dot(Row(p)); }
 };
 
 LevelPlane FitLevelPlane(const std::vector<Eigen::Vector2d>& at, const std::vector<double>& value,
                          const Eigen::Vector2d& origin) {
   LevelPlane plane;
   plane.origin = origin;
-  std::vector<bool> use(at.size(), true);
+  plane.use.assign(at.size(), true);
   for (int round = 0; round < 2; ++round) {
     Eigen::Matrix3d ata = Eigen::Matrix3d::Zero();
     Eigen::Vector3d atb = Eigen::Vector3d::Zero();
     for (size_t i = 0; i < at.size(); ++i) {
-      if (!use[i]) continue;
-      const Eigen::Vector3d row(1.0, at[i].x() - origin.x(), at[i].y() - origin.y());
+      if (!plane.use[i]) continue;
+      const Eigen::Vector3d row = plane.Row(at[i]);
       ata += row * row.transpose();
       atb += row * value[i];
     }
-    plane.coeffs = ata.ldlt().solve(atb);
+    plane.normal_inverse = ata.ldlt().solve(Eigen::Matrix3d::Identity());
+    plane.coeffs = plane.normal_inverse * atb;
     if (round == 1) break;
     std::vector<double> abs_res(at.size());
     for (size_t i = 0; i < at.size(); ++i) abs_res[i] = std::abs(value[i] - plane.At(at[i]));
     const double threshold = std::max(3.0 * 1.4826 * Median(abs_res), 1e-6);
-    for (size_t i = 0; i < at.size(); ++i) use[i] = abs_res[i] <= threshold;
+    for (size_t i = 0; i < at.size(); ++i) plane.use[i] = abs_res[i] <= threshold;
   }
   return plane;
 }
 
-}  // namespace
+// One pass of rays and what the noise propagation needs from it.
+struct EdgePass {
+  EllipseEdges edges;
+  // Per edge point: its ray's unit direction and the profile's slope
+  // df/ds > 0 there (image units per px).
+  std::vector<Eigen::Vector2d> normal;
+  std::vector<double> slope;
+  double polarity = 1.0;
+  // The level planes and the samples they were fitted to.
+  LevelPlane inside, outside;
+  std::vector<Eigen::Vector2d> in_at, out_at;
+  // Pixel-noise variance at each level (image units^2) from the raw pixels of
+  // the plateaus, and the levels.
+  double var_inside = 0.0, var_outside = 0.0;
+};
 
-std::string EllipseEdgeOptions::Check() const {
-  if (!(ray_half_length_px > 0.0)) return "ray_half_length_px must be > 0";
-  if (!(plateau_px > 0.0 && plateau_px < ray_half_length_px)) {
-    return "plateau_px must be in (0, ray_half_length_px)";
+// Robust variance of the raw pixels whose centres lie within `band` (s range
+// along a ray) of some ray, about the level plane.
+double PlateauPixelVariance(const ImageF& image, const std::vector<Eigen::Vector2d>& bases,
+                            const std::vector<Eigen::Vector2d>& normals, double s_lo, double s_hi,
+                            const LevelPlane& plane) {
+  std::vector<double> abs_res;
+  for (size_t k = 0; k < bases.size(); ++k) {
+    for (double s = s_lo; s <= s_hi + 1e-9; s += 0.5) {
+      const Eigen::Vector2d p = bases[k] + s * normals[k];
+      const Eigen::Index c = std::lround(p.x()), r = std::lround(p.y());
+      if (c < 0 || r < 0 || c >= image.cols() || r >= image.rows()) continue;
+      const Eigen::Vector2d centre(static_cast<double>(c), static_cast<double>(r));
+      const double s_pixel = (centre - bases[k]).dot(normals[k]);
+      if (s_pixel < s_lo || s_pixel > s_hi) continue;  // nearer the edge than the plateau
+      abs_res.push_back(std::abs(image(r, c) - plane.At(centre)));
+    }
   }
-  if (!(ray_spacing_px > 0.0)) return "ray_spacing_px must be > 0";
-  if (!(sample_step_px > 0.0 && sample_step_px <= 1.0)) return "sample_step_px must be in (0, 1]";
-  if (min_rays < 8) return "min_rays must be >= 8";
-  return {};
+  if (abs_res.empty()) return 0.0;
+  const double sigma = 1.4826 * Median(abs_res);
+  return sigma * sigma;
 }
 
-EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const EllipseEdgeOptions& options) {
-  EllipseEdges edges;
+EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOptions& options) {
+  EdgePass pass;
+  EllipseEdges& edges = pass.edges;
   const double a = rough.SemiMajorPx(), b = rough.SemiMinorPx();
   const double perimeter = 2.0 * std::numbers::pi * std::sqrt(0.5 * (a * a + b * b));
   edges.num_rays = std::max(options.min_rays, static_cast<int>(std::ceil(perimeter / options.ray_spacing_px)));
@@ -101,51 +131,52 @@ EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const E
   const double outer = options.ray_half_length_px;
   const double plateau_in = std::min(options.plateau_px, 0.5 * inner);
 
-  // Rays: boundary point, normal, and whether the whole ray is on the image.
-  struct Ray {
-    Eigen::Vector2d base, normal;
-  };
-  std::vector<Ray> rays;
-  rays.reserve(static_cast<size_t>(edges.num_rays));
-  std::vector<Eigen::Vector2d> in_at, out_at;
+  // Rays (boundary point and normal) that lie wholly on the image.
+  std::vector<Eigen::Vector2d> bases, normals;
+  bases.reserve(static_cast<size_t>(edges.num_rays));
+  normals.reserve(static_cast<size_t>(edges.num_rays));
   std::vector<double> in_value, out_value;
   for (int k = 0; k < edges.num_rays; ++k) {
     const double t = 2.0 * std::numbers::pi * k / edges.num_rays;
-    const Ray ray{rough.PointAt(t), rough.NormalAt(t)};
+    const Eigen::Vector2d base = rough.PointAt(t), normal = rough.NormalAt(t);
     double v0, v1;
-    if (!Interpolate(image, ray.base.x() - inner * ray.normal.x(), ray.base.y() - inner * ray.normal.y(), &v0) ||
-        !Interpolate(image, ray.base.x() + outer * ray.normal.x(), ray.base.y() + outer * ray.normal.y(), &v1)) {
+    if (!Interpolate(image, base.x() - inner * normal.x(), base.y() - inner * normal.y(), &v0) ||
+        !Interpolate(image, base.x() + outer * normal.x(), base.y() + outer * normal.y(), &v1)) {
       ++edges.num_rays_off_image;
       continue;
     }
-    rays.push_back(ray);
+    bases.push_back(base);
+    normals.push_back(normal);
     for (double s = -inner; s <= -inner + plateau_in + 1e-9; s += options.sample_step_px) {
-      const Eigen::Vector2d p = ray.base + s * ray.normal;
+      const Eigen::Vector2d p = base + s * normal;
       double v;
       Interpolate(image, p.x(), p.y(), &v);
-      in_at.push_back(p);
+      pass.in_at.push_back(p);
       in_value.push_back(v);
     }
     for (double s = outer - options.plateau_px; s <= outer + 1e-9; s += options.sample_step_px) {
-      const Eigen::Vector2d p = ray.base + s * ray.normal;
+      const Eigen::Vector2d p = base + s * normal;
       double v;
       Interpolate(image, p.x(), p.y(), &v);
-      out_at.push_back(p);
+      pass.out_at.push_back(p);
       out_value.push_back(v);
     }
   }
-  if (rays.size() < 8) {
+  if (bases.size() < 8) {
     edges.points_px.resize(2, 0);
-    return edges;
+    return pass;
   }
-  const LevelPlane inside = FitLevelPlane(in_at, in_value, rough.centre_px);
-  const LevelPlane outside = FitLevelPlane(out_at, out_value, rough.centre_px);
+  pass.inside = FitLevelPlane(pass.in_at, in_value, rough.centre_px);
+  pass.outside = FitLevelPlane(pass.out_at, out_value, rough.centre_px);
+  const LevelPlane& inside = pass.inside;
+  const LevelPlane& outside = pass.outside;
   edges.contrast = outside.coeffs(0) - inside.coeffs(0);
   const double polarity = edges.contrast >= 0.0 ? 1.0 : -1.0;
+  pass.polarity = polarity;
 
   // f(s) rises through 0 at the edge whatever the polarity.
-  auto profile = [&](const Ray& ray, double s, double* f) {
-    const Eigen::Vector2d p = ray.base + s * ray.normal;
+  auto profile = [&](size_t ray, double s, double* f) {
+    const Eigen::Vector2d p = bases[ray] + s * normals[ray];
     double v;
     if (!Interpolate(image, p.x(), p.y(), &v)) return false;
     *f = polarity * (v - 0.5 * (inside.At(p) + outside.At(p)));
@@ -154,9 +185,9 @@ EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const E
 
   std::vector<Eigen::Vector2d> points;
   std::vector<double> sigmas;
-  points.reserve(rays.size());
+  points.reserve(bases.size());
   const double search_lo = -inner + plateau_in, search_hi = outer - options.plateau_px;
-  for (const Ray& ray : rays) {
+  for (size_t ray = 0; ray < bases.size(); ++ray) {
     // Every upward crossing on the grid; keep the ray only if there is one.
     int crossings = 0;
     double lo = 0, hi = 0, f_lo = 0, f_hi = 0;
@@ -195,8 +226,17 @@ EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const E
         side = 1;
       }
     }
-    const Eigen::Vector2d point = ray.base + s_root * ray.normal;
+    // The slope at the root (the interpolant is C1; a short central
+    // difference): how far pixel noise moves the crossing.
+    constexpr double kH = 0.05;
+    double f_before, f_after;
+    if (!profile(ray, s_root - kH, &f_before) || !profile(ray, s_root + kH, &f_after) || !(f_after > f_before)) {
+      continue;
+    }
+    const Eigen::Vector2d point = bases[ray] + s_root * normals[ray];
     points.push_back(point);
+    pass.normal.push_back(normals[ray]);
+    pass.slope.push_back((f_after - f_before) / (2.0 * kH));
     double f_minus, f_plus;
     if (profile(ray, s_root - 0.5, &f_minus) && profile(ray, s_root + 0.5, &f_plus) && f_plus > f_minus) {
       const double local_contrast = std::abs(outside.At(point) - inside.At(point));
@@ -206,7 +246,104 @@ EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const E
   edges.points_px.resize(2, static_cast<Eigen::Index>(points.size()));
   for (size_t i = 0; i < points.size(); ++i) edges.points_px.col(static_cast<Eigen::Index>(i)) = points[i];
   if (!sigmas.empty()) edges.edge_sigma_px = Median(sigmas);
-  return edges;
+  pass.var_inside = PlateauPixelVariance(image, bases, normals, -inner, -inner + plateau_in, inside);
+  pass.var_outside = PlateauPixelVariance(image, bases, normals, outer - options.plateau_px, outer, outside);
+  edges.pixel_noise_inside = std::sqrt(pass.var_inside);
+  edges.pixel_noise_outside = std::sqrt(pass.var_outside);
+  return pass;
+}
+
+// Adds weight * (the interpolation weights of (x, y)) to g over its 4 x 4
+// pixels; g covers the image window starting at (x0, y0), `width` wide.
+void AddInterpolationWeights(double x, double y, const Eigen::Vector2d& weight, Eigen::Index x0, Eigen::Index y0,
+                             Eigen::Index width, std::vector<Eigen::Vector2d>* g) {
+  const double fx = std::floor(x), fy = std::floor(y);
+  double wx[4], wy[4];
+  KeysWeights(x - fx, wx);
+  KeysWeights(y - fy, wy);
+  const Eigen::Index c = static_cast<Eigen::Index>(fx) - 1 - x0, r = static_cast<Eigen::Index>(fy) - 1 - y0;
+  for (int i = 0; i < 4; ++i) {
+    for (int j = 0; j < 4; ++j) (*g)[static_cast<size_t>((r + i) * width + c + j)] += wy[i] * wx[j] * weight;
+  }
+}
+
+// Covariance of the fitted centre from the image noise, to first order: the
+// centre is linear in the edge points' moves across the curve (the fit's
+// centre_sensitivity S), each move is -(the profile's noise at the root) /
+// slope, and that noise is the interpolated pixel noise minus the noise of the
+// mid-level (the two level planes, themselves linear in their samples). So
+// centre noise = sum_p g_p e_p over the pixels p, with var(e_p) the pixel
+// noise at its level (shot + read noise is linear in the level; interpolated
+// between the two plateaus' measured variances). Unlike the residual-based
+// s^2 (J^T J)^-1, this counts the correlation of neighbouring edge points
+// (they share pixels) and leaves out the fit's systematic misfit, which is
+// not noise.
+Eigen::Matrix2d CentreCovarianceFromNoise(const ImageF& image, const EdgePass& pass, const EllipseFit& fit) {
+  const Eigen::Matrix2Xd& points = pass.edges.points_px;
+  const Eigen::Index n = points.cols();
+  // Window covering every stencil (edge points and plateau samples).
+  Eigen::Vector2d lo = points.rowwise().minCoeff(), hi = points.rowwise().maxCoeff();
+  for (const std::vector<Eigen::Vector2d>* at : {&pass.in_at, &pass.out_at}) {
+    for (const Eigen::Vector2d& p : *at) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+  }
+  const Eigen::Index x0 = static_cast<Eigen::Index>(std::floor(lo.x())) - 1;
+  const Eigen::Index y0 = static_cast<Eigen::Index>(std::floor(lo.y())) - 1;
+  const Eigen::Index width = static_cast<Eigen::Index>(std::floor(hi.x())) + 3 - x0;
+  const Eigen::Index height = static_cast<Eigen::Index>(std::floor(hi.y())) + 3 - y0;
+  std::vector<Eigen::Vector2d> g(static_cast<size_t>(width * height), Eigen::Vector2d::Zero());
+
+  // k_i: centre move per unit of profile noise at point i.
+  Eigen::Matrix<double, 2, 3> k_inside = Eigen::Matrix<double, 2, 3>::Zero(), k_outside = k_inside;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Vector2d p = points.col(i);
+    const Eigen::Vector2d across = (fit.ellipse.shape * (p - fit.ellipse.centre_px)).normalized();
+    const Eigen::Vector2d k = -pass.polarity * fit.centre_sensitivity.col(i) * across.dot(pass.normal[static_cast<size_t>(i)]) /
+                              pass.slope[static_cast<size_t>(i)];
+    AddInterpolationWeights(p.x(), p.y(), k, x0, y0, width, &g);
+    k_inside += k * pass.inside.Row(p).transpose();
+    k_outside += k * pass.outside.Row(p).transpose();
+  }
+  // The mid-level's noise enters with weight -1/2 per plane.
+  auto add_plane = [&](const LevelPlane& plane, const std::vector<Eigen::Vector2d>& at,
+                       const Eigen::Matrix<double, 2, 3>& k_plane) {
+    const Eigen::Matrix<double, 2, 3> m = -0.5 * k_plane * plane.normal_inverse;
+    for (size_t s = 0; s < at.size(); ++s) {
+      if (plane.use[s]) AddInterpolationWeights(at[s].x(), at[s].y(), m * plane.Row(at[s]), x0, y0, width, &g);
+    }
+  };
+  add_plane(pass.inside, pass.in_at, k_inside);
+  add_plane(pass.outside, pass.out_at, k_outside);
+  const double level_in = pass.inside.coeffs(0), level_out = pass.outside.coeffs(0);
+  const double var_slope = (pass.var_outside - pass.var_inside) / (level_out - level_in);
+  const double var_floor = std::min(pass.var_inside, pass.var_outside);
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (Eigen::Index r = 0; r < height; ++r) {
+    for (Eigen::Index c = 0; c < width; ++c) {
+      const Eigen::Vector2d& gp = g[static_cast<size_t>(r * width + c)];
+      if (gp.isZero()) continue;
+      const double value = image(y0 + r, x0 + c);
+      const double var = std::max(var_floor, pass.var_inside + var_slope * (value - level_in));
+      cov += var * gp * gp.transpose();
+    }
+  }
+  return cov;
+}
+
+}  // namespace
+
+std::string EllipseEdgeOptions::Check() const {
+  if (!(ray_half_length_px > 0.0)) return "ray_half_length_px must be > 0";
+  if (!(plateau_px > 0.0 && plateau_px < ray_half_length_px)) {
+    return "plateau_px must be in (0, ray_half_length_px)";
+  }
+  if (!(ray_spacing_px > 0.0)) return "ray_spacing_px must be > 0";
+  if (!(sample_step_px > 0.0 && sample_step_px <= 1.0)) return "sample_step_px must be in (0, 1]";
+  if (min_rays < 8) return "min_rays must be >= 8";
+  return {};
+}
+
+EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const EllipseEdgeOptions& options) {
+  return CastRays(image, rough, options).edges;
 }
 
 std::string MarkRefinementOptions::Check() const {
@@ -225,8 +362,9 @@ MarkFit RefineEllipticalMark(const ImageF& image, const Ellipse& rough, const Ma
   // Pass 1 along the rough normals, then along the fitted ones. Rays off the
   // edge put one side's plateau into the blur and pull the levels; the error
   // shrinks ~10x per pass (more for sharp edges), so a few passes converge.
-  for (int pass = 0; pass < options.max_passes; ++pass) {
-    const EllipseEdges edges = FindEllipseEdges(image, guide, options.edges);
+  for (int pass_index = 0; pass_index < options.max_passes; ++pass_index) {
+    const EdgePass pass = CastRays(image, guide, options.edges);
+    const EllipseEdges& edges = pass.edges;
     if (edges.num_rays_off_image > 0) {
       mark.why_failed = "mark touches the image border";
       return mark;
@@ -250,10 +388,12 @@ MarkFit RefineEllipticalMark(const ImageF& image, const Ellipse& rough, const Ma
     const double moved_px = (fit.ellipse.centre_px - guide.centre_px).norm();
     guide = fit.ellipse;
     mark.ellipse = fit.ellipse;
-    mark.centre_cov_px2 = fit.centre_cov_px2;
     mark.rms_px = fit.rms_px;
     mark.num_inliers = fit.num_inliers;
-    if (pass > 0 && moved_px < options.converged_px) break;
+    if ((pass_index > 0 && moved_px < options.converged_px) || pass_index + 1 == options.max_passes) {
+      mark.centre_cov_px2 = CentreCovarianceFromNoise(image, pass, fit);
+      break;
+    }
   }
   mark.sigma_px = std::sqrt(0.5 * mark.centre_cov_px2.trace());
   mark.ok = true;

@@ -54,6 +54,10 @@ struct EllipseEdges {
   int num_rays_off_image = 0;     // rays (partly) outside the image: not used
   double contrast = 0.0;          // median (outside - inside) level, image units
   double edge_sigma_px = 0.0;     // median blur: contrast / (sqrt(2 pi) slope at the crossing)
+  // 1-sigma pixel noise at the inside and outside levels (image units): robust
+  // scatter of the plateaus' raw pixels about their level planes.
+  double pixel_noise_inside = 0.0;
+  double pixel_noise_outside = 0.0;
 };
 
 // Edge points of the mark whose boundary is roughly `rough`. Rays are clipped
@@ -76,6 +80,7 @@ struct MarkFit {
   bool ok = false;
   std::string why_failed;  // set when !ok: "mark touches the image border", ...
   Ellipse ellipse;         // fitted boundary; its centre is the mark centre
+  // Covariance of the centre from the image noise (see RefineEllipticalMark).
   Eigen::Matrix2d centre_cov_px2 = Eigen::Matrix2d::Zero();
   double sigma_px = 0.0;   // sqrt(trace(centre_cov) / 2): isotropic 1-sigma of the centre
   double rms_px = 0.0;     // RMS edge-point distance to the fit
@@ -87,6 +92,18 @@ struct MarkFit {
 
 // Sub-pixel centre of one elliptical mark from its rough boundary (within
 // ~ray_half_length_px / 2 of the true one).
+//
+// Centre covariance: first-order propagation of the pixel noise through the
+// last pass. The fitted centre is linear in the edge points' moves across the
+// curve (EllipseFit::centre_sensitivity); a point moves by -(profile noise at
+// its crossing) / (profile slope there); the profile noise is the cubic
+// interpolation of the pixel noise minus the mid-level's noise (the level
+// planes are linear in their samples). Summed per pixel, with each pixel's
+// noise variance interpolated linearly in its level between the plateaus'
+// measured variances (shot plus read noise is linear in the level). This
+// counts the correlation of neighbouring edge points, which share pixels,
+// and leaves out the fit's systematic misfit (not noise); the scatter of
+// centres over simulated noise draws matches it (caltab_simulated_test.cc).
 MarkFit RefineEllipticalMark(const ImageF& image, const Ellipse& rough,
                              const MarkRefinementOptions& options = {});
 

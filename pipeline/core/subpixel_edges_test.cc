@@ -213,7 +213,9 @@ TEST(SubpixelEdges, NoisyCentreScatterMatchesPredictedSigma) {
   RecordProperty("rms_predicted_px", std::to_string(rms_predicted));
   EXPECT_LT(mean_error.norm(), 0.003);
   EXPECT_LT(rms_scatter, 0.01);
-  EXPECT_NEAR(rms_scatter / rms_predicted, 1.0, 0.25);
+  // 200 draws x 2 coordinates: the scatter is known to ~3.5 % (1 sigma).
+  // The propagated sigma measured 0.0039 px against a scatter of 0.0041 px.
+  EXPECT_NEAR(rms_scatter / rms_predicted, 1.0, 0.12);
 }
 
 TEST(SubpixelEdges, MarkOnTheBorderFails) {

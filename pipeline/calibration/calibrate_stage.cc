@@ -1,0 +1,383 @@
+#include "pipeline/calibration/calibrate_stage.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <sstream>
+#include <thread>
+
+#include <fmt/format.h>
+
+#include "adapters/mrcal/calibrate.h"
+#include "adapters/mrcal/lens.h"
+#include "adapters/mrcal/uncertainty.h"
+#include "pipeline/calibration/perspective_bias.h"
+#include "pipeline/core/error.h"
+
+namespace omm {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  if (values.size() % 2 == 1) return *mid;
+  return 0.5 * (*mid + *std::max_element(values.begin(), mid));
+}
+
+CalibrationOptions SolveOptions(const CameraSpec& camera, int width_px, int height_px,
+                                const std::string& lens_model,
+                                const CalibrationStageOptions& options) {
+  CalibrationOptions solve;
+  solve.lens_model = lens_model;
+  solve.focal_length_mm = camera.focal_length_mm;
+  solve.pixel_pitch_um = camera.pixel_pitch_um;
+  solve.width_px = width_px;
+  solve.height_px = height_px;
+  solve.optimize_calobject_warp = options.optimize_calobject_warp;
+  solve.min_images = options.min_images;
+  return solve;
+}
+
+// The detections with each usable one's perspective bias removed, using the
+// solve's camera and poses; `delta` receives each image's corrections (zero
+// for images the solve did not use).
+std::vector<PlateObservation> CorrectBias(const std::vector<PlateObservation>& detections,
+                                          const BoardSpec& board, const CalibrationResult& solve,
+                                          std::vector<Eigen::Matrix2Xd>* delta) {
+  std::map<std::string, Eigen::Isometry3d> pose_by_image;
+  for (size_t i = 0; i < solve.record.images.size(); ++i) {
+    pose_by_image[solve.record.images[i].image] = solve.cam_from_plate[i];
+  }
+  std::vector<PlateObservation> corrected = detections;
+  delta->assign(detections.size(), Eigen::Matrix2Xd::Zero(2, board.rows * board.cols));
+  for (size_t i = 0; i < detections.size(); ++i) {
+    const auto pose = pose_by_image.find(detections[i].image);
+    if (!detections[i].usable || pose == pose_by_image.end()) continue;
+    Eigen::Matrix2Xd d;
+    if (!PerspectiveBiasCorrections(board, solve.camera, pose->second, &d)) continue;
+    for (int m = 0; m < d.cols(); ++m) {
+      if (detections[i].weight(m) <= 0) continue;
+      corrected[i].q_px.col(m) += d.col(m);
+      (*delta)[i].col(m) = d.col(m);
+    }
+  }
+  return corrected;
+}
+
+// Largest |a - b| over all marks, and the rms and max of |b|.
+void CompareCorrections(const std::vector<Eigen::Matrix2Xd>& before,
+                        const std::vector<Eigen::Matrix2Xd>& after, BiasCorrectionSummary* bias) {
+  double change = 0.0, sum_sq = 0.0, max_px = 0.0;
+  int count = 0;
+  for (size_t i = 0; i < after.size(); ++i) {
+    for (int m = 0; m < after[i].cols(); ++m) {
+      const double size = after[i].col(m).norm();
+      if (size == 0.0) continue;
+      change = std::max(change, (after[i].col(m) - before[i].col(m)).norm());
+      sum_sq += size * size;
+      max_px = std::max(max_px, size);
+      ++count;
+    }
+  }
+  bias->last_change_px = change;
+  bias->rms_px = count > 0 ? std::sqrt(sum_sq / count) : 0.0;
+  bias->max_px = max_px;
+}
+
+// Solve, then correct and re-solve until the corrections settle.
+CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& detections,
+                                          const BoardSpec& board,
+                                          const CalibrationOptions& solve_options,
+                                          const CalibrationStageOptions& options,
+                                          std::vector<PlateObservation>* corrected,
+                                          std::vector<Eigen::Matrix2Xd>* corrections,
+                                          BiasCorrectionSummary* bias) {
+  CalibrationResult result = CalibrateCamera(board, detections, solve_options);
+  *corrected = detections;
+  corrections->assign(detections.size(), Eigen::Matrix2Xd::Zero(2, board.rows * board.cols));
+  if (!result.usable || board.type == BoardType::kChessboard) return result;
+  std::vector<Eigen::Matrix2Xd>& previous = *corrections;
+  for (int round = 1; round <= options.max_bias_rounds; ++round) {
+    std::vector<Eigen::Matrix2Xd> delta;
+    *corrected = CorrectBias(detections, board, result, &delta);
+    CompareCorrections(previous, delta, bias);
+    bias->rounds = round;
+    CalibrationResult next = CalibrateCamera(board, *corrected, solve_options);
+    previous = std::move(delta);
+    if (!next.usable) break;
+    result = std::move(next);
+    if (bias->last_change_px < options.bias_settle_px) break;
+  }
+  return result;
+}
+
+std::vector<MarkOutlier> ListOutliers(const CalibrationResult& result, const BoardSpec& board) {
+  std::vector<MarkOutlier> outliers;
+  for (const SolveImage& image : result.record.images) {
+    for (int m = 0; m < static_cast<int>(image.outlier.size()); ++m) {
+      // Unobserved marks (weight 0) are flagged too; they are not outliers.
+      if (!image.outlier[m] || image.weight(m) <= 0) continue;
+      outliers.push_back({image.image, m / board.cols, m % board.cols, image.q_px.col(m)});
+    }
+  }
+  return outliers;
+}
+
+}  // namespace
+
+void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
+                     Eigen::Matrix2Xd* residual_px) {
+  const BoardSpec& board = result.record.board;
+  const Eigen::Matrix3Xd p_plate = BoardPoints(board);
+  std::vector<Eigen::Vector2d> q, r;
+  for (size_t i = 0; i < result.record.images.size(); ++i) {
+    const SolveImage& image = result.record.images[i];
+    Eigen::Matrix3Xd p_cam = result.cam_from_plate[i] * p_plate;
+    if (result.record.problem.optimize_calobject_warp) {
+      // mrcal's warp: z += x2 (1 - u^2) + y2 (1 - v^2), u, v in [-1, 1] over the board.
+      const double half_x = 0.5 * (board.cols - 1) * board.pitch_mm;
+      const double half_y = 0.5 * (board.rows - 1) * board.pitch_mm;
+      Eigen::Matrix3Xd warped = p_plate;
+      for (int m = 0; m < warped.cols(); ++m) {
+        const double u = half_x > 0 ? warped(0, m) / half_x : 0.0;
+        const double v = half_y > 0 ? warped(1, m) / half_y : 0.0;
+        warped(2, m) += result.calobject_warp(0) * (1 - u * u) + result.calobject_warp(1) * (1 - v * v);
+      }
+      p_cam = result.cam_from_plate[i] * warped;
+    }
+    Eigen::Matrix2Xd q_projected;
+    if (!ProjectPoints(result.camera, p_cam, &q_projected)) continue;
+    for (int m = 0; m < p_cam.cols(); ++m) {
+      if (image.weight(m) <= 0 || image.outlier[m]) continue;
+      q.push_back(image.q_px.col(m));
+      r.push_back(q_projected.col(m) - image.q_px.col(m));
+    }
+  }
+  q_px->resize(2, static_cast<Eigen::Index>(q.size()));
+  residual_px->resize(2, static_cast<Eigen::Index>(r.size()));
+  for (size_t k = 0; k < q.size(); ++k) {
+    q_px->col(static_cast<Eigen::Index>(k)) = q[k];
+    residual_px->col(static_cast<Eigen::Index>(k)) = r[k];
+  }
+}
+
+std::string CalibrationStageOptions::Check() const {
+  std::ostringstream what;
+  if (const std::string d = detection.Check(); !d.empty()) what << "detection: " << d << "; ";
+  if (num_threads < 1) what << "num_threads must be >= 1; ";
+  if (max_bias_rounds < 0) what << "max_bias_rounds must be >= 0; ";
+  if (!(bias_settle_px > 0)) what << "bias_settle_px must be > 0; ";
+  if (splined_nx < 4) what << "splined_nx must be >= 4; ";
+  if (!(splined_fov_margin >= 1.0)) what << "splined_fov_margin must be >= 1; ";
+  if (cross_validation_random_splits < 0) what << "cross_validation_random_splits must be >= 0; ";
+  if (!(tie_fraction >= 0)) what << "tie_fraction must be >= 0; ";
+  if (min_images < 3) what << "min_images must be >= 3; ";
+  if (uncertainty_grid_nx < 2 || uncertainty_grid_ny < 2) what << "uncertainty grid must be >= 2 x 2; ";
+  std::string text = what.str();
+  if (!text.empty()) text.resize(text.size() - 2);
+  return text;
+}
+
+std::vector<PlateObservation> DetectPlates(const std::vector<NamedImage>& images,
+                                           const BoardSpec& board,
+                                           const PlateDetectionOptions& options, int num_threads) {
+  std::vector<PlateObservation> detections(images.size());
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i = next++; i < images.size(); i = next++) {
+      detections[i] = DetectPlate(images[i].image, board, options);
+      detections[i].image = images[i].name;
+    }
+  };
+  std::vector<std::jthread> threads;
+  const int extra = std::min<int>(num_threads, static_cast<int>(images.size())) - 1;
+  for (int t = 0; t < extra; ++t) threads.emplace_back(work);
+  work();
+  return detections;
+}
+
+std::string SplinedModelFor(const CameraModel& camera, int nx, double fov_margin) {
+  Eigen::Matrix2Xd q(2, 2);
+  const double y_mid = 0.5 * (camera.height_px - 1);
+  q << 0.0, camera.width_px - 1.0, y_mid, y_mid;
+  Eigen::Matrix3Xd v;
+  double fov_deg = 0.0;
+  if (UnprojectPixels(camera, q, &v)) {
+    fov_deg = (std::atan(std::abs(v(0, 0) / v(2, 0))) + std::atan(std::abs(v(0, 1) / v(2, 1)))) *
+              180.0 / std::numbers::pi;
+  } else {
+    // A pinhole guess if the working camera cannot unproject its own edges.
+    fov_deg = 2.0 * std::atan(0.5 * camera.width_px / camera.intrinsics(0)) * 180.0 / std::numbers::pi;
+  }
+  const int fov_x_deg = static_cast<int>(std::ceil(fov_deg * fov_margin));
+  const int ny = static_cast<int>(std::ceil(nx * static_cast<double>(camera.height_px) / camera.width_px));
+  return fmt::format("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx={}_Ny={}_fov_x_deg={}", nx,
+                     std::max(ny, 4), fov_x_deg);
+}
+
+double WorkingDistanceMm(const CalibrationResult& result) {
+  std::vector<double> distances;
+  for (const Eigen::Isometry3d& pose : result.cam_from_plate) distances.push_back(pose.translation().norm());
+  return Median(distances);
+}
+
+UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distance_mm, int grid_nx,
+                                        int grid_ny) {
+  UncertaintySummary summary;
+  summary.distance_mm = distance_mm;
+  std::string why_not;
+  const std::optional<CalibrationUncertainty> uncertainty =
+      CalibrationUncertainty::Compute(record, 0.0, &why_not);
+  if (!uncertainty) {
+    summary.why_not = why_not;
+    return summary;
+  }
+  const ImagerUncertainty over_imager =
+      ProjectionUncertaintyOverImager(*uncertainty, record.camera, distance_mm, grid_nx, grid_ny);
+  summary.available = true;
+  summary.typical_px = over_imager.typical_worst_stdev_px;
+  summary.worst_px = over_imager.max_worst_stdev_px;
+  summary.observed_sigma_px = uncertainty->observed_sigma_px();
+  return summary;
+}
+
+CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservation>& detections,
+                                                const BoardSpec& board, const CameraSpec& camera,
+                                                int width_px, int height_px,
+                                                const CalibrationStageOptions& options) {
+  if (const std::string what = options.Check(); !what.empty()) {
+    throw InputError("calibration stage options", what);
+  }
+  const Clock::time_point start = Clock::now();
+  CalibrationStageSummary summary;
+  summary.detections = detections;
+
+  const int num_usable = static_cast<int>(
+      std::count_if(detections.begin(), detections.end(), [](const PlateObservation& o) { return o.usable; }));
+  if (num_usable < options.min_images) {
+    summary.brief = fmt::format("{} usable calibration image(s) of {}, need at least {}", num_usable,
+                                detections.size(), options.min_images);
+    summary.total_seconds = SecondsSince(start);
+    return summary;
+  }
+
+  // Working model for the bias rounds.
+  const bool forced = camera.lens_model.has_value();
+  const std::string working_model = forced ? *camera.lens_model : "LENSMODEL_OPENCV8";
+  CalibrationOptions solve_options = SolveOptions(camera, width_px, height_px, working_model, options);
+  if (const std::string what = solve_options.Check(); !what.empty()) {
+    throw InputError("project.yaml: camera", what);
+  }
+  std::vector<PlateObservation> corrected;
+  std::vector<Eigen::Matrix2Xd> corrections;
+  CalibrationResult result = SolveWithBiasCorrection(detections, board, solve_options, options,
+                                                     &corrected, &corrections, &summary.bias);
+  if (!result.usable) {
+    summary.brief = "calibration failed: " + result.brief;
+    summary.result = std::move(result);
+    summary.total_seconds = SecondsSince(start);
+    return summary;
+  }
+
+  summary.lens.lens_model = working_model;
+  summary.lens.forced = forced;
+  if (forced) {
+    summary.lens.why = "forced by project.yaml camera.lens_model";
+  } else if (!options.choose_lens_model) {
+    summary.lens.why = "default (lens-model choice off)";
+  } else {
+    const Clock::time_point choice_start = Clock::now();
+    const std::vector<std::string> candidates = {
+        "LENSMODEL_OPENCV4", "LENSMODEL_OPENCV5", "LENSMODEL_OPENCV8",
+        SplinedModelFor(result.camera, options.splined_nx, options.splined_fov_margin)};
+    CrossValidationOptions cv;
+    cv.calibration = solve_options;
+    cv.distance_mm = WorkingDistanceMm(result);
+    cv.num_random_splits = options.cross_validation_random_splits;
+    cv.seed = options.seed;
+    cv.tie_fraction = options.tie_fraction;
+    CrossValidationSummary choice = CrossValidateLensModels(board, corrected, candidates, cv);
+    summary.lens_choice_seconds = SecondsSince(choice_start);
+    if (!choice.chosen_lens_model.empty()) {
+      summary.lens.lens_model = choice.chosen_lens_model;
+      summary.lens.why = "cross-validation between halves of the images: " + choice.brief;
+    } else {
+      summary.lens.why = "cross-validation found no usable candidate; kept " + working_model;
+    }
+    summary.lens.cross_validation = std::move(choice);
+    if (summary.lens.lens_model != working_model) {
+      // The corrections are recomputed from the detections with the chosen
+      // model's camera and poses, then the final solve.
+      solve_options.lens_model = summary.lens.lens_model;
+      CalibrationResult chosen = CalibrateCamera(board, corrected, solve_options);
+      if (chosen.usable) {
+        std::vector<PlateObservation> recorrected = corrected;
+        if (board.type != BoardType::kChessboard) {
+          std::vector<Eigen::Matrix2Xd> delta;
+          recorrected = CorrectBias(detections, board, chosen, &delta);
+          CompareCorrections(corrections, delta, &summary.bias);
+          ++summary.bias.rounds;
+        }
+        CalibrationResult final_result = CalibrateCamera(board, recorrected, solve_options);
+        if (final_result.usable) {
+          result = std::move(final_result);
+          corrected = std::move(recorrected);
+        } else {
+          result = std::move(chosen);
+        }
+      } else {
+        summary.lens.lens_model = working_model;
+        summary.lens.why += "; the chosen model failed on all images (" + chosen.brief + "), kept " + working_model;
+      }
+    }
+  }
+
+  summary.observations = std::move(corrected);
+  summary.uncertainty = SummarizeUncertainty(result.record, WorkingDistanceMm(result),
+                                             options.uncertainty_grid_nx, options.uncertainty_grid_ny);
+  summary.outliers = ListOutliers(result, board);
+  ResidualVectors(result, &summary.residual_q_px, &summary.residual_px);
+  summary.usable = true;
+  const int num_rejected = static_cast<int>(detections.size()) - num_usable;
+  summary.brief = fmt::format("{}: {} image(s) used, {} rejected, rms {:.3f} px, {} outlier mark(s)",
+                              result.camera.lens_model, num_usable, num_rejected, result.rms_px,
+                              summary.outliers.size());
+  if (summary.uncertainty.available) {
+    summary.brief += fmt::format(", projection 1-sigma {:.4f} px typical, {:.4f} px worst at {:.0f} mm",
+                                 summary.uncertainty.typical_px, summary.uncertainty.worst_px,
+                                 summary.uncertainty.distance_mm);
+  }
+  summary.result = std::move(result);
+  summary.total_seconds = SecondsSince(start);
+  return summary;
+}
+
+CalibrationStageSummary RunCalibration(const std::vector<NamedImage>& images, const BoardSpec& board,
+                                       const CameraSpec& camera, const CalibrationStageOptions& options) {
+  if (const std::string what = options.Check(); !what.empty()) {
+    throw InputError("calibration stage options", what);
+  }
+  const Clock::time_point start = Clock::now();
+  const std::vector<PlateObservation> detections =
+      DetectPlates(images, board, options.detection, options.num_threads);
+  const double detection_seconds = SecondsSince(start);
+  const int width_px = images.empty() ? 0 : images.front().image.width();
+  const int height_px = images.empty() ? 0 : images.front().image.height();
+  CalibrationStageSummary summary =
+      CalibrateFromDetections(detections, board, camera, width_px, height_px, options);
+  summary.detection_seconds = detection_seconds;
+  summary.total_seconds = SecondsSince(start);
+  return summary;
+}
+
+}  // namespace omm

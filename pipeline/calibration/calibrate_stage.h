@@ -1,0 +1,172 @@
+// The calibration stage: calibration-plate images in, a calibrated camera with
+// its uncertainty out. Pure: images and specs in memory, no files (the runner,
+// pipeline/orchestration/calibrate_stage.cc, reads and writes them).
+//
+// Steps:
+//  1. Plate detection in every image (adapters/opencv/plate_detector.h,
+//     num_threads at a time); an image that fails is rejected with the
+//     detector's reason and never used.
+//  2. A first mrcal solve (adapters/mrcal/calibrate.h) with the working lens
+//     model: the user's, else LENSMODEL_OPENCV8 (flexible enough that its
+//     poses and camera predict the marks' ellipses well).
+//  3. Perspective bias (pipeline/calibration/perspective_bias.h): the centre of
+//     each imaged dot is not the image of the dot's centre. The corrections
+//     are computed from the DETECTED centres with the latest camera and poses,
+//     and the solve repeated, until the corrections change by less than
+//     bias_settle_px between rounds (they depend on the pose only to second
+//     order, so one or two rounds suffice) or max_bias_rounds is reached.
+//  4. Lens model (when the user forced none): cross-validation between halves
+//     of the images (adapters/mrcal/cross_validation.h) among OPENCV4, OPENCV5,
+//     OPENCV8 and a splined stereographic model sized for the lens (fov from the
+//     working camera's corner rays plus a margin, knot count from the options);
+//     the lowest half-vs-half projection difference wins, ties going to fewer
+//     parameters. If it differs from the working model, the bias corrections
+//     are recomputed with it once and the final solve run.
+//  5. Projection uncertainty over the imager (adapters/mrcal/uncertainty.h) at
+//     the working distance, the median distance of the plates' centres from the
+//     camera: typical (median over the imager) and worst (max) of mrcal's
+//     worst-direction stdev.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "adapters/mrcal/cross_validation.h"
+#include "adapters/opencv/plate_detector.h"
+#include "pipeline/core/board.h"
+#include "pipeline/core/calibration_result.h"
+#include "pipeline/core/image.h"
+#include "pipeline/core/plate_observation.h"
+#include "pipeline/core/project.h"
+
+namespace omm {
+
+struct CalibrationStageOptions {
+  PlateDetectionOptions detection;
+  int num_threads = 2;  // detection threads
+
+  // Perspective-bias rounds (correction + re-solve) after the first solve.
+  int max_bias_rounds = 3;
+  double bias_settle_px = 0.001;  // stop when no correction moved more than this, px
+
+  // Lens-model choice (only when camera.lens_model is not given).
+  bool choose_lens_model = true;  // false: LENSMODEL_OPENCV8 without cross-validation
+  int splined_nx = 14;            // knots across the imager (Ny from the aspect ratio)
+  double splined_fov_margin = 1.1;  // the spline's fov_x is the lens's times this
+  int cross_validation_random_splits = 2;  // besides the alternating split
+  std::uint32_t seed = 1;                  // for the random splits
+  double tie_fraction = 0.1;  // cross-validation diffs within this fraction: a tie
+
+  // Calibration solve.
+  bool optimize_calobject_warp = false;
+  int min_images = 4;
+
+  // Projection-uncertainty grid over the imager.
+  int uncertainty_grid_nx = 16;
+  int uncertainty_grid_ny = 12;
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+// One calibration image in memory.
+struct NamedImage {
+  std::string name;  // file name in calib/
+  GrayImage image;
+};
+
+// Why the lens model is what it is.
+struct LensModelChoice {
+  std::string lens_model;
+  bool forced = false;  // the user's camera.lens_model
+  // Cross-validation, when it ran (see adapters/mrcal/cross_validation.h).
+  std::optional<CrossValidationSummary> cross_validation;
+  std::string why;  // one line for the report
+};
+
+struct BiasCorrectionSummary {
+  int rounds = 0;              // correction + re-solve rounds run
+  double rms_px = 0.0;         // size of the final corrections over all observed marks
+  double max_px = 0.0;
+  double last_change_px = 0.0;  // largest change of a correction in the last round
+};
+
+struct UncertaintySummary {
+  bool available = false;
+  std::string why_not;                 // when !available
+  double distance_mm = 0.0;            // where it was evaluated (range along the ray)
+  double typical_px = 0.0;             // median over the imager, worst-direction stdev
+  double worst_px = 0.0;               // max over the imager
+  double observed_sigma_px = 0.0;      // input noise estimated from the residuals
+};
+
+struct MarkOutlier {
+  std::string image;
+  int row = 0, col = 0;
+  Eigen::Vector2d q_px = Eigen::Vector2d::Zero();  // the observed (corrected) centre
+};
+
+struct CalibrationStageSummary {
+  bool usable = false;
+  std::string brief;  // one line: model, images used/rejected, rms, uncertainty
+
+  // Every image's detection, in input order (q_px as detected, uncorrected).
+  std::vector<PlateObservation> detections;
+  // The observations of the final solve (bias-corrected), input order.
+  std::vector<PlateObservation> observations;
+  CalibrationResult result;  // the final solve
+  LensModelChoice lens;
+  BiasCorrectionSummary bias;
+  UncertaintySummary uncertainty;
+  std::vector<MarkOutlier> outliers;
+  // Residual vectors (project(pose * mark) - observed) of every inlier mark of
+  // the final solve, for plots: pixel and residual, px.
+  Eigen::Matrix2Xd residual_q_px;
+  Eigen::Matrix2Xd residual_px;
+
+  double detection_seconds = 0.0;
+  double lens_choice_seconds = 0.0;
+  double total_seconds = 0.0;
+};
+
+// Detects the plate in every image, num_threads at a time. Output in input
+// order, each named.
+std::vector<PlateObservation> DetectPlates(const std::vector<NamedImage>& images,
+                                           const BoardSpec& board,
+                                           const PlateDetectionOptions& options, int num_threads);
+
+// Steps 2-5 on detections (usable or not): the stage without the pixels.
+// `camera` gives the nominal optics (seed) and the forced lens model.
+// Throws InputError on bad options; a data failure is a summary with !usable.
+CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservation>& detections,
+                                                const BoardSpec& board, const CameraSpec& camera,
+                                                int width_px, int height_px,
+                                                const CalibrationStageOptions& options);
+
+// The whole stage. Images must all have one size.
+CalibrationStageSummary RunCalibration(const std::vector<NamedImage>& images,
+                                       const BoardSpec& board, const CameraSpec& camera,
+                                       const CalibrationStageOptions& options);
+
+// The splined model sized for `camera`'s lens: fov_x from the rays of the
+// imager's left and right edges (through `camera`) times fov_margin,
+// Ny = Nx * H / W rounded up.
+std::string SplinedModelFor(const CameraModel& camera, int nx, double fov_margin);
+
+// Residual vectors project(pose * mark) - observed of every inlier mark of a
+// solve (unweighted, px), and the observed pixels (2 x num_inliers each).
+void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
+                     Eigen::Matrix2Xd* residual_px);
+
+// Median distance of the plates' centres from the camera, mm.
+double WorkingDistanceMm(const CalibrationResult& result);
+
+// The uncertainty summary of a finished solve at `distance_mm`.
+UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distance_mm,
+                                        int grid_nx, int grid_ny);
+
+}  // namespace omm
