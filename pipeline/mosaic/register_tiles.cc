@@ -1,0 +1,617 @@
+#include "pipeline/mosaic/register_tiles.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <random>
+#include <sstream>
+#include <thread>
+
+#include <Eigen/Dense>
+
+#include "adapters/mrcal/lens.h"
+#include "pipeline/core/error.h"
+#include "pipeline/mosaic/plane_adjustment.h"
+
+namespace omm {
+
+std::string RegisterTilesOptions::Check() const {
+  for (const std::string& e :
+       {harris.Check(), translation.Check(), patch.Check(), tags.Check(), bundle.Check()}) {
+    if (!e.empty()) return e;
+  }
+  if (!(min_overlap_fraction > 0 && min_overlap_fraction < 1))
+    return "min_overlap_fraction must be in (0, 1)";
+  if (num_probe_corners < 8) return "num_probe_corners must be >= 8";
+  if (probe_search_radius_px < 1) return "probe_search_radius_px must be >= 1";
+  if (!(probe_ransac_threshold_px > 0)) return "probe_ransac_threshold_px must be > 0";
+  if (search_radius_px < 1) return "search_radius_px must be >= 1";
+  if (!(ransac_threshold_px > 0)) return "ransac_threshold_px must be > 0";
+  if (ransac_iterations < 1) return "ransac_iterations must be >= 1";
+  if (min_pair_matches < 4) return "min_pair_matches must be >= 4";
+  if (!(observation_sigma_px > 0)) return "observation_sigma_px must be > 0";
+  if (!(outlier_factor > 1)) return "outlier_factor must be > 1";
+  if (!(min_outlier_threshold_px > 0)) return "min_outlier_threshold_px must be > 0";
+  if (rematch_passes < 0) return "rematch_passes must be >= 0";
+  if (num_threads < 1) return "num_threads must be >= 1";
+  return {};
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
+}
+
+template <typename Fn>
+void ParallelFor(int n, int num_threads, Fn fn) {
+  std::atomic<int> next{0};
+  const auto work = [&] {
+    for (int i = next++; i < n; i = next++) fn(i);
+  };
+  std::vector<std::thread> threads;
+  for (int t = 1; t < std::min(num_threads, n); ++t) threads.emplace_back(work);
+  work();
+  for (std::thread& t : threads) t.join();
+}
+
+// Homography b ~ H a by the normalised DLT (Hartley & Zisserman, alg. 4.2).
+Eigen::Matrix3d FitHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b) {
+  const auto normaliser = [](const Eigen::Matrix2Xd& p) {
+    const Eigen::Vector2d mean = p.rowwise().mean();
+    const double spread = (p.colwise() - mean).colwise().norm().mean();
+    const double s = spread > 0 ? std::sqrt(2.0) / spread : 1.0;
+    Eigen::Matrix3d t;
+    t << s, 0, -s * mean.x(), 0, s, -s * mean.y(), 0, 0, 1;
+    return t;
+  };
+  const Eigen::Matrix3d ta = normaliser(a), tb = normaliser(b);
+  const Eigen::Index n = a.cols();
+  Eigen::MatrixXd m(2 * n, 9);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Vector3d x = ta * a.col(i).homogeneous();
+    const Eigen::Vector3d y = tb * b.col(i).homogeneous();
+    m.row(2 * i) << 0, 0, 0, -y.z() * x.transpose(), y.y() * x.transpose();
+    m.row(2 * i + 1) << y.z() * x.transpose(), 0, 0, 0, -y.x() * x.transpose();
+  }
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(m, Eigen::ComputeFullV);
+  const Eigen::VectorXd h = svd.matrixV().col(8);
+  Eigen::Matrix3d hn;
+  hn << h(0), h(1), h(2), h(3), h(4), h(5), h(6), h(7), h(8);
+  return tb.inverse() * hn * ta;
+}
+
+Eigen::Vector2d Transfer(const Eigen::Matrix3d& h, const Eigen::Vector2d& a) {
+  return (h * a.homogeneous()).hnormalized();
+}
+
+// d Transfer / d a (2 x 2).
+Eigen::Matrix2d TransferJacobian(const Eigen::Matrix3d& h, const Eigen::Vector2d& a) {
+  const Eigen::Vector3d p = h * a.homogeneous();
+  Eigen::Matrix2d j;
+  for (int k = 0; k < 2; ++k) {
+    j.col(k) = (h.block<2, 1>(0, k) * p.z() - p.head<2>() * h(2, k)) / (p.z() * p.z());
+  }
+  return j;
+}
+
+// RANSAC on a homography b ~ H a; inliers where |Transfer(H, a) - b| * scale
+// <= threshold. Returns the inlier mask of the refitted model (empty if fewer
+// than 4 points or no model).
+std::vector<bool> RansacHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b,
+                                   double threshold, double scale, int iterations,
+                                   std::mt19937_64* rng, Eigen::Matrix3d* model) {
+  const int n = static_cast<int>(a.cols());
+  std::vector<bool> best;
+  if (n < 4) return best;
+  const auto inliers_of = [&](const Eigen::Matrix3d& h, std::vector<bool>* mask) {
+    int count = 0;
+    mask->assign(n, false);
+    for (int i = 0; i < n; ++i) {
+      const double e = (Transfer(h, a.col(i)) - b.col(i)).norm() * scale;
+      if (e <= threshold) (*mask)[i] = true, ++count;
+    }
+    return count;
+  };
+  int best_count = 0;
+  std::vector<bool> mask;
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  for (int it = 0; it < iterations; ++it) {
+    int idx[4];
+    for (int k = 0; k < 4; ++k) {
+      bool again = true;
+      while (again) {
+        idx[k] = pick(*rng);
+        again = std::find(idx, idx + k, idx[k]) != idx + k;
+      }
+    }
+    Eigen::Matrix2Xd sa(2, 4), sb(2, 4);
+    for (int k = 0; k < 4; ++k) sa.col(k) = a.col(idx[k]), sb.col(k) = b.col(idx[k]);
+    const Eigen::Matrix3d h = FitHomography(sa, sb);
+    if (!h.allFinite()) continue;
+    const int count = inliers_of(h, &mask);
+    if (count > best_count) best_count = count, best = mask;
+  }
+  if (best_count < 4) return {};
+  // Refit on the inliers, twice (the inlier set may grow).
+  for (int pass = 0; pass < 2; ++pass) {
+    Eigen::Matrix2Xd ia(2, best_count), ib(2, best_count);
+    for (int i = 0, k = 0; i < n; ++i) {
+      if (best[i]) ia.col(k) = a.col(i), ib.col(k) = b.col(i), ++k;
+    }
+    *model = FitHomography(ia, ib);
+    const int count = inliers_of(*model, &mask);
+    if (count < 4) return {};
+    best = mask;
+    best_count = count;
+  }
+  return best;
+}
+
+// One located correspondence: the anchor pixel of tile_a (a template centre)
+// found at q_b in tile_b. `key` names the anchor (its track).
+struct Match {
+  int tile_a = 0, tile_b = 0;
+  long long key = 0;
+  Eigen::Vector2i anchor_px = Eigen::Vector2i::Zero();
+  Eigen::Vector2d q_b = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d db_da = Eigen::Matrix2d::Identity();  // affine of the last match
+  bool tag = false;
+  bool keep = true;
+};
+
+long long CornerKey(int tile, int corner) { return static_cast<long long>(tile) * 1000000 + corner; }
+long long TagKey(int id, int k) { return -(static_cast<long long>(id) * 4 + k + 1); }
+
+// The image moves by A dT per table displacement dT; A from the neighbour
+// pairs' coarse translations (LMedS-like consensus of 2-pair solutions).
+bool FitImageMotion(const std::vector<Eigen::Vector2d>& dt_mm,
+                    const std::vector<Eigen::Vector2d>& shift_px, double tolerance_fraction,
+                    Eigen::Matrix2d* a) {
+  const int n = static_cast<int>(dt_mm.size());
+  std::vector<int> best_inliers;
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      Eigen::Matrix2d t, s;
+      t << dt_mm[i], dt_mm[j];
+      s << shift_px[i], shift_px[j];
+      if (std::abs(t.determinant()) < 0.1 * dt_mm[i].norm() * dt_mm[j].norm()) continue;
+      const Eigen::Matrix2d candidate = s * t.inverse();
+      std::vector<int> inliers;
+      for (int k = 0; k < n; ++k) {
+        const double e = (candidate * dt_mm[k] - shift_px[k]).norm();
+        if (e <= tolerance_fraction * shift_px[k].norm() + 4.0) inliers.push_back(k);
+      }
+      if (inliers.size() > best_inliers.size()) best_inliers = inliers;
+    }
+  }
+  if (best_inliers.size() < 2) return false;
+  Eigen::MatrixXd t(2, best_inliers.size()), s(2, best_inliers.size());
+  for (size_t k = 0; k < best_inliers.size(); ++k)
+    t.col(k) = dt_mm[best_inliers[k]], s.col(k) = shift_px[best_inliers[k]];
+  const Eigen::Matrix2d tt = t * t.transpose();
+  if (std::abs(tt.determinant()) < 1e-9 * tt.squaredNorm()) return false;
+  *a = s * t.transpose() * tt.inverse();
+  return true;
+}
+
+}  // namespace
+
+TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
+                               const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                               double table_sigma_mm, const CameraModel& camera,
+                               const RegisterTilesOptions& options) {
+  if (const std::string e = options.Check(); !e.empty())
+    throw InputError("", "tile registration: " + e);
+  if (tiles.size() != commanded_table_pos_mm.size())
+    throw InputError("", "tile registration: " + std::to_string(tiles.size()) + " tiles but " +
+                             std::to_string(commanded_table_pos_mm.size()) + " table positions");
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    if (tiles[i].cols() != camera.width_px || tiles[i].rows() != camera.height_px)
+      throw InputError("", "tile registration: tile " + std::to_string(i) + " is " +
+                               std::to_string(tiles[i].cols()) + " x " +
+                               std::to_string(tiles[i].rows()) + " px, the camera " +
+                               std::to_string(camera.width_px) + " x " +
+                               std::to_string(camera.height_px));
+  }
+  if (!(table_sigma_mm > 0)) throw InputError("", "tile registration: table sigma must be > 0");
+
+  TileRegistration result;
+  const int num_tiles = static_cast<int>(tiles.size());
+  const int width = camera.width_px, height = camera.height_px;
+
+  // 1. Features.
+  auto t0 = Clock::now();
+  std::vector<ImageF> normalized(num_tiles);
+  std::vector<std::vector<Corner>> corners(num_tiles);
+  std::vector<std::vector<TagDetection>> tags(num_tiles);
+  ParallelFor(num_tiles, options.num_threads, [&](int i) {
+    normalized[i] = NormalizeTileIntensity(tiles[i]);
+    corners[i] = DetectHarrisCorners(normalized[i], options.harris);
+    if (options.use_apriltags) tags[i] = DetectAprilTags36h11(tiles[i], options.tags);
+  });
+  for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());
+  result.features_seconds = Seconds(t0);
+
+  // 2. Image motion per table mm from nearest-neighbour pairs.
+  t0 = Clock::now();
+  std::vector<std::pair<int, int>> neighbour_pairs;
+  for (int i = 0; i < num_tiles; ++i) {
+    // The nearest tile, and the nearest one in a direction > 45 deg from it.
+    int first = -1, second = -1;
+    for (int j = 0; j < num_tiles; ++j) {
+      if (j == i) continue;
+      const double d = (commanded_table_pos_mm[j] - commanded_table_pos_mm[i]).norm();
+      if (d <= 0) continue;
+      if (first < 0 || d < (commanded_table_pos_mm[first] - commanded_table_pos_mm[i]).norm())
+        first = j;
+    }
+    if (first < 0) continue;
+    const Eigen::Vector2d u =
+        (commanded_table_pos_mm[first] - commanded_table_pos_mm[i]).normalized();
+    for (int j = 0; j < num_tiles; ++j) {
+      const Eigen::Vector2d d = commanded_table_pos_mm[j] - commanded_table_pos_mm[i];
+      if (j == i || d.norm() <= 0 || std::abs(u.dot(d.normalized())) > std::sqrt(0.5)) continue;
+      if (second < 0 || d.norm() < (commanded_table_pos_mm[second] - commanded_table_pos_mm[i]).norm())
+        second = j;
+    }
+    for (int j : {first, second}) {
+      if (j >= 0) neighbour_pairs.emplace_back(std::min(i, j), std::max(i, j));
+    }
+  }
+  std::sort(neighbour_pairs.begin(), neighbour_pairs.end());
+  neighbour_pairs.erase(std::unique(neighbour_pairs.begin(), neighbour_pairs.end()),
+                        neighbour_pairs.end());
+  std::vector<TranslationEstimate> coarse(neighbour_pairs.size());
+  ParallelFor(static_cast<int>(neighbour_pairs.size()), options.num_threads, [&](int k) {
+    coarse[k] = EstimateTranslation(normalized[neighbour_pairs[k].first],
+                                    normalized[neighbour_pairs[k].second], options.translation);
+  });
+  std::vector<Eigen::Vector2d> dt_mm, shift_px;
+  for (size_t k = 0; k < coarse.size(); ++k) {
+    if (!coarse[k].ok) continue;
+    dt_mm.push_back(commanded_table_pos_mm[neighbour_pairs[k].second] -
+                    commanded_table_pos_mm[neighbour_pairs[k].first]);
+    shift_px.push_back(coarse[k].shift_px);
+  }
+  if (!FitImageMotion(dt_mm, shift_px, 0.05, &result.image_px_per_table_mm)) {
+    result.matching_seconds = Seconds(t0);
+    result.tiles_held_by_prior.resize(num_tiles);
+    for (int i = 0; i < num_tiles; ++i) result.tiles_held_by_prior[i] = i;
+    result.brief = "registration UNUSABLE: no consistent translation between neighbouring tiles (" +
+                   std::to_string(shift_px.size()) + " of " +
+                   std::to_string(neighbour_pairs.size()) + " pairs found one)";
+    return result;
+  }
+  const Eigen::Matrix2d& a_px_per_mm = result.image_px_per_table_mm;
+
+  // 3. Pairs predicted to overlap, matched.
+  for (int i = 0; i < num_tiles; ++i) {
+    for (int j = i + 1; j < num_tiles; ++j) {
+      const Eigen::Vector2d d =
+          a_px_per_mm * (commanded_table_pos_mm[j] - commanded_table_pos_mm[i]);
+      const double overlap = std::max(0.0, width - std::abs(d.x())) *
+                             std::max(0.0, height - std::abs(d.y())) / (double(width) * height);
+      if (overlap < options.min_overlap_fraction) continue;
+      PairRegistration pair;
+      pair.tile_a = i;
+      pair.tile_b = j;
+      pair.predicted_overlap = overlap;
+      result.pairs.push_back(pair);
+    }
+  }
+  // Undistorted rays of every corner (the anchors).
+  const auto unproject = [&](const Eigen::Matrix2Xd& q) {
+    Eigen::Matrix3Xd v;
+    if (q.cols() == 0 || !UnprojectPixels(camera, q, &v)) return Eigen::Matrix2Xd(2, 0);
+    return Eigen::Matrix2Xd(v.topRows<2>());
+  };
+  std::vector<Eigen::Matrix2Xd> corner_rays(num_tiles);
+  ParallelFor(num_tiles, options.num_threads, [&](int i) {
+    Eigen::Matrix2Xd q(2, corners[i].size());
+    for (size_t k = 0; k < corners[i].size(); ++k) q.col(k) = corners[i][k].pixel.cast<double>();
+    corner_rays[i] = unproject(q);
+  });
+
+  const int h = options.patch.half_size_px;
+  const double fx = camera.intrinsics(0);
+  std::vector<std::vector<Match>> pair_matches(result.pairs.size());
+  ParallelFor(static_cast<int>(result.pairs.size()), options.num_threads, [&](int p) {
+    PairRegistration& pair = result.pairs[p];
+    const int ta = pair.tile_a, tb = pair.tile_b;
+    const Eigen::Vector2d shift =
+        a_px_per_mm * (commanded_table_pos_mm[tb] - commanded_table_pos_mm[ta]);
+    const int margin = h + options.probe_search_radius_px + 3;
+    std::vector<int> candidates;
+    for (size_t k = 0; k < corners[ta].size(); ++k) {
+      const Eigen::Vector2d q = corners[ta][k].pixel.cast<double>() + shift;
+      if (q.x() >= margin && q.y() >= margin && q.x() < width - margin && q.y() < height - margin)
+        candidates.push_back(static_cast<int>(k));
+    }
+    pair.num_candidates = static_cast<int>(candidates.size());
+    std::mt19937_64 rng(options.ransac_seed + p);
+    // Probes: the strongest corners (already spread by the bucketing).
+    const int num_probes = std::min<int>(options.num_probe_corners, candidates.size());
+    Eigen::Matrix2Xd probe_a(2, num_probes), probe_b(2, num_probes);
+    int found = 0;
+    for (int k = 0; k < num_probes; ++k) {
+      const Corner& c = corners[ta][candidates[k]];
+      const PatchMatch m =
+          MatchPatch(normalized[ta], c.pixel, normalized[tb], c.pixel.cast<double>() + shift,
+                     Eigen::Matrix2d::Identity(), options.probe_search_radius_px, options.patch);
+      if (!m.ok) continue;
+      probe_a.col(found) = c.pixel.cast<double>();
+      probe_b.col(found) = m.q_px;
+      ++found;
+    }
+    Eigen::Matrix3d h_pixels;
+    const std::vector<bool> probe_inliers =
+        RansacHomography(probe_a.leftCols(found), probe_b.leftCols(found),
+                         options.probe_ransac_threshold_px, 1.0, options.ransac_iterations, &rng,
+                         &h_pixels);
+    if (std::count(probe_inliers.begin(), probe_inliers.end(), true) < 8) return;
+
+    // All candidates, predicted by the pixel homography.
+    std::vector<Match> matches;
+    for (int k : candidates) {
+      const Corner& c = corners[ta][k];
+      const Eigen::Vector2d a = c.pixel.cast<double>();
+      Match m;
+      m.tile_a = ta;
+      m.tile_b = tb;
+      m.key = CornerKey(ta, k);
+      m.anchor_px = c.pixel;
+      m.db_da = TransferJacobian(h_pixels, a);
+      const PatchMatch pm = MatchPatch(normalized[ta], c.pixel, normalized[tb],
+                                       Transfer(h_pixels, a), m.db_da, options.search_radius_px,
+                                       options.patch);
+      if (!pm.ok) continue;
+      m.q_b = pm.q_px;
+      matches.push_back(m);
+    }
+    pair.num_matched = static_cast<int>(matches.size());
+    // Plane-induced homography on the undistorted rays.
+    Eigen::Matrix2Xd ra(2, matches.size()), qb(2, matches.size());
+    for (size_t k = 0; k < matches.size(); ++k) {
+      ra.col(k) = corner_rays[ta].col(matches[k].key - CornerKey(ta, 0));
+      qb.col(k) = matches[k].q_b;
+    }
+    const Eigen::Matrix2Xd rb = unproject(qb);
+    if (rb.cols() != qb.cols()) return;
+    Eigen::Matrix3d h_rays;
+    const std::vector<bool> inliers = RansacHomography(
+        ra, rb, options.ransac_threshold_px, fx, options.ransac_iterations, &rng, &h_rays);
+    std::vector<Match> kept;
+    for (size_t k = 0; k < inliers.size(); ++k) {
+      if (inliers[k]) kept.push_back(matches[k]);
+    }
+    pair.num_inliers = static_cast<int>(kept.size());
+    pair_matches[p] = std::move(kept);
+  });
+
+  // Tag corners by id: the first tile that sees a tag anchors it.
+  std::map<int, std::vector<std::pair<int, int>>> tag_sightings;  // id -> (tile, detection)
+  for (int i = 0; i < num_tiles; ++i) {
+    for (size_t k = 0; k < tags[i].size(); ++k)
+      tag_sightings[tags[i][k].id].emplace_back(i, static_cast<int>(k));
+  }
+  std::vector<Match> tag_matches;
+  for (const auto& [id, sightings] : tag_sightings) {
+    const auto [ta, da] = sightings.front();
+    for (size_t s = 1; s < sightings.size(); ++s) {
+      const auto [tb, db] = sightings[s];
+      for (int k = 0; k < 4; ++k) {
+        const Eigen::Vector2d corner_a = tags[ta][da].corners_px.col(k);
+        const Eigen::Vector2i anchor(static_cast<int>(std::lround(corner_a.x())),
+                                     static_cast<int>(std::lround(corner_a.y())));
+        Match m;
+        m.tile_a = ta;
+        m.tile_b = tb;
+        m.key = TagKey(id, k);
+        m.anchor_px = anchor;
+        m.tag = true;
+        const Eigen::Vector2d predicted =
+            tags[tb][db].corners_px.col(k) + (anchor.cast<double>() - corner_a);
+        const PatchMatch pm = MatchPatch(normalized[ta], anchor, normalized[tb], predicted,
+                                         m.db_da, options.search_radius_px, options.patch);
+        if (!pm.ok) continue;
+        m.q_b = pm.q_px;
+        tag_matches.push_back(m);
+      }
+    }
+  }
+  std::map<std::pair<int, int>, int> pair_index;
+  for (size_t p = 0; p < result.pairs.size(); ++p)
+    pair_index[{result.pairs[p].tile_a, result.pairs[p].tile_b}] = static_cast<int>(p);
+  for (const Match& m : tag_matches) {
+    const auto it = pair_index.find({m.tile_a, m.tile_b});
+    if (it == pair_index.end()) {
+      PairRegistration pair;
+      pair.tile_a = m.tile_a;
+      pair.tile_b = m.tile_b;
+      pair_index[{m.tile_a, m.tile_b}] = static_cast<int>(result.pairs.size());
+      result.pairs.push_back(pair);
+      pair_matches.emplace_back();
+    }
+    const int p = pair_index[{m.tile_a, m.tile_b}];
+    ++result.pairs[p].num_tag_corners;
+    pair_matches[p].push_back(m);
+  }
+  for (size_t p = 0; p < result.pairs.size(); ++p) {
+    PairRegistration& pair = result.pairs[p];
+    pair.usable = pair.num_inliers + pair.num_tag_corners >= options.min_pair_matches;
+    if (!pair.usable) pair_matches[p].clear();
+  }
+  result.matching_seconds = Seconds(t0);
+
+  // 4.-5. Tracks and adjustment, with outlier passes and relocation.
+  t0 = Clock::now();
+  PlaneBundleConfig config;
+  config.compute_covariance = false;
+  std::vector<int> track_tag_id;
+  const auto build_input = [&](std::vector<int>* anchor_observation,
+                               std::vector<std::pair<int, int>>* match_of_observation) {
+    track_tag_id.clear();
+    PlaneBundleInput input;
+    input.commanded_table_pos_mm = commanded_table_pos_mm;
+    input.table_sigma_mm = table_sigma_mm;
+    input.observation_sigma_px = options.observation_sigma_px;
+    std::map<long long, int> track_of_key;
+    anchor_observation->clear();
+    match_of_observation->clear();
+    for (size_t p = 0; p < pair_matches.size(); ++p) {
+      for (size_t k = 0; k < pair_matches[p].size(); ++k) {
+        const Match& m = pair_matches[p][k];
+        if (!m.keep) continue;
+        auto [it, added] = track_of_key.emplace(m.key, input.num_tracks);
+        if (added) {
+          ++input.num_tracks;
+          anchor_observation->push_back(static_cast<int>(input.observations.size()));
+          track_tag_id.push_back(m.tag ? static_cast<int>(-m.key - 1) / 4 : -1);
+          input.observations.push_back({m.tile_a, it->second, m.anchor_px.cast<double>(), 1.0});
+          match_of_observation->emplace_back(-1, -1);
+        }
+        input.observations.push_back({m.tile_b, it->second, m.q_b, 1.0});
+        match_of_observation->emplace_back(static_cast<int>(p), static_cast<int>(k));
+      }
+    }
+    return input;
+  };
+  std::vector<int> anchor_observation;
+  std::vector<std::pair<int, int>> match_of_observation;
+  PlaneAdjustment adjustment;
+  const auto solve = [&](bool final_solve) {
+    PlaneBundleInput input = build_input(&anchor_observation, &match_of_observation);
+    config.compute_covariance = final_solve && options.compute_covariance;
+    adjustment = AdjustPlaneScene(camera, input, config, options.bundle);
+    result.input = std::move(input);
+  };
+  // Drops matches whose target or anchor observation has a large residual.
+  const auto drop_outliers = [&] {
+    const Eigen::Matrix2Xd& res = adjustment.scene.residual_px;
+    std::vector<double> norms;
+    for (Eigen::Index k = 0; k < res.cols(); ++k)
+      if (res.col(k).allFinite()) norms.push_back(res.col(k).norm());
+    if (norms.empty()) return;
+    std::nth_element(norms.begin(), norms.begin() + norms.size() / 2, norms.end());
+    const double threshold =
+        std::max(options.min_outlier_threshold_px, options.outlier_factor * norms[norms.size() / 2]);
+    const auto bad = [&](int o) {
+      return !res.col(o).allFinite() || res.col(o).norm() > threshold;
+    };
+    // Anchor observation index of each observation's track.
+    for (size_t o = 0; o < match_of_observation.size(); ++o) {
+      const auto [p, k] = match_of_observation[o];
+      if (p < 0) continue;
+      const int track = result.input.observations[o].track;
+      if (bad(static_cast<int>(o)) || bad(anchor_observation[track])) {
+        pair_matches[p][k].keep = false;
+        ++result.num_dropped_observations;
+      }
+    }
+  };
+  const auto relocate = [&] {
+    // The adjusted plane model's affine between the two tiles at each track
+    // point: dq_b/dq_a = (dq_b/dP) (dq_a/dP)^-1, dq/dP = dq/dp_cam R[:, 0:2].
+    const PlaneScene& scene = adjustment.scene;
+    const Eigen::Matrix3d r =
+        Eigen::AngleAxisd(scene.cam_from_part_r.norm(), scene.cam_from_part_r.normalized())
+            .toRotationMatrix();
+    std::vector<std::pair<int, int>> todo;
+    for (size_t o = 0; o < match_of_observation.size(); ++o)
+      if (match_of_observation[o].first >= 0) todo.push_back(match_of_observation[o]);
+    std::vector<int> obs_index;
+    for (size_t o = 0; o < match_of_observation.size(); ++o)
+      if (match_of_observation[o].first >= 0) obs_index.push_back(static_cast<int>(o));
+    ParallelFor(static_cast<int>(todo.size()), options.num_threads, [&](int n) {
+      Match& m = pair_matches[todo[n].first][todo[n].second];
+      const int track = result.input.observations[obs_index[n]].track;
+      const Eigen::Vector2d xy = scene.track_xy_mm.col(track);
+      Eigen::Matrix3Xd p_cam(3, 2);
+      p_cam.col(0) = r * Eigen::Vector3d(xy.x() + scene.table_pos_mm[m.tile_a].x(),
+                                         xy.y() + scene.table_pos_mm[m.tile_a].y(), 0) +
+                     scene.cam_from_part_t_mm;
+      p_cam.col(1) = r * Eigen::Vector3d(xy.x() + scene.table_pos_mm[m.tile_b].x(),
+                                         xy.y() + scene.table_pos_mm[m.tile_b].y(), 0) +
+                     scene.cam_from_part_t_mm;
+      Eigen::Matrix2Xd q;
+      Eigen::MatrixXd dq_dp, dq_dintrinsics;
+      if (!ProjectPoints(camera, p_cam, &q, &dq_dp, &dq_dintrinsics)) {
+        m.keep = false;
+        return;
+      }
+      const Eigen::Matrix2d dqa = dq_dp.block<2, 3>(0, 0) * r.leftCols<2>();
+      const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(2, 0) * r.leftCols<2>();
+      m.db_da = dqb * dqa.inverse();
+      const PatchMatch pm = MatchPatch(normalized[m.tile_a], m.anchor_px, normalized[m.tile_b],
+                                       m.q_b, m.db_da, 1, options.patch);
+      if (!pm.ok) {
+        m.keep = false;
+        return;
+      }
+      m.q_b = pm.q_px;
+    });
+  };
+
+  solve(false);
+  if (adjustment.seed.ok) {
+    drop_outliers();
+    for (int pass = 0; pass < options.rematch_passes; ++pass) {
+      relocate();
+      solve(false);
+      if (!adjustment.seed.ok) break;
+      drop_outliers();
+    }
+    solve(true);
+  }
+  result.track_anchor_observation = anchor_observation;
+  result.track_tag_id = track_tag_id;
+  result.scene = adjustment.scene;
+  result.seed = adjustment.seed;
+  result.bundle = adjustment.summary;
+  result.adjustment_seconds = Seconds(t0);
+
+  // Summary.
+  const Eigen::Matrix2Xd& res = result.scene.residual_px;
+  std::vector<double> sum_sq(result.pairs.size(), 0.0);
+  std::vector<int> count(result.pairs.size(), 0);
+  std::vector<bool> tile_seen(num_tiles, false);
+  for (size_t o = 0; o < match_of_observation.size() && res.cols() > 0; ++o) {
+    tile_seen[result.input.observations[o].tile] = true;
+    const auto [p, k] = match_of_observation[o];
+    if (p < 0) continue;
+    ++result.pairs[p].num_used;
+    const int anchor = anchor_observation[result.input.observations[o].track];
+    sum_sq[p] += res.col(o).squaredNorm() + res.col(anchor).squaredNorm();
+    count[p] += 2;
+  }
+  for (size_t p = 0; p < result.pairs.size(); ++p)
+    result.pairs[p].rms_px = count[p] > 0 ? std::sqrt(sum_sq[p] / count[p]) : 0.0;
+  for (int i = 0; i < num_tiles; ++i)
+    if (!tile_seen[i]) result.tiles_held_by_prior.push_back(i);
+  result.rms_px = result.bundle.final_rms_px;
+  result.table_adjustment_mm = result.bundle.table_adjustment_mm;
+  result.plane_tilt_deg = result.bundle.plane_tilt_deg;
+  result.usable = result.bundle.usable;
+  int num_usable_pairs = 0;
+  for (const PairRegistration& pair : result.pairs) num_usable_pairs += pair.usable;
+  std::ostringstream brief;
+  brief << "registration " << (result.usable ? "usable" : "UNUSABLE") << ": " << num_tiles
+        << " tiles, " << num_usable_pairs << " of " << result.pairs.size() << " pairs, "
+        << result.input.num_tracks << " tracks, " << result.input.observations.size()
+        << " observations (" << result.num_dropped_observations << " dropped), RMS "
+        << result.rms_px << " px";
+  if (!result.tiles_held_by_prior.empty()) {
+    brief << "; held by the table prior alone: tile";
+    for (int i : result.tiles_held_by_prior) brief << ' ' << i;
+  }
+  if (!result.usable) brief << "; " << result.bundle.brief;
+  result.brief = brief.str();
+  return result;
+}
+
+}  // namespace omm

@@ -1,0 +1,129 @@
+// The mosaic stage's registration of the tiles: features, matching, robust
+// estimation, tracks and the planar bundle adjustment, from images and values
+// (no file I/O).
+//
+// Pipeline (design.md, "Planar mosaic"; the paper's Harris + NCC method):
+// 1. Each tile is normalised (NormalizeTileIntensity) and its Harris corners
+//    found (grid-bucketed); AprilTag 36h11 markers are detected if enabled.
+// 2. The image motion per table millimetre, A (2 x 2, px/mm: it holds the
+//    camera's unknown rotation about its axis, a possible mirror and the
+//    scale), from the coarse translations between tiles that are nearest
+//    neighbours on the table (EstimateTranslation), fitted robustly:
+//    shift_ij ~ A (T_j - T_i), the consensus of all neighbour pairs.
+// 3. Every pair (i < j) that A and the commanded positions predict to
+//    overlap, diagonals too: a few strong corners of i are found in j with a
+//    wide NCC search, a pixel homography is fitted to them (RANSAC), then every
+//    corner of i predicted inside j is matched in a small window and refined
+//    by least-squares template matching warped by the homography's local
+//    affine (MatchPatch); the matches are then screened by RANSAC on the
+//    plane-induced homography between the undistorted rays of the two tiles.
+//    Tag corners are matched by id (the detections predict, the template
+//    match locates). A pair with fewer than min_pair_matches is dropped.
+// 4. Tracks: a corner of tile i (the anchor: its integer pixel, exact) and its
+//    matches in every j > i; a tag corner likewise from the first tile that
+//    sees the tag. Every observation of a track is the same part point,
+//    because each is located against the same template.
+// 5. AdjustPlaneScene (seed + robust bundle adjustment), then observations
+//    whose residual exceeds outlier_factor x the median residual are dropped
+//    and the scene re-solved; then (rematch_passes) every match is relocated
+//    with the affine the adjusted plane model predicts between the two tiles
+//    and the scene solved again.
+// A tile without any kept observation is held by its table prior alone; the
+// summary lists it (tiles_held_by_prior) and its brief says so.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "adapters/apriltag/tag_detector.h"
+#include "pipeline/core/camera.h"
+#include "pipeline/core/image.h"
+#include "pipeline/core/plane_scene.h"
+#include "pipeline/mosaic/plane_seed.h"
+#include "pipeline/mosaic/tile_features.h"
+#include "pipeline/mosaic/tile_matching.h"
+
+namespace omm {
+
+struct RegisterTilesOptions {
+  HarrisOptions harris;
+  TranslationSearchOptions translation;
+  PatchMatchOptions patch;
+  bool use_apriltags = true;  // match AprilTag 36h11 corners by id where tags are seen
+  TagDetectorOptions tags;
+
+  // Pairs whose predicted overlap is below this fraction of the image are not matched.
+  double min_overlap_fraction = 0.03;
+  int num_probe_corners = 60;      // per pair: corners matched with the wide window
+  int probe_search_radius_px = 20;  // +- around the A-predicted position, px
+  double probe_ransac_threshold_px = 3.0;  // pixel homography of the probes, px
+  int search_radius_px = 3;        // +- around the homography-predicted position, px
+  // Plane-induced homography on undistorted rays: inlier distance, px (measured
+  // in the target tile with the camera's fx).
+  double ransac_threshold_px = 1.0;
+  int ransac_iterations = 400;
+  std::uint64_t ransac_seed = 1;  // the RANSAC's samples are drawn from this seed
+  int min_pair_matches = 15;      // a pair with fewer inliers is dropped (reported)
+
+  // Bundle adjustment: the observations' sigma and the outlier pass.
+  double observation_sigma_px = 0.05;  // 1-sigma of a matched position, px
+  double outlier_factor = 4.0;         // drop |residual| > this x the median |residual|
+  double min_outlier_threshold_px = 0.1;  // ... but never below this, px
+  int rematch_passes = 1;  // relocations with the adjusted plane model's affine
+  bool compute_covariance = true;  // the final scene's covariance (PlaneScene::covariance)
+  PlaneBundleOptions bundle;
+
+  int num_threads = 2;  // features and matching run on this many threads
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+// What happened between two tiles.
+struct PairRegistration {
+  int tile_a = 0, tile_b = 0;       // tile_a < tile_b
+  double predicted_overlap = 0.0;   // fraction of the image, from A and the commanded positions
+  int num_candidates = 0;           // corners of a predicted inside b
+  int num_matched = 0;              // accepted by the template match
+  int num_inliers = 0;              // after the plane-induced-homography RANSAC
+  int num_tag_corners = 0;          // tag corners matched by id
+  int num_used = 0;                 // matches in the final adjustment
+  double rms_px = 0.0;              // final residual RMS of the used matches' observations
+  bool usable = false;              // false: too few matches; its matches were dropped
+};
+
+struct TileRegistration {
+  bool usable = false;
+  std::string brief;  // one line: tiles, tracks, RMS, held tiles, why unusable
+
+  PlaneScene scene;          // the adjusted scene (tracks: the final input's)
+  PlaneBundleInput input;    // the final observations (kept ones, weight 1)
+  PlaneSeedSummary seed;
+  PlaneBundleSummary bundle;
+  // Per track of `input`: index of its anchor observation (the template's
+  // centre, an integer pixel) in input.observations.
+  std::vector<int> track_anchor_observation;
+  std::vector<int> track_tag_id;  // per track: the AprilTag id of a tag corner, else -1
+  std::vector<PairRegistration> pairs;
+  std::vector<int> tiles_held_by_prior;  // no observation kept: table prior only
+  Eigen::Matrix2d image_px_per_table_mm = Eigen::Matrix2d::Zero();  // A
+  int num_tags_detected = 0;      // tag detections over all tiles
+  int num_dropped_observations = 0;  // by the outlier passes
+  double rms_px = 0.0;               // final RMS reprojection error of used observations
+  std::vector<Eigen::Vector2d> table_adjustment_mm;  // adjusted minus commanded, per tile
+  double plane_tilt_deg = 0.0;
+  double features_seconds = 0.0, matching_seconds = 0.0, adjustment_seconds = 0.0;
+};
+
+// Registers `tiles` (gray, all camera.width_px x camera.height_px) taken at
+// `commanded_table_pos_mm` (table.csv; sigma per axis `table_sigma_mm`) with
+// the calibrated `camera`. Throws InputError for invalid options or input
+// (sizes); data failures come back in the result (usable, brief).
+TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
+                               const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                               double table_sigma_mm, const CameraModel& camera,
+                               const RegisterTilesOptions& options);
+
+}  // namespace omm

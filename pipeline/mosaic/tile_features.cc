@@ -1,0 +1,209 @@
+#include "pipeline/mosaic/tile_features.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include <Eigen/Dense>
+
+namespace omm {
+
+namespace {
+
+float NthValue(std::vector<float>* v, double fraction) {
+  const auto k = static_cast<std::ptrdiff_t>(fraction * (v->size() - 1));
+  std::nth_element(v->begin(), v->begin() + k, v->end());
+  return (*v)[k];
+}
+
+}  // namespace
+
+ImageF NormalizeTileIntensity(const ImageF& image) {
+  std::vector<float> sample;
+  sample.reserve(image.size() / 7 + 1);
+  for (Eigen::Index i = 0; i < image.size(); i += 7) sample.push_back(image.data()[i]);
+  const float median = NthValue(&sample, 0.5);
+  for (float& v : sample) v = std::abs(v - median);
+  const float mad = NthValue(&sample, 0.5);
+  const float scale = mad > 0 ? 1.0f / (1.4826f * mad) : 1.0f;
+  return ((image.array() - median) * scale).matrix();
+}
+
+ImageF DownsampleBox(const ImageF& image, int factor) {
+  const Eigen::Index rows = image.rows() / factor, cols = image.cols() / factor;
+  ImageF out(rows, cols);
+  const float norm = 1.0f / static_cast<float>(factor * factor);
+  for (Eigen::Index r = 0; r < rows; ++r) {
+    for (Eigen::Index c = 0; c < cols; ++c) {
+      out(r, c) = image.block(r * factor, c * factor, factor, factor).sum() * norm;
+    }
+  }
+  return out;
+}
+
+ImageF GaussianBlur(const ImageF& image, double sigma_px) {
+  const int radius = static_cast<int>(std::ceil(3.0 * sigma_px));
+  std::vector<float> kernel(2 * radius + 1);
+  float sum = 0;
+  for (int k = -radius; k <= radius; ++k) {
+    kernel[k + radius] = static_cast<float>(std::exp(-0.5 * k * k / (sigma_px * sigma_px)));
+    sum += kernel[k + radius];
+  }
+  for (float& w : kernel) w /= sum;
+  const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
+  ImageF tmp(rows, cols), out(rows, cols);
+  for (int r = 0; r < rows; ++r) {
+    const float* in = image.data() + static_cast<size_t>(r) * cols;
+    float* o = tmp.data() + static_cast<size_t>(r) * cols;
+    for (int c = 0; c < cols; ++c) {
+      float acc = 0;
+      if (c >= radius && c + radius < cols) {
+        for (int k = -radius; k <= radius; ++k) acc += kernel[k + radius] * in[c + k];
+      } else {
+        for (int k = -radius; k <= radius; ++k)
+          acc += kernel[k + radius] * in[std::clamp(c + k, 0, cols - 1)];
+      }
+      o[c] = acc;
+    }
+  }
+  for (int r = 0; r < rows; ++r) {
+    float* o = out.data() + static_cast<size_t>(r) * cols;
+    std::fill(o, o + cols, 0.0f);
+    for (int k = -radius; k <= radius; ++k) {
+      const float* in = tmp.data() + static_cast<size_t>(std::clamp(r + k, 0, rows - 1)) * cols;
+      const float w = kernel[k + radius];
+      for (int c = 0; c < cols; ++c) o[c] += w * in[c];
+    }
+  }
+  return out;
+}
+
+std::string HarrisOptions::Check() const {
+  if (!(window_sigma_px > 0)) return "harris.window_sigma_px must be > 0";
+  if (!(k > 0 && k < 0.25)) return "harris.k must be in (0, 0.25)";
+  if (cell_px < 8) return "harris.cell_px must be >= 8";
+  if (max_per_cell < 1) return "harris.max_per_cell must be >= 1";
+  if (nms_radius_px < 1) return "harris.nms_radius_px must be >= 1";
+  if (!(min_response_fraction >= 0)) return "harris.min_response_fraction must be >= 0";
+  if (border_px < 2) return "harris.border_px must be >= 2";
+  return {};
+}
+
+std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options) {
+  const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
+  ImageF ixx = ImageF::Zero(rows, cols), iyy = ImageF::Zero(rows, cols),
+         ixy = ImageF::Zero(rows, cols);
+  for (int r = 1; r + 1 < rows; ++r) {
+    for (int c = 1; c + 1 < cols; ++c) {
+      const float gx = 0.5f * (image(r, c + 1) - image(r, c - 1));
+      const float gy = 0.5f * (image(r + 1, c) - image(r - 1, c));
+      ixx(r, c) = gx * gx;
+      iyy(r, c) = gy * gy;
+      ixy(r, c) = gx * gy;
+    }
+  }
+  ixx = GaussianBlur(ixx, options.window_sigma_px);
+  iyy = GaussianBlur(iyy, options.window_sigma_px);
+  ixy = GaussianBlur(ixy, options.window_sigma_px);
+  const float k = static_cast<float>(options.k);
+  ImageF response = (ixx.array() * iyy.array() - ixy.array().square() -
+                     k * (ixx.array() + iyy.array()).square())
+                        .matrix();
+
+  // Local maxima inside the border.
+  const int b = std::max(options.border_px, options.nms_radius_px + 1), n = options.nms_radius_px;
+  std::vector<Corner> maxima;
+  for (int r = b; r < rows - b; ++r) {
+    for (int c = b; c < cols - b; ++c) {
+      const float v = response(r, c);
+      if (v <= 0) continue;
+      bool is_max = true;
+      for (int dr = -n; dr <= n && is_max; ++dr) {
+        for (int dc = -n; dc <= n; ++dc) {
+          const float w = response(r + dr, c + dc);
+          if (w > v || (w == v && (dr < 0 || (dr == 0 && dc < 0)))) {
+            is_max = false;
+            break;
+          }
+        }
+      }
+      if (!is_max) continue;
+      Corner corner;
+      corner.pixel << c, r;
+      corner.response = v;
+      maxima.push_back(corner);
+    }
+  }
+  if (maxima.empty()) return maxima;
+  std::vector<float> responses;
+  responses.reserve(maxima.size());
+  for (const Corner& m : maxima) responses.push_back(static_cast<float>(m.response));
+  const double threshold = options.min_response_fraction * NthValue(&responses, 0.9);
+
+  // Bucketing: the strongest max_per_cell of each cell.
+  std::sort(maxima.begin(), maxima.end(),
+            [](const Corner& x, const Corner& y) { return x.response > y.response; });
+  const int cells_x = (cols + options.cell_px - 1) / options.cell_px;
+  const int cells_y = (rows + options.cell_px - 1) / options.cell_px;
+  std::vector<int> count(static_cast<size_t>(cells_x) * cells_y, 0);
+  std::vector<Corner> corners;
+  for (Corner& m : maxima) {
+    if (m.response < threshold) break;
+    int& in_cell = count[(m.pixel.y() / options.cell_px) * cells_x + m.pixel.x() / options.cell_px];
+    if (in_cell >= options.max_per_cell) continue;
+    ++in_cell;
+    const int x = m.pixel.x(), y = m.pixel.y();
+    // Quadratic fit over the 3 x 3 neighbourhood (separable second differences).
+    const double dx = 0.5 * (response(y, x + 1) - response(y, x - 1));
+    const double dy = 0.5 * (response(y + 1, x) - response(y - 1, x));
+    const double dxx = response(y, x + 1) - 2.0 * response(y, x) + response(y, x - 1);
+    const double dyy = response(y + 1, x) - 2.0 * response(y, x) + response(y - 1, x);
+    const double dxy = 0.25 * (response(y + 1, x + 1) - response(y + 1, x - 1) -
+                               response(y - 1, x + 1) + response(y - 1, x - 1));
+    Eigen::Matrix2d hessian;
+    hessian << dxx, dxy, dxy, dyy;
+    Eigen::Vector2d step = Eigen::Vector2d::Zero();
+    if (hessian.determinant() > 0 && dxx < 0) step = -hessian.inverse() * Eigen::Vector2d(dx, dy);
+    if (step.cwiseAbs().maxCoeff() > 0.5) step.setZero();
+    m.q_px = m.pixel.cast<double>() + step;
+    corners.push_back(m);
+  }
+  return corners;
+}
+
+bool SampleBicubic(const ImageF& image, double x, double y, double* value,
+                   Eigen::Vector2d* gradient) {
+  const double fx_floor = std::floor(x), fy_floor = std::floor(y);
+  const int ix = static_cast<int>(fx_floor), iy = static_cast<int>(fy_floor);
+  if (ix < 1 || iy < 1 || ix + 2 >= image.cols() || iy + 2 >= image.rows()) return false;
+  const double fx = x - fx_floor, fy = y - fy_floor;
+  const auto weights = [](double f, double* w, double* dw) {
+    const double f2 = f * f, f3 = f2 * f;
+    w[0] = -0.5 * f3 + f2 - 0.5 * f;
+    w[1] = 1.5 * f3 - 2.5 * f2 + 1.0;
+    w[2] = -1.5 * f3 + 2.0 * f2 + 0.5 * f;
+    w[3] = 0.5 * f3 - 0.5 * f2;
+    dw[0] = -1.5 * f2 + 2.0 * f - 0.5;
+    dw[1] = 4.5 * f2 - 5.0 * f;
+    dw[2] = -4.5 * f2 + 4.0 * f + 0.5;
+    dw[3] = 1.5 * f2 - f;
+  };
+  double wx[4], dwx[4], wy[4], dwy[4];
+  weights(fx, wx, dwx);
+  weights(fy, wy, dwy);
+  double v = 0, gx = 0, gy = 0;
+  for (int j = 0; j < 4; ++j) {
+    const float* row = image.data() + static_cast<size_t>(iy - 1 + j) * image.cols() + (ix - 1);
+    const double rv = wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3];
+    v += wy[j] * rv;
+    if (gradient != nullptr) {
+      gx += wy[j] * (dwx[0] * row[0] + dwx[1] * row[1] + dwx[2] * row[2] + dwx[3] * row[3]);
+      gy += dwy[j] * rv;
+    }
+  }
+  *value = v;
+  if (gradient != nullptr) *gradient << gx, gy;
+  return true;
+}
+
+}  // namespace omm

@@ -1,0 +1,64 @@
+// Point features of the mosaic's tiles: exposure normalisation, Harris
+// corners with grid bucketing, and the image sampling the matcher needs.
+// Pure kernels on ImageF (pipeline/core/image.h); pixels follow the pipeline's
+// convention, (0, 0) at the centre of the top-left pixel.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/image.h"
+
+namespace omm {
+
+// (I - median) / (1.4826 MAD) over the whole tile: removes gain and offset so
+// that absolute thresholds mean the same in every tile (NCC and the matcher's
+// gain/offset model are invariant anyway; Harris' threshold is not). The
+// statistics come from every 7th pixel.
+ImageF NormalizeTileIntensity(const ImageF& image);
+
+// Box-filter downsampling by an integer factor: output pixel (r, c) is the
+// mean of input rows [r f, r f + f), columns [c f, c f + f), so an offset of
+// d output pixels is exactly f d input pixels.
+ImageF DownsampleBox(const ImageF& image, int factor);
+
+// Separable Gaussian blur (kernel radius ceil(3 sigma), borders clamped).
+ImageF GaussianBlur(const ImageF& image, double sigma_px);
+
+struct HarrisOptions {
+  double window_sigma_px = 1.5;  // Gaussian integration window of the structure tensor, px
+  double k = 0.04;               // R = det(M) - k trace(M)^2
+  int cell_px = 64;              // bucketing: corners are chosen per cell of this size, px
+  int max_per_cell = 3;          // strongest corners kept per cell
+  int nms_radius_px = 3;         // a corner is the maximum of R over (2r+1)^2 pixels
+  // A corner's R must reach this fraction of the 90th percentile of all
+  // local maxima's R (drops flat areas and noise).
+  double min_response_fraction = 0.02;
+  int border_px = 12;  // corners keep at least this distance from the image border, px
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+struct Corner {
+  Eigen::Vector2i pixel = Eigen::Vector2i::Zero();  // (x, y) of the response maximum
+  Eigen::Vector2d q_px = Eigen::Vector2d::Zero();   // sub-pixel peak (quadratic fit of R)
+  double response = 0.0;
+};
+
+// Harris corners (Harris & Stephens 1988) of a normalised tile: gradients by
+// central differences, structure tensor M integrated with a Gaussian window,
+// R = det M - k tr(M)^2, local maxima above the threshold, at most
+// max_per_cell per grid cell (well distributed), sub-pixel peak by a 3 x 3
+// quadratic fit. Sorted by response, strongest first.
+// Precondition: options.Check() is empty.
+std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options);
+
+// Keys' cubic convolution (a = -1/2) at (x, y) px with its gradient; false
+// (outputs untouched) if the 4 x 4 support leaves the image.
+bool SampleBicubic(const ImageF& image, double x, double y, double* value,
+                   Eigen::Vector2d* gradient = nullptr);
+
+}  // namespace omm
