@@ -276,9 +276,12 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
   const double band = options.blend_band_px;
   std::vector<std::int64_t> covered(height, 0), clipped(height, 0);
 
+  // Tiles whose weight is below exp(-kNegligibleBands) of the best one's are
+  // not sampled (they would change the result by < 1e-4 of the intensity).
+  constexpr double kNegligibleBands = 10.0;
   ParallelFor(options.num_threads, height, [&](int row) {
-    // Per tile: value and border distance of each column (d <= 0: unseen).
-    std::vector<float> value(static_cast<size_t>(num_tiles) * width);
+    // Per tile and column: the tile pixel and its border distance (<= 0: unseen).
+    std::vector<Eigen::Vector2d> q(static_cast<size_t>(num_tiles) * width);
     std::vector<float> dist(static_cast<size_t>(num_tiles) * width, -1.0f);
     std::vector<float> best(width, -1.0f);
     std::vector<Eigen::Vector2d> q_row;
@@ -290,12 +293,9 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
                              &q_ok);
       for (int col = map.min_px.x(); col <= map.max_px.x(); ++col) {
         if (!q_ok[col - map.min_px.x()]) continue;
-        const Eigen::Vector2d& q = q_row[col - map.min_px.x()];
-        const double d = geometry.BorderDistancePx(q);
+        const double d = geometry.BorderDistancePx(q_row[col - map.min_px.x()]);
         if (!(d > 0.0)) continue;
-        double v = SampleCatmullRom(tiles[i], q);
-        if (!exposure.empty()) v /= exposure[i].Factor(frame.Rho2(q));
-        value[static_cast<size_t>(i) * width + col] = static_cast<float>(v);
+        q[static_cast<size_t>(i) * width + col] = q_row[col - map.min_px.x()];
         dist[static_cast<size_t>(i) * width + col] = static_cast<float>(d);
         best[col] = std::max(best[col], static_cast<float>(d));
       }
@@ -304,11 +304,15 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
       if (!(best[col] > 0.0f)) continue;
       double sum_w = 0.0, sum_wv = 0.0;
       for (int i = 0; i < num_tiles; ++i) {
-        const float d = dist[static_cast<size_t>(i) * width + col];
-        if (!(d > 0.0f)) continue;
-        const double w = std::min(d / band, 1.0) * std::exp((d - best[col]) / band);
+        const double d = dist[static_cast<size_t>(i) * width + col];
+        if (!(d > 0.0) || d < best[col] - kNegligibleBands * band) continue;
+        const Eigen::Vector2d& qi = q[static_cast<size_t>(i) * width + col];
+        double v = SampleCatmullRom(tiles[i], qi);
+        if (!exposure.empty()) v /= exposure[i].Factor(frame.Rho2(qi));
+        const double w = d < best[col] ? std::min(d / band, 1.0) * std::exp((d - best[col]) / band)
+                                       : std::min(d / band, 1.0);
         sum_w += w;
-        sum_wv += w * value[static_cast<size_t>(i) * width + col];
+        sum_wv += w * v;
       }
       const double v = sum_wv / sum_w;
       ++covered[row];
