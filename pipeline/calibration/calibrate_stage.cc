@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numbers>
 #include <sstream>
@@ -133,6 +134,22 @@ std::vector<MarkOutlier> ListOutliers(const CalibrationResult& result, const Boa
   return outliers;
 }
 
+LensCandidate ScoreCandidate(const std::string& lens_model, const CalibrationResult& result) {
+  LensCandidate c;
+  c.lens_model = lens_model;
+  c.num_params = LensModelNumParams(lens_model);
+  c.usable = result.usable;
+  if (!result.usable) return c;
+  c.rms_px = result.rms_px;
+  c.num_measurements = 2 * result.num_observations_used;
+  c.num_states = c.num_params + 6 * static_cast<int>(result.record.images.size()) +
+                 (result.record.problem.optimize_calobject_warp ? 2 : 0);
+  const int dof = c.num_measurements - c.num_states;
+  c.usable = dof > 0;
+  c.sigma_px = dof > 0 ? result.rms_px * std::sqrt(static_cast<double>(c.num_measurements) / dof) : 0.0;
+  return c;
+}
+
 }  // namespace
 
 void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
@@ -178,8 +195,7 @@ std::string CalibrationStageOptions::Check() const {
   if (max_bias_rounds < 0) what << "max_bias_rounds must be >= 0; ";
   if (!(bias_settle_px > 0)) what << "bias_settle_px must be > 0; ";
   if (splined_nx < 4) what << "splined_nx must be >= 4; ";
-  if (!(splined_fov_margin >= 1.0)) what << "splined_fov_margin must be >= 1; ";
-  if (cross_validation_random_splits < 0) what << "cross_validation_random_splits must be >= 0; ";
+  if (!(splined_fov_margin > 0.5 && splined_fov_margin <= 1.5)) what << "splined_fov_margin must be in (0.5, 1.5]; ";
   if (!(tie_fraction >= 0)) what << "tie_fraction must be >= 0; ";
   if (min_images < 3) what << "min_images must be >= 3; ";
   if (uncertainty_grid_nx < 2 || uncertainty_grid_ny < 2) what << "uncertainty grid must be >= 2 x 2; ";
@@ -206,20 +222,30 @@ std::vector<PlateObservation> DetectPlates(const std::vector<NamedImage>& images
   return detections;
 }
 
-std::string SplinedModelFor(const CameraModel& camera, int nx, double fov_margin) {
-  Eigen::Matrix2Xd q(2, 2);
-  const double y_mid = 0.5 * (camera.height_px - 1);
-  q << 0.0, camera.width_px - 1.0, y_mid, y_mid;
-  Eigen::Matrix3Xd v;
-  double fov_deg = 0.0;
-  if (UnprojectPixels(camera, q, &v)) {
-    fov_deg = (std::atan(std::abs(v(0, 0) / v(2, 0))) + std::atan(std::abs(v(0, 1) / v(2, 1)))) *
-              180.0 / std::numbers::pi;
-  } else {
-    // A pinhole guess if the working camera cannot unproject its own edges.
-    fov_deg = 2.0 * std::atan(0.5 * camera.width_px / camera.intrinsics(0)) * 180.0 / std::numbers::pi;
+std::string SplinedModelFor(const CameraModel& camera,
+                            const std::vector<PlateObservation>& observations, int nx,
+                            double fov_margin) {
+  std::vector<Eigen::Vector2d> marks;
+  for (const PlateObservation& o : observations) {
+    if (!o.usable) continue;
+    for (int m = 0; m < o.q_px.cols(); ++m) {
+      if (o.weight(m) > 0) marks.push_back(o.q_px.col(m));
+    }
   }
-  const int fov_x_deg = static_cast<int>(std::ceil(fov_deg * fov_margin));
+  Eigen::Matrix2Xd q(2, static_cast<Eigen::Index>(marks.size()));
+  for (size_t k = 0; k < marks.size(); ++k) q.col(static_cast<Eigen::Index>(k)) = marks[k];
+  Eigen::Matrix3Xd v;
+  double half_angle_rad = 0.0;
+  if (!marks.empty() && UnprojectPixels(camera, q, &v)) {
+    for (Eigen::Index k = 0; k < v.cols(); ++k) {
+      half_angle_rad = std::max(half_angle_rad, std::atan(std::abs(v(0, k) / v(2, k))));
+    }
+  } else {
+    // A pinhole guess if the working camera cannot unproject the marks.
+    half_angle_rad = std::atan(0.5 * camera.width_px / camera.intrinsics(0));
+  }
+  const int fov_x_deg =
+      std::max(1, static_cast<int>(std::floor(2.0 * half_angle_rad * fov_margin * 180.0 / std::numbers::pi)));
   const int ny = static_cast<int>(std::ceil(nx * static_cast<double>(camera.height_px) / camera.width_px));
   return fmt::format("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx={}_Ny={}_fov_x_deg={}", nx,
                      std::max(ny, 4), fov_x_deg);
@@ -299,28 +325,42 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     const Clock::time_point choice_start = Clock::now();
     const std::vector<std::string> candidates = {
         "LENSMODEL_OPENCV4", "LENSMODEL_OPENCV5", "LENSMODEL_OPENCV8",
-        SplinedModelFor(result.camera, options.splined_nx, options.splined_fov_margin)};
-    CrossValidationOptions cv;
-    cv.calibration = solve_options;
-    cv.distance_mm = WorkingDistanceMm(result);
-    cv.num_random_splits = options.cross_validation_random_splits;
-    cv.seed = options.seed;
-    cv.tie_fraction = options.tie_fraction;
-    CrossValidationSummary choice = CrossValidateLensModels(board, corrected, candidates, cv);
-    summary.lens_choice_seconds = SecondsSince(choice_start);
-    if (!choice.chosen_lens_model.empty()) {
-      summary.lens.lens_model = choice.chosen_lens_model;
-      summary.lens.why = "cross-validation between halves of the images: " + choice.brief;
-    } else {
-      summary.lens.why = "cross-validation found no usable candidate; kept " + working_model;
+        SplinedModelFor(result.camera, corrected, options.splined_nx, options.splined_fov_margin)};
+    std::vector<CalibrationResult> solved;
+    for (const std::string& model : candidates) {
+      CalibrationOptions candidate_options = solve_options;
+      candidate_options.lens_model = model;
+      solved.push_back(CalibrateCamera(board, corrected, candidate_options));
+      summary.lens.candidates.push_back(ScoreCandidate(model, solved.back()));
     }
-    summary.lens.cross_validation = std::move(choice);
+    double best = std::numeric_limits<double>::infinity();
+    for (const LensCandidate& c : summary.lens.candidates) {
+      if (c.usable) best = std::min(best, c.sigma_px);
+    }
+    // Candidates are listed by increasing parameter count: the first within
+    // the tie of the best wins.
+    for (size_t k = 0; k < candidates.size(); ++k) {
+      const LensCandidate& c = summary.lens.candidates[k];
+      if (!c.usable || c.sigma_px > (1.0 + options.tie_fraction) * best) continue;
+      summary.lens.lens_model = c.lens_model;
+      summary.lens.why = fmt::format(
+          "{}: residual sigma {:.4f} px (dof-corrected) within {:.0f}% of the lowest ({:.4f} px) "
+          "with the fewest parameters ({})",
+          c.lens_model, c.sigma_px, 100 * options.tie_fraction, best, c.num_params);
+      for (const LensCandidate& other : summary.lens.candidates) {
+        if (&other != &c) summary.lens.why += fmt::format("; {} {:.4f} px", other.lens_model, other.sigma_px);
+      }
+      if (c.lens_model != working_model) result = std::move(solved[k]);
+      break;
+    }
+    if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;
+    summary.lens_choice_seconds = SecondsSince(choice_start);
     if (summary.lens.lens_model != working_model) {
       // The corrections are recomputed from the detections with the chosen
       // model's camera and poses, then the final solve.
       solve_options.lens_model = summary.lens.lens_model;
-      CalibrationResult chosen = CalibrateCamera(board, corrected, solve_options);
-      if (chosen.usable) {
+      const CalibrationResult& chosen = result;
+      {
         std::vector<PlateObservation> recorrected = corrected;
         if (board.type != BoardType::kChessboard) {
           std::vector<Eigen::Matrix2Xd> delta;
@@ -332,12 +372,7 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
         if (final_result.usable) {
           result = std::move(final_result);
           corrected = std::move(recorrected);
-        } else {
-          result = std::move(chosen);
         }
-      } else {
-        summary.lens.lens_model = working_model;
-        summary.lens.why += "; the chosen model failed on all images (" + chosen.brief + "), kept " + working_model;
       }
     }
   }

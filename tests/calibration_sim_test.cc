@@ -1,0 +1,135 @@
+// The calibration stage on simulated projects with known truth (issue 3,
+// "Accuracy"): the calibrated camera's projection against the true camera's
+// over the whole imager at the working distance (rigid transform fitted,
+// adapters/mrcal/projection_diff.h), the rejected images, the lens-model
+// choice. Each project is rendered once per build tree (tests/sim_cache.h) and
+// calibrated once per test program.
+#include <map>
+#include <memory>
+
+#include <gtest/gtest.h>
+
+#include "adapters/mrcal/calibrate.h"
+#include "adapters/mrcal/projection_diff.h"
+#include "adapters/opencv/image_io.h"
+#include "adapters/project_io/project_reader.h"
+#include "pipeline/calibration/calibrate_stage.h"
+#include "tests/sim_cache.h"
+
+namespace omm {
+namespace {
+
+struct Calibrated {
+  testing::CachedProject sim;
+  Project project;
+  CalibrationStageSummary summary;
+  double distance_mm = 0.0;
+  double truth_diff_px = 0.0;  // calibrated vs true projection, rms over the imager
+};
+
+// One calibration per (preset, seed) per test program.
+const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed) {
+  static std::map<std::string, std::unique_ptr<Calibrated>> cache;
+  std::unique_ptr<Calibrated>& entry = cache[preset + std::to_string(seed)];
+  if (!entry) {
+    entry = std::make_unique<Calibrated>();
+    entry->sim = testing::SimulatedProject(preset, seed);
+    entry->project = LoadProject(entry->sim.project_dir);
+    // The simulator's project.yaml names the lens model; these tests exercise
+    // the stage's own choice, as for a project.yaml without camera.lens_model.
+    entry->project.camera.lens_model.reset();
+    std::vector<NamedImage> images;
+    for (const auto& path : entry->project.calib_images) {
+      images.push_back({path.filename().string(), ReadGrayImage(path)});
+    }
+    entry->summary = RunCalibration(images, *entry->project.board, entry->project.camera, {});
+    EXPECT_TRUE(entry->summary.usable) << entry->summary.brief;
+    entry->distance_mm = WorkingDistanceMm(entry->summary.result);
+    entry->truth_diff_px = ProjectionDiffRms(entry->summary.result.camera,
+                                             entry->sim.truth.camera.model, entry->distance_mm);
+    std::cout << preset << "-" << seed << ": " << entry->summary.brief << "\n  lens: "
+              << entry->summary.lens.why << "\n  bias rounds " << entry->summary.bias.rounds
+              << ", rms " << entry->summary.bias.rms_px << " px, max " << entry->summary.bias.max_px
+              << " px\n  vs truth at " << entry->distance_mm << " mm: " << entry->truth_diff_px
+              << " px rms; " << entry->summary.total_seconds << " s (detection "
+              << entry->summary.detection_seconds << " s, lens choice "
+              << entry->summary.lens_choice_seconds << " s)\n";
+    for (const LensCandidate& candidate : entry->summary.lens.candidates) {
+      std::cout << "  candidate " << candidate.lens_model << ": rms " << candidate.rms_px
+                << " px, sigma " << candidate.sigma_px << " px\n";
+    }
+  }
+  return *entry;
+}
+
+// Our solve of the same bias-corrected observations with a fixed lens model,
+// scored against the truth.
+double FixedModelTruthDiff(const Calibrated& c, const std::string& lens_model) {
+  CalibrationOptions options;
+  options.lens_model = lens_model;
+  options.focal_length_mm = c.project.camera.focal_length_mm;
+  options.pixel_pitch_um = c.project.camera.pixel_pitch_um;
+  options.width_px = c.project.image_width_px;
+  options.height_px = c.project.image_height_px;
+  const CalibrationResult result = CalibrateCamera(*c.project.board, c.summary.observations, options);
+  EXPECT_TRUE(result.usable) << result.brief;
+  const double diff = ProjectionDiffRms(result.camera, c.sim.truth.camera.model, c.distance_mm);
+  std::cout << "  fixed " << lens_model << ": rms " << result.rms_px << " px, " << diff
+            << " px vs truth\n";
+  return diff;
+}
+
+TEST(CalibrationOnSimulatedProjects, DemoProjectionMatchesTheTruth) {
+  const Calibrated& c = Calibrate("demo", 1);
+  ASSERT_TRUE(c.summary.usable);
+  EXPECT_LE(c.truth_diff_px, 0.007);
+  // The stage's own uncertainty is of the size of the error it makes.
+  EXPECT_TRUE(c.summary.uncertainty.available);
+  EXPECT_LT(c.summary.uncertainty.typical_px, 0.02);
+}
+
+TEST(CalibrationOnSimulatedProjects, PartlyVisibleAndPlateAbsentImagesAreRejectedWithReasons) {
+  const Calibrated& c = Calibrate("demo", 1);
+  std::map<std::string, const PlateObservation*> by_name;
+  for (const PlateObservation& o : c.summary.detections) by_name[o.image] = &o;
+  int num_not_full = 0;
+  for (const CalibImageTruth& image : c.sim.truth.calib_images) {
+    ASSERT_TRUE(by_name.count(image.image)) << image.image;
+    const PlateObservation& o = *by_name[image.image];
+    if (image.kind == CalibImageTruth::Kind::kFull) {
+      EXPECT_TRUE(o.usable) << image.image << ": " << o.why_rejected;
+    } else {
+      ++num_not_full;
+      EXPECT_FALSE(o.usable) << image.image << " (" << CalibImageKindName(image.kind) << ")";
+      EXPECT_FALSE(o.why_rejected.empty()) << image.image;
+    }
+  }
+  EXPECT_EQ(num_not_full, 2);
+}
+
+TEST(CalibrationOnSimulatedProjects, DemoLensChoiceIsNotWorseThanTheBestFixedModel) {
+  const Calibrated& c = Calibrate("demo", 1);
+  double best = 1e9;
+  for (const char* model : {"LENSMODEL_OPENCV4", "LENSMODEL_OPENCV5", "LENSMODEL_OPENCV8"}) {
+    best = std::min(best, FixedModelTruthDiff(c, model));
+  }
+  // "Noise": the chosen model's own projection 1-sigma, typical over the imager.
+  EXPECT_LE(c.truth_diff_px, best + c.summary.uncertainty.typical_px)
+      << "chose " << c.summary.result.camera.lens_model;
+}
+
+TEST(CalibrationOnSimulatedProjects, LensMismatchChoosesASplinedModelSeveralTimesBetter) {
+  const Calibrated& c = Calibrate("lens-mismatch", 1);
+  ASSERT_TRUE(c.summary.usable);
+  EXPECT_NE(c.summary.result.camera.lens_model.find("SPLINED"), std::string::npos)
+      << c.summary.lens.why;
+  const double opencv5 = FixedModelTruthDiff(c, "LENSMODEL_OPENCV5");
+  const double opencv8 = FixedModelTruthDiff(c, "LENSMODEL_OPENCV8");
+  // Issue 3's "Checked by": at most 0.3x OpenCV's on such a lens. (Our
+  // OPENCV5/8 solves of the same observations stand in for OpenCV's
+  // calibrateCamera until the OpenCV baseline is in.)
+  EXPECT_LE(c.truth_diff_px, 0.3 * std::min(opencv5, opencv8));
+}
+
+}  // namespace
+}  // namespace omm

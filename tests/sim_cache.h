@@ -1,0 +1,33 @@
+// Simulated projects rendered once per build tree and shared by every test
+// process: $build/sim-cache/<preset>-<seed>/{project/, truth.json}.
+//
+// Rendering takes ~30-60 s per project, so tests that need one call
+// SimulatedProject(): the first caller renders into a temporary directory and
+// renames it into place under an exclusive lock (flock on <name>.lock), so
+// parallel ctest processes neither render twice nor see a half-written
+// project. The cached project is read-only by convention: a test that runs
+// `omm` on it copies it first (CopyProject).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "pipeline/core/truth.h"
+
+namespace omm::testing {
+
+struct CachedProject {
+  std::filesystem::path project_dir;
+  std::filesystem::path truth_path;
+  SimulationTruth truth;
+};
+
+// Renders (or finds) the project of `preset` and `seed` with the simulator's
+// defaults. Fails the calling test (ADD_FAILURE) and throws if rendering fails.
+CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed);
+
+// Copies a project's inputs (everything but out/) into `to` (created).
+void CopyProject(const std::filesystem::path& from, const std::filesystem::path& to);
+
+}  // namespace omm::testing
