@@ -90,7 +90,8 @@ std::vector<fs::path> FindProjects(const std::vector<fs::path>& dirs) {
 
 }  // namespace
 
-int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages) {
+int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
+               bool calibration_study) {
   return Finish(Guarded([&] {
     const Project project = LoadProject(project_dir);
     spdlog::info("loaded {}: {} calibration images, {} tiles, {} measurements", project.name,
@@ -98,6 +99,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages) {
     TerminalProgress progress(IsStderrTerminal());
     RunOptions options;
     options.stages = stages;
+    options.calibration_study = calibration_study;
     options.progress = progress.Callback();
     const RunSummary summary = RunProject(project, options);
     progress.Finish();

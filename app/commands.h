@@ -12,8 +12,10 @@
 
 namespace omm {
 
-// `omm run` (all stages) and `omm calibrate|mosaic|measure` (one stage).
-int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage>& stages);
+// `omm run` (all stages) and `omm calibrate|mosaic|measure` (one stage);
+// `calibration_study`: `omm calibrate --study`.
+int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage>& stages,
+               bool calibration_study = false);
 
 // `omm batch`: each argument is a project directory or a directory whose
 // subdirectories are projects. Projects whose report is current are skipped

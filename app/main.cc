@@ -82,11 +82,18 @@ int main(int argc, char** argv) {
       "Writes PROJECT/out/: report.json, camera.cameramodel, the mosaic, ... (all or nothing).");
   run->add_option("PROJECT", project, "project directory")->required();
 
-  AddStageCommand(app, omm::Stage::kCalibrate,
-                  "Calibrate the camera from the plate images.\n"
-                  "Reads PROJECT/project.yaml (camera, board) and calib/ (or calibration.from).\n"
-                  "Writes PROJECT/out/camera.cameramodel and the report's calibration section.",
-                  project, stage);
+  bool study = false;
+  CLI::App* calibrate = AddStageCommand(
+      app, omm::Stage::kCalibrate,
+      "Calibrate the camera from the plate images.\n"
+      "Reads PROJECT/project.yaml (camera, board) and calib/ (or calibration.from).\n"
+      "Writes PROJECT/out/camera.cameramodel, out/calibration/ (solve record, plots) and the\n"
+      "report's calibration section.",
+      project, stage);
+  calibrate->add_flag("--study", study,
+                      "also run the image-count study: calibrate on random subsets of 3..N images,\n"
+                      "report the spread of the intrinsics against the count and how many suffice\n"
+                      "(slow: ~150 solves; writes out/calibration/study.svg)");
   AddStageCommand(app, omm::Stage::kMosaic,
                   "Register the tiles and write the orthorectified mosaic.\n"
                   "Reads PROJECT/project.yaml, tiles/, table.csv and out/camera.cameramodel.\n"
@@ -141,7 +148,7 @@ int main(int argc, char** argv) {
   SetUpLogging(verbose, quiet);
 
   if (run->parsed()) return omm::RunCommand(project, omm::AllStages());
-  if (stage) return omm::RunCommand(project, {*stage});
+  if (stage) return omm::RunCommand(project, {*stage}, study);
   if (batch->parsed()) return omm::BatchCommand(batch_dirs, force);
   if (simulate->parsed()) return omm::SimulateCommand(simulate_out, seed, preset, truth);
   if (report->parsed()) return omm::ReportCommand(project, json);

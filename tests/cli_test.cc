@@ -89,10 +89,11 @@ TEST_F(CliTest, FailedRunKeepsAnEarlierReportByteForByte) {
   EXPECT_EQ(left, std::vector<std::string>{"report.json"});  // no staging left behind
 }
 
-TEST_F(CliTest, ValidProjectStopsAtTheFirstUnbuiltStage) {
+TEST_F(CliTest, PlainImagesFailCalibrationWithTheirReasons) {
   const auto result = Omm("run " + Quoted(project_.dir));
-  EXPECT_EQ(result.exit_code, 3) << result.output;
-  EXPECT_THAT(result.output, HasSubstr("stage 'calibrate' is not built yet"));
+  EXPECT_EQ(result.exit_code, 1) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("stage 'calibrate' failed"));
+  EXPECT_THAT(result.output, HasSubstr("calib_01.png: plate not found"));
   EXPECT_FALSE(fs::exists(project_.OutDir()));
   const auto mosaic = Omm("mosaic " + Quoted(project_.dir));
   EXPECT_EQ(mosaic.exit_code, 3);
@@ -108,7 +109,7 @@ TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
   EXPECT_THAT(result.output, HasSubstr("2 projects, 2 failed"));
   EXPECT_THAT(result.output, HasSubstr("FAILED (2)"));  // bad: table.csv header
   EXPECT_THAT(result.output, HasSubstr("table.csv:1"));
-  EXPECT_THAT(result.output, HasSubstr("FAILED (3)"));  // job: calibrate not built
+  EXPECT_THAT(result.output, HasSubstr("FAILED (1)"));  // job: no plate in its gray images
 }
 
 TEST_F(CliTest, ReportPrintsTheMeasurements) {

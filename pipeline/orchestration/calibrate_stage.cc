@@ -1,8 +1,320 @@
-// Runner of the calibrate stage (see stage.h).
+// Runner of the calibrate stage (see stage.h): calib/ images -> the stage
+// (pipeline/calibration/calibrate_stage.h) -> out/camera.cameramodel,
+// out/calibration/{solve.json,residuals.svg[,study.svg]} and the report's
+// calibration section. With `calibration.from`, the earlier calibration is
+// taken instead and calib/ is not read.
+#include <algorithm>
+#include <atomic>
+#include <exception>
+#include <filesystem>
+#include <thread>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "adapters/mrcal/calibrate.h"
+#include "adapters/mrcal/cameramodel_io.h"
+#include "adapters/mrcal/solve_record_json.h"
+#include "adapters/mrcal/uncertainty.h"
+#include "adapters/opencv/image_io.h"
+#include "adapters/project_io/report_json.h"
+#include "adapters/project_io/text_file.h"
+#include "pipeline/calibration/calibrate_stage.h"
+#include "pipeline/calibration/study.h"
+#include "pipeline/core/error.h"
 #include "pipeline/orchestration/stage.h"
+#include "pipeline/orchestration/svg_plots.h"
 
 namespace omm {
+namespace {
 
-void RunCalibrateStage(StageContext& /*context*/) { throw StageNotBuiltError(Stage::kCalibrate); }
+namespace fs = std::filesystem;
+
+constexpr const char* kCameraModelName = "camera.cameramodel";
+constexpr const char* kSolveRecordName = "calibration/solve.json";
+constexpr const char* kResidualsPlotName = "calibration/residuals.svg";
+constexpr const char* kStudyPlotName = "calibration/study.svg";
+
+ReportValue Array(const Eigen::VectorXd& values) {
+  ReportValue::Array array;
+  for (Eigen::Index i = 0; i < values.size(); ++i) array.emplace_back(values(i));
+  return array;
+}
+
+ReportValue PerImage(const CalibrationResult& result) {
+  ReportValue::Array rows;
+  for (const ImageResidual& r : result.per_image) {
+    rows.emplace_back(ReportObject{{"image", r.image},
+                                   {"rms_px", r.rms_px},
+                                   {"inliers", r.num_inliers},
+                                   {"outliers", r.num_outliers}});
+  }
+  return rows;
+}
+
+ReportValue Uncertainty(const UncertaintySummary& u) {
+  if (!u.available) {
+    return ReportObject{{"included", false}, {"why_not", u.why_not}};
+  }
+  return ReportObject{{"included", true},
+                      {"statistic", "worst-direction 1-sigma of the projection (mrcal), px"},
+                      {"distance_mm", u.distance_mm},
+                      {"typical_px", u.typical_px},
+                      {"worst_px", u.worst_px},
+                      {"observed_sigma_px", u.observed_sigma_px}};
+}
+
+ReportValue LensChoice(const LensModelChoice& lens) {
+  ReportObject choice{{"lens_model", lens.lens_model}, {"forced", lens.forced}, {"why", lens.why}};
+  if (!lens.candidates.empty()) {
+    ReportValue::Array candidates;
+    for (const LensCandidate& c : lens.candidates) {
+      candidates.emplace_back(ReportObject{{"lens_model", c.lens_model},
+                                           {"num_params", c.num_params},
+                                           {"usable", c.usable},
+                                           {"rms_px", c.rms_px},
+                                           {"num_measurements", c.num_measurements},
+                                           {"num_states", c.num_states},
+                                           {"sigma_px", c.sigma_px}});
+    }
+    choice.emplace_back("criterion",
+                        "residual structure: each candidate solved on all images; residual sigma "
+                        "corrected for the degrees of freedom, rms sqrt(M / (M - P)); the fewest "
+                        "parameters within 10% of the lowest sigma wins");
+    choice.emplace_back("candidates", candidates);
+  }
+  return choice;
+}
+
+ReportValue StudyReport(const ImageCountStudy& study) {
+  ReportValue::Array l_values, parameters;
+  for (int l : study.num_images) l_values.emplace_back(l);
+  for (const StudyParameter& p : study.parameters) {
+    ReportValue::Array spread, ideal;
+    for (double v : p.spread) spread.emplace_back(v);
+    for (double v : p.spread_ideal) ideal.emplace_back(v);
+    parameters.emplace_back(ReportObject{{"name", p.name},
+                                         {"full_sigma", p.full_sigma},
+                                         {"spread", spread},
+                                         {"spread_noise_only", ideal}});
+  }
+  return ReportObject{{"brief", study.brief},
+                      {"lens_model", study.lens_model},
+                      {"num_images", l_values},
+                      {"parameters", parameters},
+                      {"suffices_from", study.suffices_from > 0 ? ReportValue(study.suffices_from)
+                                                                : ReportValue(nullptr)},
+                      {"rule", study.rule},
+                      {"plot", kStudyPlotName},
+                      {"seconds", study.seconds}};
+}
+
+// Reads the calib images, 2 at a time.
+std::vector<NamedImage> ReadCalibImages(const Project& project, const ProgressCallback& progress) {
+  std::vector<NamedImage> images(project.calib_images.size());
+  std::atomic<size_t> next{0};
+  std::atomic<int> done{0};
+  std::exception_ptr errors[2];
+  auto work = [&](std::exception_ptr* error) {
+    try {
+      for (size_t i = next++; i < images.size(); i = next++) {
+        images[i].name = project.calib_images[i].filename().string();
+        images[i].image = ReadGrayImage(project.calib_images[i]);
+        ++done;
+      }
+    } catch (...) {
+      *error = std::current_exception();
+      next = images.size();
+    }
+  };
+  {
+    std::jthread helper(work, &errors[1]);
+    work(&errors[0]);
+  }
+  for (const std::exception_ptr& error : errors) {
+    if (error) std::rethrow_exception(error);
+  }
+  if (progress) progress(done, static_cast<int>(images.size()), "read calibration images");
+  return images;
+}
+
+void WriteResidualsPlot(const fs::path& staging_dir, const CalibrationResult& result) {
+  Eigen::Matrix2Xd q_px, residual_px;
+  ResidualVectors(result, &q_px, &residual_px);
+  WriteTextFileAtomically(staging_dir / kResidualsPlotName,
+                          ResidualsSvg(q_px, residual_px, result.camera.width_px,
+                                       result.camera.height_px, result.rms_px));
+}
+
+// The common part of a report from a solve (fresh or reused).
+CalibrationReport ReportFromSolve(const CalibrationResult& result,
+                                  const UncertaintySummary& uncertainty) {
+  CalibrationReport report;
+  report.lens_model = result.camera.lens_model;
+  report.rms_px = result.rms_px;
+  report.images_used = static_cast<int>(result.record.images.size());
+  report.extra.emplace_back("intrinsics", Array(result.camera.intrinsics));
+  report.extra.emplace_back("image_size_px", ReportValue::Array{result.camera.width_px, result.camera.height_px});
+  report.extra.emplace_back("per_image", PerImage(result));
+  report.extra.emplace_back("num_outliers", result.num_outliers);
+  report.extra.emplace_back("projection_uncertainty", Uncertainty(uncertainty));
+  report.extra.emplace_back("residuals_plot", kResidualsPlotName);
+  return report;
+}
+
+void RunStudy(StageContext& context, const CalibrationStageSummary& summary) {
+  const Project& project = context.project;
+  Eigen::VectorXd sigma;
+  if (const auto uncertainty = CalibrationUncertainty::Compute(summary.result.record)) {
+    sigma = uncertainty->IntrinsicsCovariance().diagonal().cwiseMax(0.0).cwiseSqrt();
+  }
+  spdlog::info("calibrate: image-count study with {}", summary.result.camera.lens_model);
+  const ImageCountStudy study = StudyImageCount(summary.observations, *project.board, project.camera,
+                                                summary.result.camera, sigma, ImageCountStudyOptions());
+  spdlog::info("calibrate: study: {}", study.brief);
+  WriteTextFileAtomically(context.staging_dir / kStudyPlotName, StudySvg(study));
+  context.report.calibration->extra.emplace_back("study", StudyReport(study));
+}
+
+void CalibrateFromImages(StageContext& context) {
+  const Project& project = context.project;
+  if (!project.board) throw InputError((project.dir / "project.yaml").string(), "board: missing");
+  if (project.calib_images.empty()) {
+    throw InputError((project.dir / "calib").string(), "no calibration images (and no calibration.from)");
+  }
+  const std::vector<NamedImage> images = ReadCalibImages(project, context.progress);
+  CalibrationStageOptions options;
+  const CalibrationStageSummary summary = RunCalibration(images, *project.board, project.camera, options);
+
+  std::vector<RejectedImage> rejected;
+  for (const PlateObservation& o : summary.detections) {
+    if (!o.usable) rejected.push_back({o.image, o.why_rejected});
+  }
+  for (const RejectedImage& r : rejected) spdlog::info("calibrate: rejected {}: {}", r.image, r.why);
+  if (!summary.usable) {
+    std::string why = summary.brief;
+    for (const RejectedImage& r : rejected) why += fmt::format("; {}: {}", r.image, r.why);
+    throw StageFailedError(Stage::kCalibrate, why);
+  }
+  spdlog::info("calibrate: {}", summary.lens.why);
+  spdlog::info("calibrate: {} ({:.2f} s: detection {:.2f} s, lens-model choice {:.2f} s)", summary.brief,
+               summary.total_seconds, summary.detection_seconds, summary.lens_choice_seconds);
+
+  fs::create_directories(context.staging_dir / "calibration");
+  WriteCameraModel(context.staging_dir / kCameraModelName, summary.result.camera);
+  WriteSolveRecord(context.staging_dir / kSolveRecordName, summary.result.record);
+  WriteResidualsPlot(context.staging_dir, summary.result);
+
+  CalibrationReport report = ReportFromSolve(summary.result, summary.uncertainty);
+  report.images_rejected = rejected;
+  report.extra.emplace_back("source", "calib/");
+  ReportValue::Array outliers;
+  for (const MarkOutlier& o : summary.outliers) {
+    outliers.emplace_back(ReportObject{{"image", o.image},
+                                       {"row", o.row},
+                                       {"col", o.col},
+                                       {"q_px", ReportValue::Array{o.q_px.x(), o.q_px.y()}}});
+  }
+  report.extra.emplace_back("outliers", outliers);
+  report.extra.emplace_back("lens_model_choice", LensChoice(summary.lens));
+  report.extra.emplace_back(
+      "perspective_bias_correction",
+      ReportObject{{"rounds", summary.bias.rounds},
+                   {"rms_px", summary.bias.rms_px},
+                   {"max_px", summary.bias.max_px},
+                   {"last_change_px", summary.bias.last_change_px}});
+  report.extra.emplace_back("seconds", ReportObject{{"detection", summary.detection_seconds},
+                                                    {"lens_model_choice", summary.lens_choice_seconds},
+                                                    {"total", summary.total_seconds}});
+  report.extra.emplace_back("brief", summary.brief);
+  context.report.calibration = std::move(report);
+  if (context.calibration_study) RunStudy(context, summary);
+}
+
+// `calibration.from` an earlier omm project: its camera and solve record,
+// copied into this project's out/ so the covariance carries over.
+void ReuseProjectCalibration(StageContext& context, const fs::path& from) {
+  const fs::path camera_path = from / "out" / kCameraModelName;
+  const fs::path record_path = from / "out" / kSolveRecordName;
+  for (const fs::path& needed : {camera_path, record_path}) {
+    if (!fs::exists(needed)) {
+      throw InputError((context.project.dir / "project.yaml").string(),
+                       fmt::format("calibration.from: {} has no calibration ({} is missing); run "
+                                   "`omm calibrate {}` there first",
+                                   from.string(), needed.string(), from.string()));
+    }
+  }
+  const CameraModel camera = ReadCameraModel(camera_path);
+  const SolveRecord record = ReadSolveRecord(record_path);
+  const CalibrationResult result = SummarizeSolve(record);
+  if (!result.usable) {
+    throw InputError(record_path.string(), "the solve record cannot be evaluated: " + result.brief);
+  }
+  fs::create_directories(context.staging_dir / "calibration");
+  fs::copy_file(camera_path, context.staging_dir / kCameraModelName, fs::copy_options::overwrite_existing);
+  fs::copy_file(record_path, context.staging_dir / kSolveRecordName, fs::copy_options::overwrite_existing);
+  WriteResidualsPlot(context.staging_dir, result);
+
+  const CalibrationStageOptions options;
+  const UncertaintySummary uncertainty = SummarizeUncertainty(
+      record, WorkingDistanceMm(result), options.uncertainty_grid_nx, options.uncertainty_grid_ny);
+  CalibrationReport report = ReportFromSolve(result, uncertainty);
+  report.lens_model = camera.lens_model;
+  // The earlier run's rejections, if its report is there.
+  const fs::path earlier_report = from / "out" / "report.json";
+  if (fs::exists(earlier_report)) {
+    const Report earlier = ReadReportJson(earlier_report);
+    if (earlier.calibration) report.images_rejected = earlier.calibration->images_rejected;
+  }
+  report.extra.emplace_back("source", "from project " + from.string());
+  context.report.calibration = std::move(report);
+  spdlog::info("calibrate: reused {}'s calibration ({}, rms {:.3f} px)", from.string(),
+               camera.lens_model, result.rms_px);
+}
+
+// `calibration.from` a mrcal .cameramodel: the camera only.
+void ReuseCameraModel(StageContext& context, const fs::path& from) {
+  const CameraModel camera = ReadCameraModel(from);
+  const Project& project = context.project;
+  if (project.image_width_px > 0 &&
+      (camera.width_px != project.image_width_px || camera.height_px != project.image_height_px)) {
+    throw InputError(from.string(), fmt::format("imager {}x{} px, but the project's images are {}x{} px",
+                                                camera.width_px, camera.height_px,
+                                                project.image_width_px, project.image_height_px));
+  }
+  fs::copy_file(from, context.staging_dir / kCameraModelName, fs::copy_options::overwrite_existing);
+  CalibrationReport report;
+  report.lens_model = camera.lens_model;
+  report.extra.emplace_back("source", "from camera model " + from.string());
+  report.extra.emplace_back("intrinsics", Array(camera.intrinsics));
+  report.extra.emplace_back("image_size_px", ReportValue::Array{camera.width_px, camera.height_px});
+  report.extra.emplace_back(
+      "projection_uncertainty",
+      ReportObject{{"included", false},
+                   {"why_not",
+                    "calibration taken from a .cameramodel file: the calibration's own uncertainty "
+                    "is not included (no solve record)"}});
+  report.extra.emplace_back("rms_px_known", false);
+  context.report.calibration = std::move(report);
+  spdlog::warn("calibrate: camera from {}: its calibration's own uncertainty is not included",
+               from.string());
+}
+
+}  // namespace
+
+void RunCalibrateStage(StageContext& context) {
+  const Project& project = context.project;
+  if (!project.calibration_from) return CalibrateFromImages(context);
+  if (context.calibration_study) {
+    throw InputError((project.dir / "project.yaml").string(),
+                     "--study needs calib/ images; this project reuses calibration.from");
+  }
+  const CalibrationSource& source = *project.calibration_from;
+  if (source.kind == CalibrationSource::Kind::kProject) {
+    ReuseProjectCalibration(context, source.path);
+  } else {
+    ReuseCameraModel(context, source.path);
+  }
+}
 
 }  // namespace omm

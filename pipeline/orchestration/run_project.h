@@ -34,6 +34,8 @@ struct RunOptions {
   std::vector<Stage> stages = AllStages();
   // Progress of long work inside stages; may be empty.
   ProgressCallback progress;
+  // Run the calibration's image-count study (`omm calibrate --study`).
+  bool calibration_study = false;
   // What runs a stage.
   StageRunner runner = RunStage;
 

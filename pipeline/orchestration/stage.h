@@ -62,6 +62,8 @@ struct StageContext {
   // The report being built; a runner fills its own section.
   Report& report;
   const ProgressCallback& progress;
+  // `omm calibrate --study`: also run the image-count study (slow).
+  bool calibration_study = false;
 
   // An earlier stage's output file: this run's if it wrote one, else the one
   // in out/ from an earlier run, else an empty path.

@@ -1,0 +1,159 @@
+// `omm calibrate` end to end on a rendered demo project (tests/sim_cache.h):
+// the files it writes, python3-mrcal reading its camera, the report section,
+// and reusing the calibration through `calibration.from`.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "adapters/mrcal/cameramodel_io.h"
+#include "adapters/mrcal/lens.h"
+#include "adapters/project_io/report_json.h"
+#include "tests/sim_cache.h"
+#include "tests/test_util.h"
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+namespace omm {
+namespace {
+
+testing::CommandResult Omm(const std::string& arguments) {
+  return testing::RunCommand(testing::OmmProgram().string() + " " + arguments);
+}
+
+// (Built by append: GCC 12's -Wrestrict misfires on "'" + std::string at -O3.)
+std::string Quoted(const fs::path& path) { return std::string("'").append(path.string()).append("'"); }
+
+const ReportValue* Member(const ReportObject& object, const std::string& name) {
+  for (const auto& [key, value] : object) {
+    if (key == name) return &value;
+  }
+  return nullptr;
+}
+
+// One calibrated copy of the demo project shared by the tests below.
+class CalibrateCliTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    const testing::CachedProject sim = testing::SimulatedProject("demo", 1);
+    testing::CopyProject(sim.project_dir, Calibrated());
+    calibrate_ = new testing::CommandResult(Omm("calibrate " + Quoted(Calibrated())));
+    std::cout << calibrate_->output;
+  }
+  static void TearDownTestSuite() {
+    delete calibrate_;
+    delete dir_;
+  }
+  static fs::path Calibrated() { return dir_->path() / "calibrated"; }
+
+  // A copy of the demo project whose project.yaml reuses `from`.
+  static fs::path Reusing(const std::string& name, const fs::path& from) {
+    const fs::path dir = dir_->path() / name;
+    testing::CopyProject(testing::SimulatedProject("demo", 1).project_dir, dir);
+    std::string reuse = "\ncalibration:\n  from: ";
+    reuse.append(from.string()).append("\nboard:");
+    testing::ReplaceInFile(dir / "project.yaml", "\nboard:", reuse);
+    return dir;
+  }
+
+  static testing::TempDir* dir_;
+  static testing::CommandResult* calibrate_;
+};
+
+testing::TempDir* CalibrateCliTest::dir_ = nullptr;
+testing::CommandResult* CalibrateCliTest::calibrate_ = nullptr;
+
+TEST_F(CalibrateCliTest, WritesTheCameraSolveRecordPlotAndReport) {
+  ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
+  const fs::path out = Calibrated() / "out";
+  EXPECT_TRUE(fs::exists(out / "camera.cameramodel"));
+  EXPECT_TRUE(fs::exists(out / "calibration" / "solve.json"));
+  EXPECT_THAT(testing::ReadTextFile(out / "calibration" / "residuals.svg"), HasSubstr("<svg"));
+  const Report report = ReadReportJson(out / "report.json");
+  ASSERT_TRUE(report.calibration);
+  EXPECT_EQ(report.calibration->images_used, 18);
+  EXPECT_EQ(report.calibration->images_rejected.size(), 2u);
+  EXPECT_GT(report.calibration->rms_px, 0.0);
+  EXPECT_LT(report.calibration->rms_px, 0.1);
+  for (const char* key : {"intrinsics", "per_image", "outliers", "projection_uncertainty",
+                          "lens_model_choice", "perspective_bias_correction", "residuals_plot"}) {
+    EXPECT_NE(Member(report.calibration->extra, key), nullptr) << key;
+  }
+}
+
+TEST_F(CalibrateCliTest, Python3MrcalLoadsTheCameraModel) {
+  ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
+  const fs::path model = Calibrated() / "out" / "camera.cameramodel";
+  std::string script = "import mrcal, numpy; m = mrcal.cameramodel('";
+  script.append(model.string())
+      .append("'); q = mrcal.project(numpy.array((30.0, -20.0, 400.0)), *m.intrinsics()); ")
+      .append("print(m.intrinsics()[0], m.imagersize()[0], '%.9f %.9f' % (q[0], q[1]))");
+  const auto python = testing::RunCommand("/usr/bin/python3 -c \"" + script + "\"");
+  ASSERT_EQ(python.exit_code, 0) << python.output;
+  const CameraModel camera = ReadCameraModel(model);
+  EXPECT_THAT(python.output, HasSubstr(camera.lens_model + " 1600 "));
+  // mrcal projects with the model it read exactly as our code does.
+  Eigen::Matrix2Xd q;
+  ASSERT_TRUE(ProjectPoints(camera, Eigen::Vector3d(30.0, -20.0, 400.0), &q));
+  std::istringstream numbers(python.output.substr(python.output.rfind(" 1600 ") + 6));
+  double x = 0, y = 0;
+  numbers >> x >> y;
+  EXPECT_NEAR(x, q(0, 0), 1e-6) << python.output;
+  EXPECT_NEAR(y, q(1, 0), 1e-6) << python.output;
+}
+
+TEST_F(CalibrateCliTest, ReuseFromAProjectCopiesTheCameraAndTheSolveRecord) {
+  ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
+  const fs::path dir = Reusing("reuse-project", Calibrated());
+  fs::remove_all(dir / "calib");  // not needed
+  const auto result = Omm("calibrate " + Quoted(dir));
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  for (const char* file : {"camera.cameramodel", "calibration/solve.json"}) {
+    EXPECT_EQ(testing::ReadTextFile(dir / "out" / file),
+              testing::ReadTextFile(Calibrated() / "out" / file))
+        << file;
+  }
+  const Report report = ReadReportJson(dir / "out" / "report.json");
+  ASSERT_TRUE(report.calibration);
+  EXPECT_EQ(report.calibration->images_used, 18);
+  EXPECT_EQ(report.calibration->images_rejected.size(), 2u);
+  const ReportValue* uncertainty = Member(report.calibration->extra, "projection_uncertainty");
+  ASSERT_NE(uncertainty, nullptr);
+  const auto* object = std::get_if<ReportObject>(&uncertainty->data());
+  ASSERT_NE(object, nullptr);
+  EXPECT_EQ(*Member(*object, "included"), ReportValue(true));
+}
+
+TEST_F(CalibrateCliTest, ReuseFromACameraModelSaysItsUncertaintyIsNotIncluded) {
+  ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
+  const fs::path dir = Reusing("reuse-model", Calibrated() / "out" / "camera.cameramodel");
+  const auto result = Omm("calibrate " + Quoted(dir));
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_EQ(testing::ReadTextFile(dir / "out" / "camera.cameramodel"),
+            testing::ReadTextFile(Calibrated() / "out" / "camera.cameramodel"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "calibration" / "solve.json"));
+  const Report report = ReadReportJson(dir / "out" / "report.json");
+  ASSERT_TRUE(report.calibration);
+  const ReportValue* uncertainty = Member(report.calibration->extra, "projection_uncertainty");
+  ASSERT_NE(uncertainty, nullptr);
+  const auto* object = std::get_if<ReportObject>(&uncertainty->data());
+  ASSERT_NE(object, nullptr);
+  EXPECT_EQ(*Member(*object, "included"), ReportValue(false));
+  EXPECT_THAT(std::get<std::string>(Member(*object, "why_not")->data()),
+              HasSubstr("uncertainty is not included"));
+}
+
+TEST_F(CalibrateCliTest, ReuseFromAProjectWithoutCalibrationIsABadInput) {
+  const fs::path uncalibrated = dir_->path() / "uncalibrated";
+  testing::CopyProject(testing::SimulatedProject("demo", 1).project_dir, uncalibrated);
+  const fs::path dir = Reusing("reuse-nothing", uncalibrated);
+  const auto result = Omm("calibrate " + Quoted(dir));
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("has no calibration"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
+}
+
+}  // namespace
+}  // namespace omm
