@@ -22,6 +22,7 @@ std::string RegisterTilesOptions::Check() const {
        {harris.Check(), translation.Check(), patch.Check(), tags.Check(), bundle.Check()}) {
     if (!e.empty()) return e;
   }
+  if (!(matching_blur_sigma_px >= 0)) return "matching_blur_sigma_px must be >= 0";
   if (!(min_overlap_fraction > 0 && min_overlap_fraction < 1))
     return "min_overlap_fraction must be in (0, 1)";
   if (num_probe_corners < 8) return "num_probe_corners must be >= 8";
@@ -226,12 +227,15 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
 
   // 1. Features.
   auto t0 = Clock::now();
-  std::vector<ImageF> normalized(num_tiles);
+  std::vector<ImageF> normalized(num_tiles), spline(num_tiles);
   std::vector<std::vector<Corner>> corners(num_tiles);
   std::vector<std::vector<TagDetection>> tags(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
     normalized[i] = NormalizeTileIntensity(tiles[i]);
     corners[i] = DetectHarrisCorners(normalized[i], options.harris);
+    if (options.matching_blur_sigma_px > 0)
+      normalized[i] = GaussianBlur(normalized[i], options.matching_blur_sigma_px);
+    spline[i] = BSplineCoefficients(normalized[i]);
     if (options.use_apriltags) tags[i] = DetectAprilTags36h11(tiles[i], options.tags);
   });
   for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());
@@ -341,7 +345,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     for (int k = 0; k < num_probes; ++k) {
       const Corner& c = corners[ta][candidates[k]];
       const PatchMatch m =
-          MatchPatch(normalized[ta], c.pixel, normalized[tb], c.pixel.cast<double>() + shift,
+          MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
+                     c.pixel.cast<double>() + shift,
                      Eigen::Matrix2d::Identity(), options.probe_search_radius_px, options.patch);
       if (!m.ok) continue;
       probe_a.col(found) = c.pixel.cast<double>();
@@ -366,7 +371,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       m.key = CornerKey(ta, k);
       m.anchor_px = c.pixel;
       m.db_da = TransferJacobian(h_pixels, a);
-      const PatchMatch pm = MatchPatch(normalized[ta], c.pixel, normalized[tb],
+      const PatchMatch pm = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
                                        Transfer(h_pixels, a), m.db_da, options.search_radius_px,
                                        options.patch);
       if (!pm.ok) continue;
@@ -416,7 +421,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         m.tag = true;
         const Eigen::Vector2d predicted =
             tags[tb][db].corners_px.col(k) + (anchor.cast<double>() - corner_a);
-        const PatchMatch pm = MatchPatch(normalized[ta], anchor, normalized[tb], predicted,
+        const PatchMatch pm = MatchPatch(normalized[ta], anchor, normalized[tb], spline[tb], predicted,
                                          m.db_da, options.search_radius_px, options.patch);
         if (!pm.ok) continue;
         m.q_b = pm.q_px;
@@ -548,7 +553,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(2, 0) * r.leftCols<2>();
       m.db_da = dqb * dqa.inverse();
       const PatchMatch pm = MatchPatch(normalized[m.tile_a], m.anchor_px, normalized[m.tile_b],
-                                       m.q_b, m.db_da, 1, options.patch);
+                                       spline[m.tile_b], m.q_b, m.db_da, 1, options.patch);
       if (!pm.ok) {
         m.keep = false;
         return;

@@ -56,6 +56,11 @@ struct RegisterTilesOptions {
 
   // Pairs whose predicted overlap is below this fraction of the image are not matched.
   double min_overlap_fraction = 0.03;
+  // Both tiles of a pair are matched after a Gaussian blur of this sigma, px:
+  // it suppresses the content near the Nyquist frequency, where the
+  // undersampled tiles carry aliases that bias sub-pixel matches periodically
+  // with the fractional position (0 to keep the raw pixels).
+  double matching_blur_sigma_px = 1.0;
   int num_probe_corners = 60;      // per pair: corners matched with the wide window
   int probe_search_radius_px = 20;  // +- around the A-predicted position, px
   double probe_ransac_threshold_px = 3.0;  // pixel homography of the probes, px

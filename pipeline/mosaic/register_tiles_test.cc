@@ -4,6 +4,7 @@
 // is its own stage), so every error below is the registration's.
 #include "pipeline/mosaic/register_tiles.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -102,6 +103,13 @@ std::vector<Eigen::Vector2d> MatchErrorsPx(const SimulationTruth& truth,
     if (reg.track_anchor_observation[obs.track] == static_cast<int>(o)) continue;
     if (tags_only && reg.track_tag_id[obs.track] < 0) continue;
     errors.push_back(obs.q_px - PixelOf(camera, TruthPose(truth, obs.tile), part_of_track[obs.track]));
+    const double f = obs.q_px.x() - std::floor(obs.q_px.x());
+    static std::vector<double> sum(10, 0.0), cnt(10, 0.0);
+    sum[int(f * 10)] += errors.back().x();
+    cnt[int(f * 10)] += 1;
+    if (o + 1 == reg.input.observations.size()) {
+      for (int b = 0; b < 10; ++b) std::printf("frac %.1f: mean ex %.4f (%g)\n", b / 10.0, sum[b] / cnt[b], cnt[b]);
+    }
   }
   return errors;
 }
@@ -168,6 +176,11 @@ Scores Score(const Rendered& r, const TileRegistration& reg) {
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
   for (const Eigen::Vector2d& e : errors) mean += e / errors.size();
   std::printf("mean match error %.4f %.4f px\n", mean.x(), mean.y());
+  std::vector<double> norms;
+  for (const Eigen::Vector2d& e : errors) norms.push_back(e.norm());
+  std::sort(norms.begin(), norms.end());
+  std::printf("|e| percentiles 50 %.4f 90 %.4f 99 %.4f max %.4f\n", norms[norms.size() / 2],
+              norms[norms.size() * 9 / 10], norms[norms.size() * 99 / 100], norms.back());
   s.num_matches = static_cast<int>(errors.size());
   s.hole_rms_px = HoleRmsRawPx(r.plan.truth, reg, &s.num_hole_sightings);
   s.table_rms_mm = TableRmsMm(r.plan.truth, reg.scene.table_pos_mm);

@@ -171,29 +171,61 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
   return corners;
 }
 
-bool SampleBicubic(const ImageF& image, double x, double y, double* value,
+namespace {
+
+// In-place cubic B-spline prefilter of n samples at stride `stride`.
+void BSplinePrefilter1D(float* data, int n, int stride, std::vector<double>* work) {
+  if (n < 2) return;
+  const double z = std::sqrt(3.0) - 2.0;
+  std::vector<double>& c = *work;
+  c.resize(n);
+  // Causal initialisation: mirrored sum truncated where z^k < 1e-9.
+  const int horizon = std::min(n, 16);
+  double sum = 0, zk = 1;
+  for (int k = 0; k < horizon; ++k) sum += zk * data[k * stride], zk *= z;
+  c[0] = sum;
+  for (int k = 1; k < n; ++k) c[k] = data[k * stride] + z * c[k - 1];
+  c[n - 1] = (z / (z * z - 1.0)) * (c[n - 1] + z * c[n - 2]);
+  for (int k = n - 2; k >= 0; --k) c[k] = z * (c[k + 1] - c[k]);
+  for (int k = 0; k < n; ++k) data[k * stride] = static_cast<float>(6.0 * c[k]);
+}
+
+}  // namespace
+
+ImageF BSplineCoefficients(const ImageF& image) {
+  ImageF c = image;
+  const int rows = static_cast<int>(c.rows()), cols = static_cast<int>(c.cols());
+  std::vector<double> work;
+  for (int r = 0; r < rows; ++r) BSplinePrefilter1D(c.data() + static_cast<size_t>(r) * cols, cols, 1, &work);
+  for (int col = 0; col < cols; ++col) BSplinePrefilter1D(c.data() + col, rows, cols, &work);
+  return c;
+}
+
+bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
                    Eigen::Vector2d* gradient) {
   const double fx_floor = std::floor(x), fy_floor = std::floor(y);
   const int ix = static_cast<int>(fx_floor), iy = static_cast<int>(fy_floor);
-  if (ix < 1 || iy < 1 || ix + 2 >= image.cols() || iy + 2 >= image.rows()) return false;
+  if (ix < 1 || iy < 1 || ix + 2 >= coefficients.cols() || iy + 2 >= coefficients.rows())
+    return false;
   const double fx = x - fx_floor, fy = y - fy_floor;
   const auto weights = [](double f, double* w, double* dw) {
-    const double f2 = f * f, f3 = f2 * f;
-    w[0] = -0.5 * f3 + f2 - 0.5 * f;
-    w[1] = 1.5 * f3 - 2.5 * f2 + 1.0;
-    w[2] = -1.5 * f3 + 2.0 * f2 + 0.5 * f;
-    w[3] = 0.5 * f3 - 0.5 * f2;
-    dw[0] = -1.5 * f2 + 2.0 * f - 0.5;
-    dw[1] = 4.5 * f2 - 5.0 * f;
-    dw[2] = -4.5 * f2 + 4.0 * f + 0.5;
-    dw[3] = 1.5 * f2 - f;
+    const double f2 = f * f, f3 = f2 * f, g = 1.0 - f;
+    w[0] = g * g * g / 6.0;
+    w[1] = (4.0 - 6.0 * f2 + 3.0 * f3) / 6.0;
+    w[2] = (1.0 + 3.0 * f + 3.0 * f2 - 3.0 * f3) / 6.0;
+    w[3] = f3 / 6.0;
+    dw[0] = -0.5 * g * g;
+    dw[1] = -2.0 * f + 1.5 * f2;
+    dw[2] = 0.5 + f - 1.5 * f2;
+    dw[3] = 0.5 * f2;
   };
   double wx[4], dwx[4], wy[4], dwy[4];
   weights(fx, wx, dwx);
   weights(fy, wy, dwy);
   double v = 0, gx = 0, gy = 0;
   for (int j = 0; j < 4; ++j) {
-    const float* row = image.data() + static_cast<size_t>(iy - 1 + j) * image.cols() + (ix - 1);
+    const float* row =
+        coefficients.data() + static_cast<size_t>(iy - 1 + j) * coefficients.cols() + (ix - 1);
     const double rv = wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3];
     v += wy[j] * rv;
     if (gradient != nullptr) {

@@ -104,7 +104,8 @@ TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
 }
 
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
-                      const ImageF& target, const Eigen::Vector2d& predicted_q_px,
+                      const ImageF& target, const ImageF& target_spline,
+                      const Eigen::Vector2d& predicted_q_px,
                       const Eigen::Matrix2d& dtarget_dreference, int search_radius_px,
                       const PatchMatchOptions& options) {
   PatchMatch match;
@@ -175,7 +176,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       for (int c = -h; c <= h; ++c) {
         const Eigen::Vector2d p = q + dtarget_dreference * Eigen::Vector2d(c, r);
         double v;
-        if (!SampleBicubic(target, p.x(), p.y(), &v)) return match;
+        if (!SampleBSpline(target_spline, p.x(), p.y(), &v)) return match;
         s += v, ss += v * v, ++count;
       }
     }
@@ -193,7 +194,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
         const Eigen::Vector2d p = q + dtarget_dreference * Eigen::Vector2d(c, r);
         double v;
         Eigen::Vector2d g;
-        if (!SampleBicubic(target, p.x(), p.y(), &v, &g)) return match;
+        if (!SampleBSpline(target_spline, p.x(), p.y(), &v, &g)) return match;
         sampled(i) = v;
         const double residual = gain * v + offset - templ(i);
         const Eigen::Vector4d jac(gain * g.x(), gain * g.y(), v, 1.0);
@@ -214,7 +215,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   for (int r = -h, i = 0; r <= h; ++r) {
     for (int c = -h; c <= h; ++c, ++i) {
       const Eigen::Vector2d p = q + dtarget_dreference * Eigen::Vector2d(c, r);
-      if (!SampleBicubic(target, p.x(), p.y(), &sampled(i))) return match;
+      if (!SampleBSpline(target_spline, p.x(), p.y(), &sampled(i))) return match;
     }
   }
   const Eigen::VectorXd s0 = sampled.array() - sampled.mean();

@@ -65,13 +65,15 @@ struct PatchMatch {
 // 2. least-squares template matching (Gruen 1985) from the best offset:
 //      min over q, g, o  sum_x (g T(q + J x) + o - R(anchor + x))^2,
 //    x over the template's integer offsets, R the reference tile's raw pixels,
-//    T the target sampled by Keys' bicubic convolution, J = dq_target /
+//    T the target's cubic B-spline interpolant (BSplineCoefficients), J = dq_target /
 //    dq_reference the local affine of the tile-to-tile map (the prediction's
 //    Jacobian, e.g. from the plane-induced homography), held fixed: only the
 //    position, gain and offset are estimated. The template is never resampled,
 //    so the anchor is exact and only the target is interpolated.
+// `target_spline` is BSplineCoefficients(target).
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
-                      const ImageF& target, const Eigen::Vector2d& predicted_q_px,
+                      const ImageF& target, const ImageF& target_spline,
+                      const Eigen::Vector2d& predicted_q_px,
                       const Eigen::Matrix2d& dtarget_dreference, int search_radius_px,
                       const PatchMatchOptions& options);
 
