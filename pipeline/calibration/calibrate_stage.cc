@@ -150,6 +150,21 @@ LensCandidate ScoreCandidate(const std::string& lens_model, const CalibrationRes
   return c;
 }
 
+// The F-test of a bigger model against a smaller one: with SSR = M rms^2 and
+// P states, F = ((SSR_a - SSR_b) / (P_b - P_a)) / (SSR_b / (M - P_b)) is
+// ~ chi2(P_b - P_a) / (P_b - P_a) when the extra parameters only fit noise.
+// Significant above that distribution's upper point at z (Wilson-Hilferty).
+bool ResidualsDropSignificantly(const LensCandidate& a, const LensCandidate& b, double z) {
+  const double extra = b.num_states - a.num_states;
+  if (extra <= 0 || b.num_measurements <= b.num_states) return b.sigma_px < a.sigma_px;
+  const double ssr_a = a.rms_px * a.rms_px * a.num_measurements;
+  const double ssr_b = b.rms_px * b.rms_px * b.num_measurements;
+  const double f = ((ssr_a - ssr_b) / extra) / (ssr_b / (b.num_measurements - b.num_states));
+  const double h = 2.0 / (9.0 * extra);
+  const double critical = std::pow(1.0 - h + z * std::sqrt(h), 3);
+  return f > critical;
+}
+
 }  // namespace
 
 void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
@@ -196,7 +211,7 @@ std::string CalibrationStageOptions::Check() const {
   if (!(bias_settle_px > 0)) what << "bias_settle_px must be > 0; ";
   if (splined_nx < 4) what << "splined_nx must be >= 4; ";
   if (!(splined_fov_margin > 0.5 && splined_fov_margin <= 1.5)) what << "splined_fov_margin must be in (0.5, 1.5]; ";
-  if (!(tie_fraction >= 0)) what << "tie_fraction must be >= 0; ";
+  if (!(lens_choice_significance_z > 0)) what << "lens_choice_significance_z must be > 0; ";
   if (min_images < 3) what << "min_images must be >= 3; ";
   if (uncertainty_grid_nx < 2 || uncertainty_grid_ny < 2) what << "uncertainty grid must be >= 2 x 2; ";
   std::string text = what.str();
@@ -333,46 +348,49 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
       solved.push_back(CalibrateCamera(board, corrected, candidate_options));
       summary.lens.candidates.push_back(ScoreCandidate(model, solved.back()));
     }
-    double best = std::numeric_limits<double>::infinity();
-    for (const LensCandidate& c : summary.lens.candidates) {
-      if (c.usable) best = std::min(best, c.sigma_px);
-    }
-    // Candidates are listed by increasing parameter count: the first within
-    // the tie of the best wins.
-    for (size_t k = 0; k < candidates.size(); ++k) {
+    // Candidates are listed by increasing parameter count. Starting from the
+    // smallest usable one, a larger one replaces the current choice only if
+    // its fit is better by more than its extra parameters explain by chance.
+    int chosen = -1;
+    for (int k = 0; k < static_cast<int>(candidates.size()); ++k) {
       const LensCandidate& c = summary.lens.candidates[k];
-      if (!c.usable || c.sigma_px > (1.0 + options.tie_fraction) * best) continue;
+      if (!c.usable) continue;
+      if (chosen < 0 || ResidualsDropSignificantly(summary.lens.candidates[chosen], c,
+                                                   options.lens_choice_significance_z)) {
+        chosen = k;
+      }
+    }
+    if (chosen >= 0) {
+      const LensCandidate& c = summary.lens.candidates[chosen];
       summary.lens.lens_model = c.lens_model;
       summary.lens.why = fmt::format(
-          "{}: residual sigma {:.4f} px (dof-corrected) within {:.0f}% of the lowest ({:.4f} px) "
-          "with the fewest parameters ({})",
-          c.lens_model, c.sigma_px, 100 * options.tie_fraction, best, c.num_params);
+          "{} ({} parameters): residual sigma {:.4f} px (dof-corrected); no candidate with more "
+          "parameters lowers the residuals beyond chance (F-test, z = {:.2f})",
+          c.lens_model, c.num_params, c.sigma_px, options.lens_choice_significance_z);
       for (const LensCandidate& other : summary.lens.candidates) {
-        if (&other != &c) summary.lens.why += fmt::format("; {} {:.4f} px", other.lens_model, other.sigma_px);
+        if (&other != &c) {
+          summary.lens.why += fmt::format("; {} ({}) {:.4f} px", other.lens_model, other.num_params, other.sigma_px);
+        }
       }
-      if (c.lens_model != working_model) result = std::move(solved[k]);
-      break;
+      if (c.lens_model != working_model) result = std::move(solved[chosen]);
     }
     if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;
     summary.lens_choice_seconds = SecondsSince(choice_start);
     if (summary.lens.lens_model != working_model) {
       // The corrections are recomputed from the detections with the chosen
-      // model's camera and poses, then the final solve.
+      // model's camera and poses (now in `result`), then the final solve.
       solve_options.lens_model = summary.lens.lens_model;
-      const CalibrationResult& chosen = result;
-      {
-        std::vector<PlateObservation> recorrected = corrected;
-        if (board.type != BoardType::kChessboard) {
-          std::vector<Eigen::Matrix2Xd> delta;
-          recorrected = CorrectBias(detections, board, chosen, &delta);
-          CompareCorrections(corrections, delta, &summary.bias);
-          ++summary.bias.rounds;
-        }
-        CalibrationResult final_result = CalibrateCamera(board, recorrected, solve_options);
-        if (final_result.usable) {
-          result = std::move(final_result);
-          corrected = std::move(recorrected);
-        }
+      std::vector<PlateObservation> recorrected = corrected;
+      if (board.type != BoardType::kChessboard) {
+        std::vector<Eigen::Matrix2Xd> delta;
+        recorrected = CorrectBias(detections, board, result, &delta);
+        CompareCorrections(corrections, delta, &summary.bias);
+        ++summary.bias.rounds;
+      }
+      CalibrationResult final_result = CalibrateCamera(board, recorrected, solve_options);
+      if (final_result.usable) {
+        result = std::move(final_result);
+        corrected = std::move(recorrected);
       }
     }
   }
@@ -384,9 +402,12 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   ResidualVectors(result, &summary.residual_q_px, &summary.residual_px);
   summary.usable = true;
   const int num_rejected = static_cast<int>(detections.size()) - num_usable;
-  summary.brief = fmt::format("{}: {} image(s) used, {} rejected, rms {:.3f} px, {} outlier mark(s)",
-                              result.camera.lens_model, num_usable, num_rejected, result.rms_px,
-                              summary.outliers.size());
+  const Eigen::Index num_residuals = summary.residual_px.cols();
+  const double rms_px =
+      num_residuals > 0 ? std::sqrt(summary.residual_px.squaredNorm() / (2.0 * num_residuals)) : 0.0;
+  summary.brief = fmt::format(
+      "{}: {} image(s) used, {} rejected, residual rms {:.4f} px (weighted {:.3f}), {} outlier mark(s)",
+      result.camera.lens_model, num_usable, num_rejected, rms_px, result.rms_px, summary.outliers.size());
   if (summary.uncertainty.available) {
     summary.brief += fmt::format(", projection 1-sigma {:.4f} px typical, {:.4f} px worst at {:.0f} mm",
                                  summary.uncertainty.typical_px, summary.uncertainty.worst_px,

@@ -18,13 +18,16 @@
 //  4. Lens model (when the user forced none), by the structure of the
 //     residuals: each candidate (OPENCV4, OPENCV5, OPENCV8, and a splined
 //     stereographic model sized for the observed marks, SplinedModelFor) is
-//     solved on all images, and scored by its residual sigma corrected for
-//     the degrees of freedom, sigma = rms sqrt(M / (M - P)) (M measurements,
-//     P states). A model that cannot represent the lens leaves systematic
-//     residuals far above the detection noise; one that can leaves the noise.
-//     The fewest-parameter candidate within tie_fraction of the lowest sigma
-//     wins. If it differs from the working model, the bias corrections are
-//     recomputed with it once and the final solve run.
+//     solved on all images; its residual sigma corrected for the degrees of
+//     freedom is sigma = rms sqrt(M / (M - P)) (M measurements, P states). A
+//     model that cannot represent the lens leaves systematic residuals far
+//     above the detection noise; one that can leaves the noise. Going up in
+//     parameter count, a bigger model replaces the current choice only if an
+//     F-test says its residual drop is more than its extra parameters would
+//     give on noise alone (the extra-sum-of-squares test, exact for nested
+//     models, OPENCV4 < 5 < 8; an approximation for the splined model). If it
+//     differs from the working model, the bias corrections are recomputed
+//     with it once and the final solve run.
 //     Why not cross-validation between halves (adapters/mrcal/cross_validation.h):
 //     it compares the halves over the WHOLE imager, where the plates rarely
 //     reach the corners; each half extrapolates there on its own, so it
@@ -65,7 +68,9 @@ struct CalibrationStageOptions {
   bool choose_lens_model = true;  // false: LENSMODEL_OPENCV8 without cross-validation
   int splined_nx = 10;               // knots across (Ny from the imager's aspect ratio)
   double splined_fov_margin = 0.9;   // the spline's fov_x is the marks' horizontal extent times this
-  double tie_fraction = 0.1;  // residual sigmas within this fraction of the lowest: a tie
+  // A bigger model is chosen only if its residuals drop beyond chance at this
+  // one-sided normal quantile (2.326: 1% false choices).
+  double lens_choice_significance_z = 2.326;
 
   // Calibration solve.
   bool optimize_calobject_warp = false;

@@ -113,18 +113,25 @@ ImageCountStudy StudyImageCount(const std::vector<PlateObservation>& observation
   }
 
   study.rule = fmt::format(
-      "smallest l from which on (l < N = {}) the spread over {} random l-image subsets of every "
-      "parameter is within {:.1f}x sigma_N sqrt(N/l - 1), the spread that noise averaging alone "
+      "smallest l from which on (up to N - 2 = {}) the spread over {} random l-image subsets of f, "
+      "cx and cy is within {:.2f}x sigma_N sqrt(N/l - 1), the spread that noise averaging alone "
       "predicts from the full solve's 1-sigma sigma_N",
-      n, options.num_subsets, options.tolerance);
-  const bool have_sigma = std::all_of(study.parameters.begin(), study.parameters.end(),
+      n - 2, options.num_subsets, options.tolerance);
+  // The rule looks at the core (f, cx, cy, the first three parameters): the
+  // individual distortion terms of the rational models are strongly
+  // correlated with each other and shaped by mrcal's regularisation, so their
+  // spreads are reported but not judged.
+  const bool have_sigma = std::all_of(study.parameters.begin(), study.parameters.begin() + 3,
                                       [](const StudyParameter& p) { return p.full_sigma > 0; });
   if (have_sigma) {
-    // Scan down from l = N - 1 while the rule holds.
-    for (int k = static_cast<int>(study.num_images.size()) - 2; k >= 0; --k) {
+    // Scan down from l = N - 2 while the rule holds. (At l = N - 1 the
+    // subsets differ by one image: their spread measures that image's
+    // influence, not the count.)
+    for (int k = static_cast<int>(study.num_images.size()) - 3; k >= 0; --k) {
       bool within = study.num_solved[k] >= 2;
-      for (const StudyParameter& p : study.parameters) {
-        within = within && p.spread[k] <= options.tolerance * p.spread_ideal[k];
+      for (size_t p = 0; p < 3; ++p) {
+        const StudyParameter& parameter = study.parameters[p];
+        within = within && parameter.spread[k] <= options.tolerance * parameter.spread_ideal[k];
       }
       if (!within) break;
       study.suffices_from = study.num_images[k];

@@ -5,6 +5,7 @@
 // taken instead and calib/ is not read.
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <exception>
 #include <filesystem>
 #include <thread>
@@ -78,9 +79,9 @@ ReportValue LensChoice(const LensModelChoice& lens) {
                                            {"sigma_px", c.sigma_px}});
     }
     choice.emplace_back("criterion",
-                        "residual structure: each candidate solved on all images; residual sigma "
-                        "corrected for the degrees of freedom, rms sqrt(M / (M - P)); the fewest "
-                        "parameters within 10% of the lowest sigma wins");
+                        "residual structure: each candidate solved on all images; going up in "
+                        "parameters, a bigger model is chosen only if its residual drop passes an "
+                        "F-test (extra sum of squares, 1% level); sigma_px = rms sqrt(M / (M - P))");
     choice.emplace_back("candidates", candidates);
   }
   return choice;
@@ -138,20 +139,23 @@ std::vector<NamedImage> ReadCalibImages(const Project& project, const ProgressCa
   return images;
 }
 
-void WriteResidualsPlot(const fs::path& staging_dir, const CalibrationResult& result) {
+// The common part of a report from a solve (fresh or reused), and the
+// residual plot. rms_px is the plain pixel residual per coordinate; mrcal's
+// rms is of WEIGHTED residuals (weight = nominal / estimated mark sigma, up to
+// 4 for sharp marks), so it is reported beside it, not as it.
+CalibrationReport ReportFromSolve(const fs::path& staging_dir, const CalibrationResult& result,
+                                  const UncertaintySummary& uncertainty) {
   Eigen::Matrix2Xd q_px, residual_px;
   ResidualVectors(result, &q_px, &residual_px);
+  const double rms_px =
+      residual_px.cols() > 0 ? std::sqrt(residual_px.squaredNorm() / (2.0 * residual_px.cols())) : 0.0;
   WriteTextFileAtomically(staging_dir / kResidualsPlotName,
                           ResidualsSvg(q_px, residual_px, result.camera.width_px,
-                                       result.camera.height_px, result.rms_px));
-}
-
-// The common part of a report from a solve (fresh or reused).
-CalibrationReport ReportFromSolve(const CalibrationResult& result,
-                                  const UncertaintySummary& uncertainty) {
+                                       result.camera.height_px, rms_px));
   CalibrationReport report;
   report.lens_model = result.camera.lens_model;
-  report.rms_px = result.rms_px;
+  report.rms_px = rms_px;
+  report.extra.emplace_back("weighted_rms", result.rms_px);
   report.images_used = static_cast<int>(result.record.images.size());
   report.extra.emplace_back("intrinsics", Array(result.camera.intrinsics));
   report.extra.emplace_back("image_size_px", ReportValue::Array{result.camera.width_px, result.camera.height_px});
@@ -203,9 +207,7 @@ void CalibrateFromImages(StageContext& context) {
   fs::create_directories(context.staging_dir / "calibration");
   WriteCameraModel(context.staging_dir / kCameraModelName, summary.result.camera);
   WriteSolveRecord(context.staging_dir / kSolveRecordName, summary.result.record);
-  WriteResidualsPlot(context.staging_dir, summary.result);
-
-  CalibrationReport report = ReportFromSolve(summary.result, summary.uncertainty);
+  CalibrationReport report = ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty);
   report.images_rejected = rejected;
   report.extra.emplace_back("source", "calib/");
   ReportValue::Array outliers;
@@ -253,12 +255,10 @@ void ReuseProjectCalibration(StageContext& context, const fs::path& from) {
   fs::create_directories(context.staging_dir / "calibration");
   fs::copy_file(camera_path, context.staging_dir / kCameraModelName, fs::copy_options::overwrite_existing);
   fs::copy_file(record_path, context.staging_dir / kSolveRecordName, fs::copy_options::overwrite_existing);
-  WriteResidualsPlot(context.staging_dir, result);
-
   const CalibrationStageOptions options;
   const UncertaintySummary uncertainty = SummarizeUncertainty(
       record, WorkingDistanceMm(result), options.uncertainty_grid_nx, options.uncertainty_grid_ny);
-  CalibrationReport report = ReportFromSolve(result, uncertainty);
+  CalibrationReport report = ReportFromSolve(context.staging_dir, result, uncertainty);
   report.lens_model = camera.lens_model;
   // The earlier run's rejections, if its report is there.
   const fs::path earlier_report = from / "out" / "report.json";
