@@ -1,11 +1,9 @@
 #include "adapters/project_io/truth_json.h"
 
-#include <fstream>
-#include <sstream>
-#include <system_error>
 
 #include <nlohmann/json.hpp>
 
+#include "adapters/project_io/text_file.h"
 #include "pipeline/core/error.h"
 
 namespace omm {
@@ -319,28 +317,11 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
 }
 
 void WriteTruthJson(const SimulationTruth& truth, const std::filesystem::path& path) {
-  std::filesystem::path tmp = path;
-  tmp += ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << TruthToJson(truth);
-    out.flush();
-    if (!out) throw InputError(path.string(), "cannot write file");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw InputError(path.string(), "cannot write file: " + ec.message());
-  }
+  WriteTextFileAtomically(path, TruthToJson(truth));
 }
 
 SimulationTruth ReadTruthJson(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path.string(), "cannot open truth file");
-  std::stringstream text;
-  text << in.rdbuf();
-  return TruthFromJson(text.str(), path.string());
+  return TruthFromJson(ReadTextFile(path, "truth file not found"), path.string());
 }
 
 }  // namespace omm
