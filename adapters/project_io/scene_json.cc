@@ -1,0 +1,171 @@
+#include "adapters/project_io/scene_json.h"
+
+#include <algorithm>
+
+#include <nlohmann/json.hpp>
+
+#include "adapters/project_io/text_file.h"
+#include "pipeline/core/error.h"
+
+namespace omm {
+namespace {
+
+using nlohmann::json;
+
+json Vec(const Eigen::VectorXd& v) {
+  json out = json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) out.push_back(v[i]);
+  return out;
+}
+
+// Reading: every access names the key path, so a malformed file says where.
+class Reader {
+ public:
+  explicit Reader(std::string where) : where_(std::move(where)) {}
+
+  const json& At(const json& node, const std::string& key, const std::string& path) const {
+    if (!node.is_object() || !node.contains(key)) Fail(path + "." + key, "missing");
+    return node.at(key);
+  }
+  double Number(const json& node, const std::string& key, const std::string& path) const {
+    const json& v = At(node, key, path);
+    if (!v.is_number()) Fail(path + "." + key, "expected a number");
+    return v.get<double>();
+  }
+  const json& Array(const json& node, const std::string& key, const std::string& path) const {
+    const json& v = At(node, key, path);
+    if (!v.is_array()) Fail(path + "." + key, "expected an array");
+    return v;
+  }
+  Eigen::VectorXd Vector(const json& node, const std::string& key, const std::string& path,
+                         int size = -1) const {
+    const json& v = Array(node, key, path);
+    if (size >= 0 && static_cast<int>(v.size()) != size) {
+      Fail(path + "." + key, "expected " + std::to_string(size) + " numbers");
+    }
+    Eigen::VectorXd out(v.size());
+    for (size_t i = 0; i < v.size(); ++i) {
+      if (!v[i].is_number()) Fail(path + "." + key, "expected numbers");
+      out[static_cast<Eigen::Index>(i)] = v[i].get<double>();
+    }
+    return out;
+  }
+  [[noreturn]] void Fail(const std::string& key, const std::string& what) const {
+    throw InputError(where_ + " key '" + key + "'", what);
+  }
+
+ private:
+  std::string where_;
+};
+
+}  // namespace
+
+std::string SceneToJson(const SavedScene& saved) {
+  const PlaneScene& scene = saved.scene;
+  json root;
+  root["format"] = kSceneFormat;
+  root["cam_from_part"] = {{"r", Vec(scene.cam_from_part_r)}, {"t", Vec(scene.cam_from_part_t_mm)}};
+  root["table_sigma_mm"] = saved.table_sigma_mm;
+  json tiles = json::array();
+  for (size_t i = 0; i < scene.table_pos_mm.size(); ++i) {
+    const bool held = std::find(saved.tiles_held_by_prior.begin(), saved.tiles_held_by_prior.end(),
+                                static_cast<int>(i)) != saved.tiles_held_by_prior.end();
+    tiles.push_back({{"image", saved.tile_images.at(i)},
+                     {"commanded_mm", Vec(saved.commanded_table_pos_mm.at(i))},
+                     {"adjusted_mm", Vec(scene.table_pos_mm[i])},
+                     {"held_by_prior", held}});
+  }
+  root["tiles"] = tiles;
+  json plates = json::array();
+  for (const PlatePose& plate : scene.plates) {
+    plates.push_back({{"x_mm", plate.x_mm},
+                      {"y_mm", plate.y_mm},
+                      {"theta_rad", plate.theta_rad},
+                      {"height_mm", plate.height_mm},
+                      {"scale", plate.scale}});
+  }
+  root["plates"] = plates;
+  root["intrinsics"] = Vec(scene.intrinsics);
+  root["rms_px"] = saved.rms_px;
+  if (scene.covariance.size() == 0) {
+    root["covariance"] = nullptr;
+  } else {
+    json values = json::array();
+    for (Eigen::Index r = 0; r < scene.covariance.rows(); ++r) {
+      for (Eigen::Index c = 0; c < scene.covariance.cols(); ++c) values.push_back(scene.covariance(r, c));
+    }
+    root["covariance"] = {{"size", scene.covariance.rows()}, {"values", values}};
+  }
+  return root.dump(2) + "\n";
+}
+
+SavedScene SceneFromJson(const std::string& text, const std::string& where) {
+  const Reader in(where);
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw InputError(where, std::string("not valid JSON: ") + e.what());
+  }
+  const json& format = in.At(root, "format", "");
+  if (!format.is_string() || format.get<std::string>() != kSceneFormat) {
+    in.Fail("format", std::string("expected \"") + kSceneFormat + "\"");
+  }
+  SavedScene saved;
+  PlaneScene& scene = saved.scene;
+  const json& pose = in.At(root, "cam_from_part", "");
+  scene.cam_from_part_r = in.Vector(pose, "r", "cam_from_part", 3);
+  scene.cam_from_part_t_mm = in.Vector(pose, "t", "cam_from_part", 3);
+  saved.table_sigma_mm = in.Number(root, "table_sigma_mm", "");
+  const json& tiles = in.Array(root, "tiles", "");
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    const std::string path = "tiles[" + std::to_string(i) + "]";
+    const json& image = in.At(tiles[i], "image", path);
+    if (!image.is_string()) in.Fail(path + ".image", "expected a string");
+    saved.tile_images.push_back(image.get<std::string>());
+    saved.commanded_table_pos_mm.push_back(in.Vector(tiles[i], "commanded_mm", path, 2));
+    scene.table_pos_mm.push_back(in.Vector(tiles[i], "adjusted_mm", path, 2));
+    const json& held = in.At(tiles[i], "held_by_prior", path);
+    if (!held.is_boolean()) in.Fail(path + ".held_by_prior", "expected true or false");
+    if (held.get<bool>()) saved.tiles_held_by_prior.push_back(static_cast<int>(i));
+  }
+  const json& plates = in.Array(root, "plates", "");
+  for (size_t k = 0; k < plates.size(); ++k) {
+    const std::string path = "plates[" + std::to_string(k) + "]";
+    PlatePose plate;
+    plate.x_mm = in.Number(plates[k], "x_mm", path);
+    plate.y_mm = in.Number(plates[k], "y_mm", path);
+    plate.theta_rad = in.Number(plates[k], "theta_rad", path);
+    plate.height_mm = in.Number(plates[k], "height_mm", path);
+    plate.scale = in.Number(plates[k], "scale", path);
+    scene.plates.push_back(plate);
+  }
+  scene.intrinsics = in.Vector(root, "intrinsics", "");
+  saved.rms_px = in.Number(root, "rms_px", "");
+  const json& covariance = in.At(root, "covariance", "");
+  if (!covariance.is_null()) {
+    const int size = static_cast<int>(in.Number(covariance, "size", "covariance"));
+    const int expected = PlaneSceneCovarianceSize(static_cast<int>(tiles.size()),
+                                                  static_cast<int>(plates.size()),
+                                                  static_cast<int>(scene.intrinsics.size()));
+    if (size != expected) {
+      in.Fail("covariance.size", "expected " + std::to_string(expected) + " for " +
+                                     std::to_string(tiles.size()) + " tiles");
+    }
+    const Eigen::VectorXd values = in.Vector(covariance, "values", "covariance", size * size);
+    scene.covariance = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic,
+                                                      Eigen::RowMajor>>(values.data(), size, size);
+  }
+  return saved;
+}
+
+void WriteSceneJson(const SavedScene& saved, const std::filesystem::path& path) {
+  WriteTextFileAtomically(path, SceneToJson(saved));
+}
+
+SavedScene ReadSceneJson(const std::filesystem::path& path) {
+  return SceneFromJson(ReadTextFile(path, "scene file not found (run `omm mosaic` first)"),
+                       path.string());
+}
+
+}  // namespace omm
