@@ -3,7 +3,7 @@
 // over the whole imager at the working distance (rigid transform fitted,
 // adapters/mrcal/projection_diff.h), the rejected images, the lens-model
 // choice. Each project is rendered once per build tree (tests/sim_cache.h) and
-// calibrated once per test program.
+// calibrated once per test process (ctest runs each TEST in its own).
 #include <map>
 #include <memory>
 
@@ -32,7 +32,7 @@ struct Calibrated {
   double opencv_truth_diff_px = 0.0;
 };
 
-// One calibration per (preset, seed) per test program.
+// One calibration per (preset, seed) per process.
 const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed) {
   static std::map<std::string, std::unique_ptr<Calibrated>> cache;
   std::unique_ptr<Calibrated>& entry = cache[preset + std::to_string(seed)];

@@ -110,12 +110,14 @@ CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& d
   std::vector<Eigen::Matrix2Xd>& previous = *corrections;
   for (int round = 1; round <= options.max_bias_rounds; ++round) {
     std::vector<Eigen::Matrix2Xd> delta;
-    *corrected = CorrectBias(detections, board, result, &delta);
+    std::vector<PlateObservation> round_corrected = CorrectBias(detections, board, result, &delta);
+    CalibrationResult next = CalibrateCamera(board, round_corrected, solve_options);
+    // A failed re-solve keeps the last consistent (observations, solve) pair.
+    if (!next.usable) break;
     CompareCorrections(previous, delta, bias);
     bias->rounds = round;
-    CalibrationResult next = CalibrateCamera(board, *corrected, solve_options);
+    *corrected = std::move(round_corrected);
     previous = std::move(delta);
-    if (!next.usable) break;
     result = std::move(next);
     if (bias->last_change_px < options.bias_settle_px) break;
   }
