@@ -23,7 +23,9 @@ testing::CommandResult Omm(const std::string& arguments) {
 }
 
 // (Built by append: GCC 12's -Wrestrict misfires on "'" + std::string at -O3.)
-std::string Quoted(const fs::path& path) { return std::string("'").append(path.string()).append("'"); }
+std::string Quoted(const fs::path& path) {
+  return std::string("'").append(path.string()).append("'");
+}
 
 const ReportValue* Member(const ReportObject& object, const std::string& name) {
   for (const auto& [key, value] : object) {

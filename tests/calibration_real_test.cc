@@ -56,7 +56,8 @@ TEST(CalibrationOnRealImages, OpenCvChessboard9x6AgreesWithOpenCvWithinOurUncert
   const OpenCvCalibration opencv = OpenCvCalibrate(pixels, names, board, opencv_options);
   ASSERT_TRUE(opencv.usable) << opencv.brief;
   std::cout << "ours: " << ours.brief << "\n  " << ours.result.camera.intrinsics.transpose()
-            << "\nOpenCV: " << opencv.brief << "\n  " << opencv.camera.intrinsics.transpose() << "\n";
+            << "\nOpenCV: " << opencv.brief << "\n  " << opencv.camera.intrinsics.transpose()
+            << "\n";
 
   const auto uncertainty = CalibrationUncertainty::Compute(ours.result.record);
   ASSERT_TRUE(uncertainty);

@@ -60,12 +60,12 @@ const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed) {
                                              entry->sim.truth.camera.model, entry->distance_mm);
     entry->opencv_truth_diff_px =
         ProjectionDiffRms(entry->opencv.camera, entry->sim.truth.camera.model, entry->distance_mm);
-    std::cout << preset << "-" << seed << ": " << entry->summary.brief << "\n  lens: "
-              << entry->summary.lens.why << "\n  bias rounds " << entry->summary.bias.rounds
-              << ", rms " << entry->summary.bias.rms_px << " px, max " << entry->summary.bias.max_px
-              << " px\n  vs truth at " << entry->distance_mm << " mm: " << entry->truth_diff_px
-              << " px rms; " << entry->summary.total_seconds << " s (detection "
-              << entry->summary.detection_seconds << " s, lens choice "
+    std::cout << preset << "-" << seed << ": " << entry->summary.brief
+              << "\n  lens: " << entry->summary.lens.why << "\n  bias rounds "
+              << entry->summary.bias.rounds << ", rms " << entry->summary.bias.rms_px << " px, max "
+              << entry->summary.bias.max_px << " px\n  vs truth at " << entry->distance_mm
+              << " mm: " << entry->truth_diff_px << " px rms; " << entry->summary.total_seconds
+              << " s (detection " << entry->summary.detection_seconds << " s, lens choice "
               << entry->summary.lens_choice_seconds << " s)\n  OpenCV: " << entry->opencv.brief
               << "; vs truth " << entry->opencv_truth_diff_px << " px rms ("
               << entry->opencv.detection_seconds + entry->opencv.solve_seconds << " s)\n";
@@ -86,7 +86,8 @@ double FixedModelTruthDiff(const Calibrated& c, const std::string& lens_model) {
   options.pixel_pitch_um = c.project.camera.pixel_pitch_um;
   options.width_px = c.project.image_width_px;
   options.height_px = c.project.image_height_px;
-  const CalibrationResult result = CalibrateCamera(*c.project.board, c.summary.observations, options);
+  const CalibrationResult result =
+      CalibrateCamera(*c.project.board, c.summary.observations, options);
   EXPECT_TRUE(result.usable) << result.brief;
   const double diff = ProjectionDiffRms(result.camera, c.sim.truth.camera.model, c.distance_mm);
   std::cout << "  fixed " << lens_model << ": rms " << result.rms_px << " px, " << diff
@@ -152,9 +153,11 @@ TEST(CalibrationOnSimulatedProjects, ImageCountStudyFindsWhereMoreImagesOnlyAver
   const Calibrated& c = Calibrate("demo", 1);
   const auto uncertainty = CalibrationUncertainty::Compute(c.summary.result.record);
   ASSERT_TRUE(uncertainty);
-  const Eigen::VectorXd sigma = uncertainty->IntrinsicsCovariance().diagonal().cwiseMax(0.0).cwiseSqrt();
-  const ImageCountStudy study = StudyImageCount(c.summary.observations, *c.project.board, c.project.camera,
-                                                c.summary.result.camera, sigma, {});
+  const Eigen::VectorXd sigma =
+      uncertainty->IntrinsicsCovariance().diagonal().cwiseMax(0.0).cwiseSqrt();
+  const ImageCountStudy study =
+      StudyImageCount(c.summary.observations, *c.project.board, c.project.camera,
+                      c.summary.result.camera, sigma, {});
   ASSERT_TRUE(study.usable) << study.brief;
   std::cout << study.brief << "\n";
   ASSERT_EQ(study.num_images.front(), 3);

@@ -20,7 +20,8 @@ namespace fs = std::filesystem;
 class FileLock {
  public:
   explicit FileLock(const fs::path& path) : fd_(open(path.c_str(), O_CREAT | O_RDWR, 0644)) {
-    if (fd_ < 0 || flock(fd_, LOCK_EX) != 0) throw std::runtime_error("cannot lock " + path.string());
+    if (fd_ < 0 || flock(fd_, LOCK_EX) != 0)
+      throw std::runtime_error("cannot lock " + path.string());
   }
   ~FileLock() {
     if (fd_ >= 0) close(fd_);  // closing releases the lock

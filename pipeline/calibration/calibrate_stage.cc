@@ -148,7 +148,8 @@ LensCandidate ScoreCandidate(const std::string& lens_model, const CalibrationRes
                  (result.record.problem.optimize_calobject_warp ? 2 : 0);
   const int dof = c.num_measurements - c.num_states;
   c.usable = dof > 0;
-  c.sigma_px = dof > 0 ? result.rms_px * std::sqrt(static_cast<double>(c.num_measurements) / dof) : 0.0;
+  c.sigma_px =
+      dof > 0 ? result.rms_px * std::sqrt(static_cast<double>(c.num_measurements) / dof) : 0.0;
   return c;
 }
 
@@ -185,7 +186,8 @@ void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
       for (int m = 0; m < warped.cols(); ++m) {
         const double u = half_x > 0 ? warped(0, m) / half_x : 0.0;
         const double v = half_y > 0 ? warped(1, m) / half_y : 0.0;
-        warped(2, m) += result.calobject_warp(0) * (1 - u * u) + result.calobject_warp(1) * (1 - v * v);
+        warped(2, m) +=
+            result.calobject_warp(0) * (1 - u * u) + result.calobject_warp(1) * (1 - v * v);
       }
       p_cam = result.cam_from_plate[i] * warped;
     }
@@ -212,10 +214,12 @@ std::string CalibrationStageOptions::Check() const {
   if (max_bias_rounds < 0) what << "max_bias_rounds must be >= 0; ";
   if (!(bias_settle_px > 0)) what << "bias_settle_px must be > 0; ";
   if (splined_nx < 4) what << "splined_nx must be >= 4; ";
-  if (!(splined_fov_margin > 0.5 && splined_fov_margin <= 1.5)) what << "splined_fov_margin must be in (0.5, 1.5]; ";
+  if (!(splined_fov_margin > 0.5 && splined_fov_margin <= 1.5))
+    what << "splined_fov_margin must be in (0.5, 1.5]; ";
   if (!(lens_choice_significance_z > 0)) what << "lens_choice_significance_z must be > 0; ";
   if (min_images < 3) what << "min_images must be >= 3; ";
-  if (uncertainty_grid_nx < 2 || uncertainty_grid_ny < 2) what << "uncertainty grid must be >= 2 x 2; ";
+  if (uncertainty_grid_nx < 2 || uncertainty_grid_ny < 2)
+    what << "uncertainty grid must be >= 2 x 2; ";
   std::string text = what.str();
   if (!text.empty()) text.resize(text.size() - 2);
   return text;
@@ -261,16 +265,18 @@ std::string SplinedModelFor(const CameraModel& camera,
     // A pinhole guess if the working camera cannot unproject the marks.
     half_angle_rad = std::atan(0.5 * camera.width_px / camera.intrinsics(0));
   }
-  const int fov_x_deg =
-      std::max(1, static_cast<int>(std::floor(2.0 * half_angle_rad * fov_margin * 180.0 / std::numbers::pi)));
-  const int ny = static_cast<int>(std::ceil(nx * static_cast<double>(camera.height_px) / camera.width_px));
+  const int fov_x_deg = std::max(1, static_cast<int>(std::floor(2.0 * half_angle_rad * fov_margin *
+                                                                180.0 / std::numbers::pi)));
+  const int ny =
+      static_cast<int>(std::ceil(nx * static_cast<double>(camera.height_px) / camera.width_px));
   return fmt::format("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx={}_Ny={}_fov_x_deg={}", nx,
                      std::max(ny, 4), fov_x_deg);
 }
 
 double WorkingDistanceMm(const CalibrationResult& result) {
   std::vector<double> distances;
-  for (const Eigen::Isometry3d& pose : result.cam_from_plate) distances.push_back(pose.translation().norm());
+  for (const Eigen::Isometry3d& pose : result.cam_from_plate)
+    distances.push_back(pose.translation().norm());
   return Median(distances);
 }
 
@@ -305,11 +311,11 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   CalibrationStageSummary summary;
   summary.detections = detections;
 
-  const int num_usable = static_cast<int>(
-      std::count_if(detections.begin(), detections.end(), [](const PlateObservation& o) { return o.usable; }));
+  const int num_usable = static_cast<int>(std::count_if(
+      detections.begin(), detections.end(), [](const PlateObservation& o) { return o.usable; }));
   if (num_usable < options.min_images) {
-    summary.brief = fmt::format("{} usable calibration image(s) of {}, need at least {}", num_usable,
-                                detections.size(), options.min_images);
+    summary.brief = fmt::format("{} usable calibration image(s) of {}, need at least {}",
+                                num_usable, detections.size(), options.min_images);
     summary.total_seconds = SecondsSince(start);
     return summary;
   }
@@ -317,7 +323,8 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   // Working model for the bias rounds.
   const bool forced = camera.lens_model.has_value();
   const std::string working_model = forced ? *camera.lens_model : "LENSMODEL_OPENCV8";
-  CalibrationOptions solve_options = SolveOptions(camera, width_px, height_px, working_model, options);
+  CalibrationOptions solve_options =
+      SolveOptions(camera, width_px, height_px, working_model, options);
   if (const std::string what = solve_options.Check(); !what.empty()) {
     throw InputError("project.yaml: camera", what);
   }
@@ -371,7 +378,8 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
           c.lens_model, c.num_params, c.sigma_px, options.lens_choice_significance_z);
       for (const LensCandidate& other : summary.lens.candidates) {
         if (&other != &c) {
-          summary.lens.why += fmt::format("; {} ({}) {:.4f} px", other.lens_model, other.num_params, other.sigma_px);
+          summary.lens.why += fmt::format("; {} ({}) {:.4f} px", other.lens_model, other.num_params,
+                                          other.sigma_px);
         }
       }
       if (c.lens_model != working_model) result = std::move(solved[chosen]);
@@ -398,30 +406,36 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   }
 
   summary.observations = std::move(corrected);
-  summary.uncertainty = SummarizeUncertainty(result.record, WorkingDistanceMm(result),
-                                             options.uncertainty_grid_nx, options.uncertainty_grid_ny);
+  summary.uncertainty =
+      SummarizeUncertainty(result.record, WorkingDistanceMm(result), options.uncertainty_grid_nx,
+                           options.uncertainty_grid_ny);
   summary.outliers = ListOutliers(result, board);
   ResidualVectors(result, &summary.residual_q_px, &summary.residual_px);
   summary.usable = true;
   const int num_rejected = static_cast<int>(detections.size()) - num_usable;
   const Eigen::Index num_residuals = summary.residual_px.cols();
-  const double rms_px =
-      num_residuals > 0 ? std::sqrt(summary.residual_px.squaredNorm() / (2.0 * num_residuals)) : 0.0;
+  const double rms_px = num_residuals > 0
+                            ? std::sqrt(summary.residual_px.squaredNorm() / (2.0 * num_residuals))
+                            : 0.0;
   summary.brief = fmt::format(
-      "{}: {} image(s) used, {} rejected, residual rms {:.4f} px (weighted {:.3f}), {} outlier mark(s)",
-      result.camera.lens_model, num_usable, num_rejected, rms_px, result.rms_px, summary.outliers.size());
+      "{}: {} image(s) used, {} rejected, residual rms {:.4f} px (weighted {:.3f}), {} outlier "
+      "mark(s)",
+      result.camera.lens_model, num_usable, num_rejected, rms_px, result.rms_px,
+      summary.outliers.size());
   if (summary.uncertainty.available) {
-    summary.brief += fmt::format(", projection 1-sigma {:.4f} px typical, {:.4f} px worst at {:.0f} mm",
-                                 summary.uncertainty.typical_px, summary.uncertainty.worst_px,
-                                 summary.uncertainty.distance_mm);
+    summary.brief +=
+        fmt::format(", projection 1-sigma {:.4f} px typical, {:.4f} px worst at {:.0f} mm",
+                    summary.uncertainty.typical_px, summary.uncertainty.worst_px,
+                    summary.uncertainty.distance_mm);
   }
   summary.result = std::move(result);
   summary.total_seconds = SecondsSince(start);
   return summary;
 }
 
-CalibrationStageSummary RunCalibration(const std::vector<NamedImage>& images, const BoardSpec& board,
-                                       const CameraSpec& camera, const CalibrationStageOptions& options) {
+CalibrationStageSummary RunCalibration(const std::vector<NamedImage>& images,
+                                       const BoardSpec& board, const CameraSpec& camera,
+                                       const CalibrationStageOptions& options) {
   if (const std::string what = options.Check(); !what.empty()) {
     throw InputError("calibration stage options", what);
   }

@@ -65,9 +65,9 @@ struct CalibrationStageOptions {
   double bias_settle_px = 0.001;  // stop when no correction moved more than this, px
 
   // Lens-model choice (only when camera.lens_model is not given).
-  bool choose_lens_model = true;  // false: LENSMODEL_OPENCV8 without cross-validation
-  int splined_nx = 10;               // knots across (Ny from the imager's aspect ratio)
-  double splined_fov_margin = 0.9;   // the spline's fov_x is the marks' horizontal extent times this
+  bool choose_lens_model = true;    // false: LENSMODEL_OPENCV8 without cross-validation
+  int splined_nx = 10;              // knots across (Ny from the imager's aspect ratio)
+  double splined_fov_margin = 0.9;  // the spline's fov_x is the marks' horizontal extent times this
   // A bigger model is chosen only if its residuals drop beyond chance at this
   // one-sided normal quantile (2.326: 1% false choices).
   double lens_choice_significance_z = 2.326;
@@ -95,7 +95,7 @@ struct LensCandidate {
   std::string lens_model;
   int num_params = 0;  // intrinsics
   bool usable = false;
-  double rms_px = 0.0;    // mrcal's rms reprojection error
+  double rms_px = 0.0;       // mrcal's rms reprojection error
   int num_measurements = 0;  // M: 2 x inlier marks
   int num_states = 0;        // P: intrinsics + 6 per plate (+ warp)
   double sigma_px = 0.0;     // rms sqrt(M / (M - P))
@@ -104,25 +104,25 @@ struct LensCandidate {
 // Why the lens model is what it is.
 struct LensModelChoice {
   std::string lens_model;
-  bool forced = false;  // the user's camera.lens_model
+  bool forced = false;                    // the user's camera.lens_model
   std::vector<LensCandidate> candidates;  // when the stage chose
-  std::string why;  // one line for the report
+  std::string why;                        // one line for the report
 };
 
 struct BiasCorrectionSummary {
-  int rounds = 0;              // correction + re-solve rounds run
-  double rms_px = 0.0;         // size of the final corrections over all observed marks
+  int rounds = 0;       // correction + re-solve rounds run
+  double rms_px = 0.0;  // size of the final corrections over all observed marks
   double max_px = 0.0;
   double last_change_px = 0.0;  // largest change of a correction in the last round
 };
 
 struct UncertaintySummary {
   bool available = false;
-  std::string why_not;                 // when !available
-  double distance_mm = 0.0;            // where it was evaluated (range along the ray)
-  double typical_px = 0.0;             // median over the imager, worst-direction stdev
-  double worst_px = 0.0;               // max over the imager
-  double observed_sigma_px = 0.0;      // input noise estimated from the residuals
+  std::string why_not;             // when !available
+  double distance_mm = 0.0;        // where it was evaluated (range along the ray)
+  double typical_px = 0.0;         // median over the imager, worst-direction stdev
+  double worst_px = 0.0;           // max over the imager
+  double observed_sigma_px = 0.0;  // input noise estimated from the residuals
 };
 
 struct MarkOutlier {
@@ -198,7 +198,7 @@ void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
 double WorkingDistanceMm(const CalibrationResult& result);
 
 // The uncertainty summary of a finished solve at `distance_mm`.
-UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distance_mm,
-                                        int grid_nx, int grid_ny);
+UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distance_mm, int grid_nx,
+                                        int grid_ny);
 
 }  // namespace omm

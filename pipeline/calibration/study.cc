@@ -14,9 +14,8 @@ namespace omm {
 namespace {
 
 // mrcal's parameter order of the LENSMODEL_OPENCVn models.
-constexpr const char* kOpencvNames[] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2",
-                                        "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4",
-                                        "taux", "tauy"};
+constexpr const char* kOpencvNames[] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2",   "k3",
+                                        "k4", "k5", "k6", "s1", "s2", "s3", "s4", "taux", "tauy"};
 
 double StdDev(const std::vector<double>& values) {
   if (values.size() < 2) return 0.0;
@@ -62,15 +61,15 @@ ImageCountStudy StudyImageCount(const std::vector<PlateObservation>& observation
   std::vector<int> indices = {0, 2, 3};
   const bool parametric = camera.lens_model.rfind("LENSMODEL_OPENCV", 0) == 0;
   if (parametric) {
-    const int num_distortions = std::min<int>(static_cast<int>(camera.intrinsics.size()) - 4,
-                                              options.max_distortion_terms);
+    const int num_distortions =
+        std::min<int>(static_cast<int>(camera.intrinsics.size()) - 4, options.max_distortion_terms);
     for (int k = 0; k < num_distortions; ++k) indices.push_back(4 + k);
   }
   for (int index : indices) {
     StudyParameter parameter;
     parameter.index = index;
     parameter.name = index < static_cast<int>(std::size(kOpencvNames)) ? kOpencvNames[index]
-                                                                        : fmt::format("p{}", index);
+                                                                       : fmt::format("p{}", index);
     if (full_intrinsics_sigma.size() > index) parameter.full_sigma = full_intrinsics_sigma(index);
     study.parameters.push_back(parameter);
   }
@@ -141,11 +140,11 @@ ImageCountStudy StudyImageCount(const std::vector<PlateObservation>& observation
   }
   study.usable = true;
   study.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  study.brief =
-      study.suffices_from > 0
-          ? fmt::format("{} images suffice ({} usable; {} subsets per size, {:.1f} s)",
-                        study.suffices_from, n, options.num_subsets, study.seconds)
-          : fmt::format("no subset size met the rule ({} usable images, {:.1f} s)", n, study.seconds);
+  study.brief = study.suffices_from > 0
+                    ? fmt::format("{} images suffice ({} usable; {} subsets per size, {:.1f} s)",
+                                  study.suffices_from, n, options.num_subsets, study.seconds)
+                    : fmt::format("no subset size met the rule ({} usable images, {:.1f} s)", n,
+                                  study.seconds);
   return study;
 }
 

@@ -34,20 +34,20 @@
 namespace omm {
 
 struct ImageCountStudyOptions {
-  int min_images = 3;     // smallest subset size l (mrcal needs >= 2; 2 is hopeless for OPENCV8)
-  int num_subsets = 10;   // random subsets per l
+  int min_images = 3;    // smallest subset size l (mrcal needs >= 2; 2 is hopeless for OPENCV8)
+  int num_subsets = 10;  // random subsets per l
   std::uint32_t seed = 1;
-  double tolerance = 1.55;  // spread within this x spread_ideal(l)
+  double tolerance = 1.55;       // spread within this x spread_ideal(l)
   int max_distortion_terms = 8;  // report at most this many (splined models: none)
 
   std::string Check() const;
 };
 
 struct StudyParameter {
-  std::string name;                 // "fx", "cx", "cy", "k1", ...
-  int index = 0;                    // in the intrinsics vector
-  double full_sigma = 0.0;          // the full solve's 1-sigma (px or unitless)
-  std::vector<double> spread;       // per l (parallel to ImageCountStudy::num_images)
+  std::string name;                  // "fx", "cx", "cy", "k1", ...
+  int index = 0;                     // in the intrinsics vector
+  double full_sigma = 0.0;           // the full solve's 1-sigma (px or unitless)
+  std::vector<double> spread;        // per l (parallel to ImageCountStudy::num_images)
   std::vector<double> spread_ideal;  // sigma_N sqrt(N / l - 1)
 };
 
@@ -55,11 +55,11 @@ struct ImageCountStudy {
   bool usable = false;
   std::string brief;
   std::string lens_model;
-  std::vector<int> num_images;      // l
-  std::vector<int> num_solved;      // subsets that solved, per l
+  std::vector<int> num_images;  // l
+  std::vector<int> num_solved;  // subsets that solved, per l
   std::vector<StudyParameter> parameters;
-  int suffices_from = 0;            // the rule's l (0 if never met)
-  std::string rule;                 // the rule in words, for the report
+  int suffices_from = 0;  // the rule's l (0 if never met)
+  std::string rule;       // the rule in words, for the report
   double seconds = 0.0;
 };
 

@@ -78,10 +78,11 @@ ReportValue LensChoice(const LensModelChoice& lens) {
                                            {"num_states", c.num_states},
                                            {"sigma_px", c.sigma_px}});
     }
-    choice.emplace_back("criterion",
-                        "residual structure: each candidate solved on all images; going up in "
-                        "parameters, a bigger model is chosen only if its residual drop passes an "
-                        "F-test (extra sum of squares, 1% level); sigma_px = rms sqrt(M / (M - P))");
+    choice.emplace_back(
+        "criterion",
+        "residual structure: each candidate solved on all images; going up in "
+        "parameters, a bigger model is chosen only if its residual drop passes an "
+        "F-test (extra sum of squares, 1% level); sigma_px = rms sqrt(M / (M - P))");
     choice.emplace_back("candidates", candidates);
   }
   return choice;
@@ -147,18 +148,20 @@ CalibrationReport ReportFromSolve(const fs::path& staging_dir, const Calibration
                                   const UncertaintySummary& uncertainty) {
   Eigen::Matrix2Xd q_px, residual_px;
   ResidualVectors(result, &q_px, &residual_px);
-  const double rms_px =
-      residual_px.cols() > 0 ? std::sqrt(residual_px.squaredNorm() / (2.0 * residual_px.cols())) : 0.0;
-  WriteTextFileAtomically(staging_dir / kResidualsPlotName,
-                          ResidualsSvg(q_px, residual_px, result.camera.width_px,
-                                       result.camera.height_px, rms_px));
+  const double rms_px = residual_px.cols() > 0
+                            ? std::sqrt(residual_px.squaredNorm() / (2.0 * residual_px.cols()))
+                            : 0.0;
+  WriteTextFileAtomically(
+      staging_dir / kResidualsPlotName,
+      ResidualsSvg(q_px, residual_px, result.camera.width_px, result.camera.height_px, rms_px));
   CalibrationReport report;
   report.lens_model = result.camera.lens_model;
   report.rms_px = rms_px;
   report.extra.emplace_back("weighted_rms", result.rms_px);
   report.images_used = static_cast<int>(result.record.images.size());
   report.extra.emplace_back("intrinsics", Array(result.camera.intrinsics));
-  report.extra.emplace_back("image_size_px", ReportValue::Array{result.camera.width_px, result.camera.height_px});
+  report.extra.emplace_back("image_size_px",
+                            ReportValue::Array{result.camera.width_px, result.camera.height_px});
   report.extra.emplace_back("per_image", PerImage(result));
   report.extra.emplace_back("num_outliers", result.num_outliers);
   report.extra.emplace_back("projection_uncertainty", Uncertainty(uncertainty));
@@ -173,8 +176,9 @@ void RunStudy(StageContext& context, const CalibrationStageSummary& summary) {
     sigma = uncertainty->IntrinsicsCovariance().diagonal().cwiseMax(0.0).cwiseSqrt();
   }
   spdlog::info("calibrate: image-count study with {}", summary.result.camera.lens_model);
-  const ImageCountStudy study = StudyImageCount(summary.observations, *project.board, project.camera,
-                                                summary.result.camera, sigma, ImageCountStudyOptions());
+  const ImageCountStudy study =
+      StudyImageCount(summary.observations, *project.board, project.camera, summary.result.camera,
+                      sigma, ImageCountStudyOptions());
   spdlog::info("calibrate: study: {}", study.brief);
   WriteTextFileAtomically(context.staging_dir / kStudyPlotName, StudySvg(study));
   context.report.calibration->extra.emplace_back("study", StudyReport(study));
@@ -184,30 +188,35 @@ void CalibrateFromImages(StageContext& context) {
   const Project& project = context.project;
   if (!project.board) throw InputError((project.dir / "project.yaml").string(), "board: missing");
   if (project.calib_images.empty()) {
-    throw InputError((project.dir / "calib").string(), "no calibration images (and no calibration.from)");
+    throw InputError((project.dir / "calib").string(),
+                     "no calibration images (and no calibration.from)");
   }
   const std::vector<NamedImage> images = ReadCalibImages(project, context.progress);
   CalibrationStageOptions options;
-  const CalibrationStageSummary summary = RunCalibration(images, *project.board, project.camera, options);
+  const CalibrationStageSummary summary =
+      RunCalibration(images, *project.board, project.camera, options);
 
   std::vector<RejectedImage> rejected;
   for (const PlateObservation& o : summary.detections) {
     if (!o.usable) rejected.push_back({o.image, o.why_rejected});
   }
-  for (const RejectedImage& r : rejected) spdlog::info("calibrate: rejected {}: {}", r.image, r.why);
+  for (const RejectedImage& r : rejected)
+    spdlog::info("calibrate: rejected {}: {}", r.image, r.why);
   if (!summary.usable) {
     std::string why = summary.brief;
     for (const RejectedImage& r : rejected) why += fmt::format("; {}: {}", r.image, r.why);
     throw StageFailedError(Stage::kCalibrate, why);
   }
   spdlog::info("calibrate: {}", summary.lens.why);
-  spdlog::info("calibrate: {} ({:.2f} s: detection {:.2f} s, lens-model choice {:.2f} s)", summary.brief,
-               summary.total_seconds, summary.detection_seconds, summary.lens_choice_seconds);
+  spdlog::info("calibrate: {} ({:.2f} s: detection {:.2f} s, lens-model choice {:.2f} s)",
+               summary.brief, summary.total_seconds, summary.detection_seconds,
+               summary.lens_choice_seconds);
 
   fs::create_directories(context.staging_dir / "calibration");
   WriteCameraModel(context.staging_dir / kCameraModelName, summary.result.camera);
   WriteSolveRecord(context.staging_dir / kSolveRecordName, summary.result.record);
-  CalibrationReport report = ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty);
+  CalibrationReport report =
+      ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty);
   report.images_rejected = rejected;
   report.extra.emplace_back("source", "calib/");
   ReportValue::Array outliers;
@@ -219,15 +228,15 @@ void CalibrateFromImages(StageContext& context) {
   }
   report.extra.emplace_back("outliers", outliers);
   report.extra.emplace_back("lens_model_choice", LensChoice(summary.lens));
-  report.extra.emplace_back(
-      "perspective_bias_correction",
-      ReportObject{{"rounds", summary.bias.rounds},
-                   {"rms_px", summary.bias.rms_px},
-                   {"max_px", summary.bias.max_px},
-                   {"last_change_px", summary.bias.last_change_px}});
-  report.extra.emplace_back("seconds", ReportObject{{"detection", summary.detection_seconds},
-                                                    {"lens_model_choice", summary.lens_choice_seconds},
-                                                    {"total", summary.total_seconds}});
+  report.extra.emplace_back("perspective_bias_correction",
+                            ReportObject{{"rounds", summary.bias.rounds},
+                                         {"rms_px", summary.bias.rms_px},
+                                         {"max_px", summary.bias.max_px},
+                                         {"last_change_px", summary.bias.last_change_px}});
+  report.extra.emplace_back("seconds",
+                            ReportObject{{"detection", summary.detection_seconds},
+                                         {"lens_model_choice", summary.lens_choice_seconds},
+                                         {"total", summary.total_seconds}});
   report.extra.emplace_back("brief", summary.brief);
   context.report.calibration = std::move(report);
   if (context.calibration_study) RunStudy(context, summary);
@@ -253,8 +262,10 @@ void ReuseProjectCalibration(StageContext& context, const fs::path& from) {
     throw InputError(record_path.string(), "the solve record cannot be evaluated: " + result.brief);
   }
   fs::create_directories(context.staging_dir / "calibration");
-  fs::copy_file(camera_path, context.staging_dir / kCameraModelName, fs::copy_options::overwrite_existing);
-  fs::copy_file(record_path, context.staging_dir / kSolveRecordName, fs::copy_options::overwrite_existing);
+  fs::copy_file(camera_path, context.staging_dir / kCameraModelName,
+                fs::copy_options::overwrite_existing);
+  fs::copy_file(record_path, context.staging_dir / kSolveRecordName,
+                fs::copy_options::overwrite_existing);
   const CalibrationStageOptions options;
   const UncertaintySummary uncertainty = SummarizeUncertainty(
       record, WorkingDistanceMm(result), options.uncertainty_grid_nx, options.uncertainty_grid_ny);
@@ -278,9 +289,10 @@ void ReuseCameraModel(StageContext& context, const fs::path& from) {
   const Project& project = context.project;
   if (project.image_width_px > 0 &&
       (camera.width_px != project.image_width_px || camera.height_px != project.image_height_px)) {
-    throw InputError(from.string(), fmt::format("imager {}x{} px, but the project's images are {}x{} px",
-                                                camera.width_px, camera.height_px,
-                                                project.image_width_px, project.image_height_px));
+    throw InputError(
+        from.string(),
+        fmt::format("imager {}x{} px, but the project's images are {}x{} px", camera.width_px,
+                    camera.height_px, project.image_width_px, project.image_height_px));
   }
   fs::copy_file(from, context.staging_dir / kCameraModelName, fs::copy_options::overwrite_existing);
   CalibrationReport report;
