@@ -148,7 +148,17 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
                          options.calibration_study};
     for (const Stage stage : options.stages) {
       spdlog::info("{}: starting", StageName(stage));
-      options.runner(stage, context);
+      try {
+        options.runner(stage, context);
+      } catch (const StageNotBuiltError&) {
+        // The stages before it are complete and consistent: keep them, so a
+        // user (and the demo) sees what the built part of the pipeline gives.
+        if (!summary.stages_run.empty()) {
+          WriteReportJson(staging_dir / kReportName, report);
+          Commit(staging_dir, out_dir);
+        }
+        throw;
+      }
       spdlog::info("{}: done", StageName(stage));
       summary.stages_run.push_back(stage);
     }
