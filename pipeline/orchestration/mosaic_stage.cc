@@ -1,8 +1,240 @@
-// Runner of the mosaic stage (see stage.h).
+// Runner of the mosaic stage (see stage.h): the calibrated camera and the
+// tiles in, RegisterTiles and Orthorectify (pipeline/mosaic), and out
+// mosaic.png (16 bit), mosaic/scene.json (the adjusted scene for the measure
+// stage), colmap/ (the scene as a COLMAP sparse model) and report.mosaic.
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "adapters/colmap/colmap_model.h"
+#include "adapters/mrcal/cameramodel_io.h"
+#include "adapters/opencv/image_io.h"
+#include "adapters/project_io/scene_json.h"
+#include "pipeline/core/error.h"
+#include "pipeline/mosaic/ortho_file.h"
+#include "pipeline/mosaic/orthorectify.h"
+#include "pipeline/mosaic/register_tiles.h"
 #include "pipeline/orchestration/stage.h"
 
 namespace omm {
+namespace {
 
-void RunMosaicStage(StageContext& /*context*/) { throw StageNotBuiltError(Stage::kMosaic); }
+namespace fs = std::filesystem;
+
+constexpr const char* kCameraModelName = "camera.cameramodel";
+constexpr const char* kMosaicName = "mosaic.png";
+constexpr const char* kSceneName = "mosaic/scene.json";
+constexpr const char* kColmapDirName = "colmap";
+constexpr int kMosaicBitDepth = 16;
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.y()}; }
+
+// The calibrated camera: this run's or an earlier one's out/camera.cameramodel,
+// else the one calibration.from names.
+fs::path CameraModelPath(const StageContext& context) {
+  const fs::path staged = context.Input(kCameraModelName);
+  if (!staged.empty()) return staged;
+  const Project& project = context.project;
+  if (project.calibration_from) {
+    const CalibrationSource& source = *project.calibration_from;
+    const fs::path from = source.kind == CalibrationSource::Kind::kCameraModel
+                              ? source.path
+                              : source.path / "out" / kCameraModelName;
+    if (fs::exists(from)) return from;
+  }
+  throw InputError((context.out_dir / kCameraModelName).string(),
+                   "no calibrated camera: run `omm calibrate` (or `omm run`) first, or set "
+                   "calibration.from in project.yaml");
+}
+
+std::vector<ImageF> ReadTiles(const Project& project, const CameraModel& camera,
+                              const ProgressCallback& progress) {
+  std::vector<ImageF> tiles;
+  tiles.reserve(project.tiles.size());
+  for (const TilePosition& tile : project.tiles) {
+    if (progress) progress(static_cast<int>(tiles.size()), static_cast<int>(project.tiles.size()),
+                           "read tiles/" + tile.image);
+    GrayImage image = ReadGrayImage(project.TilePath(tile.image));
+    if (image.width() != camera.width_px || image.height() != camera.height_px) {
+      throw InputError(project.TilePath(tile.image).string(),
+                       fmt::format("{}x{} px, but the calibrated camera's imager is {}x{} px",
+                                   image.width(), image.height(), camera.width_px,
+                                   camera.height_px));
+    }
+    tiles.push_back(std::move(image.pixels));
+  }
+  return tiles;
+}
+
+// Why a tile kept no feature: its pairs' fates.
+std::string WhyHeld(const TileRegistration& registration, int tile) {
+  int num_pairs = 0, num_usable = 0;
+  for (const PairRegistration& pair : registration.pairs) {
+    if (pair.tile_a != tile && pair.tile_b != tile) continue;
+    ++num_pairs;
+    if (pair.usable) ++num_usable;
+  }
+  if (num_pairs == 0) return "no other tile is predicted to overlap it: held by its table position alone";
+  if (num_usable == 0) {
+    return fmt::format("none of its {} overlapping pairs had enough good matches: held by its "
+                       "table position alone", num_pairs);
+  }
+  return "its matches were all dropped as outliers: held by its table position alone";
+}
+
+ReportValue PairsReport(const Project& project, const TileRegistration& registration) {
+  ReportValue::Array rows;
+  for (const PairRegistration& pair : registration.pairs) {
+    rows.emplace_back(ReportObject{
+        {"images", ReportValue::Array{project.tiles[pair.tile_a].image, project.tiles[pair.tile_b].image}},
+        {"predicted_overlap", pair.predicted_overlap},
+        {"candidates", pair.num_candidates},
+        {"matched", pair.num_matched},
+        {"inliers", pair.num_inliers},
+        {"tag_corners", pair.num_tag_corners},
+        {"used", pair.num_used},
+        {"rms_px", pair.rms_px},
+        {"usable", pair.usable}});
+  }
+  return rows;
+}
+
+ReportValue TilesReport(const Project& project, const TileRegistration& registration,
+                        const OrthoSummary& ortho) {
+  ReportValue::Array rows;
+  for (size_t i = 0; i < project.tiles.size(); ++i) {
+    const bool held = std::find(registration.tiles_held_by_prior.begin(),
+                                registration.tiles_held_by_prior.end(),
+                                static_cast<int>(i)) != registration.tiles_held_by_prior.end();
+    ReportObject row{{"image", project.tiles[i].image},
+                     {"commanded_mm", Pair(project.tiles[i].table_pos_mm)},
+                     {"adjusted_minus_commanded_mm", Pair(registration.table_adjustment_mm[i])},
+                     {"held_by_prior", held}};
+    if (i < ortho.exposure.tiles.size()) {
+      row.emplace_back("exposure_gain", ortho.exposure.tiles[i].gain);
+      row.emplace_back("vignetting", ortho.exposure.tiles[i].vignetting);
+    }
+    rows.emplace_back(std::move(row));
+  }
+  return rows;
+}
+
+}  // namespace
+
+void RunMosaicStage(StageContext& context) {
+  const Project& project = context.project;
+  const auto stage_start = std::chrono::steady_clock::now();
+  if (project.tiles.size() < 2) {
+    throw InputError((project.dir / "table.csv").string(),
+                     fmt::format("{} tile(s): a mosaic needs at least 2", project.tiles.size()));
+  }
+  const fs::path camera_path = CameraModelPath(context);
+  const CameraModel camera = ReadCameraModel(camera_path);
+  const std::vector<ImageF> tiles = ReadTiles(project, camera, context.progress);
+  const double read_seconds = SecondsSince(stage_start);
+
+  std::vector<Eigen::Vector2d> commanded_mm;
+  std::vector<std::string> image_names;
+  for (const TilePosition& tile : project.tiles) {
+    commanded_mm.push_back(tile.table_pos_mm);
+    image_names.push_back(tile.image);
+  }
+  const int num_tiles = static_cast<int>(tiles.size());
+  if (context.progress) context.progress(num_tiles, num_tiles + 3, "register tiles");
+  const TileRegistration registration =
+      RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera, RegisterTilesOptions{});
+  spdlog::info("mosaic: {}", registration.brief);
+  if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
+
+  if (context.progress) context.progress(num_tiles + 1, num_tiles + 3, "orthorectify");
+  OrthoOptions ortho_options;
+  ortho_options.gsd_mm = project.mosaic_gsd_mm;
+  const OrthoResult ortho = Orthorectify(camera, registration.scene, tiles, ortho_options);
+  spdlog::info("mosaic: {}", ortho.summary.brief);
+  if (!ortho.summary.usable) throw StageFailedError(Stage::kMosaic, ortho.summary.brief);
+
+  if (context.progress) context.progress(num_tiles + 2, num_tiles + 3, "write mosaic");
+  const auto write_start = std::chrono::steady_clock::now();
+  MosaicReport report =
+      WriteOrthoMosaic(context.staging_dir / kMosaicName, ortho.mosaic, kMosaicBitDepth);
+  report.rms_px = registration.rms_px;
+
+  SavedScene saved;
+  saved.scene = registration.scene;
+  saved.scene.track_xy_mm.resize(2, 0);  // the tracks go to colmap/
+  saved.tile_images = image_names;
+  saved.commanded_table_pos_mm = commanded_mm;
+  saved.tiles_held_by_prior = registration.tiles_held_by_prior;
+  saved.table_sigma_mm = project.table_sigma_mm;
+  saved.rms_px = registration.rms_px;
+  fs::create_directories(context.staging_dir / "mosaic");
+  WriteSceneJson(saved, context.staging_dir / kSceneName);
+
+  const ColmapExportSummary colmap =
+      WriteColmapModel(context.staging_dir / kColmapDirName, camera, registration.scene,
+                       registration.input.observations, image_names);
+  const double write_seconds = SecondsSince(write_start);
+
+  ReportValue::Array held;
+  for (int tile : registration.tiles_held_by_prior) {
+    held.emplace_back(ReportObject{{"image", project.tiles[tile].image},
+                                   {"why", WhyHeld(registration, tile)}});
+  }
+  const Eigen::Matrix2d& a = registration.image_px_per_table_mm;
+  report.extra = ReportObject{
+      {"brief", registration.brief},
+      {"camera", camera_path.string()},
+      {"num_tracks", registration.input.num_tracks},
+      {"num_observations", static_cast<int>(registration.input.observations.size())},
+      {"num_dropped_observations", registration.num_dropped_observations},
+      {"num_tags_detected", registration.num_tags_detected},
+      {"unit_weight_sigma", registration.bundle.unit_weight_sigma},
+      {"plane_tilt_deg", registration.plane_tilt_deg},
+      {"image_px_per_table_mm", ReportValue::Array{ReportValue::Array{a(0, 0), a(0, 1)},
+                                                   ReportValue::Array{a(1, 0), a(1, 1)}}},
+      {"covariance_computed", registration.scene.covariance.size() > 0},
+      {"intrinsics", "held at the calibration's values"},
+      {"pairs", PairsReport(project, registration)},
+      {"tiles", TilesReport(project, registration, ortho.summary)},
+      {"tiles_held_by_prior", held},
+      {"exposure", ReportObject{{"brief", ortho.summary.exposure.brief},
+                                {"relative_sigma_before", ortho.summary.exposure.relative_sigma_before},
+                                {"relative_sigma_after", ortho.summary.exposure.relative_sigma_after},
+                                {"max_pair_step_before", ortho.summary.exposure.max_pair_step_before},
+                                {"max_pair_step_after", ortho.summary.exposure.max_pair_step_after}}},
+      {"ortho", ReportObject{{"brief", ortho.summary.brief},
+                             {"covered_fraction", ortho.summary.covered_fraction},
+                             {"clipped_fraction", ortho.summary.clipped_fraction},
+                             {"tile_px_per_mosaic_px", ortho.summary.tile_px_per_mosaic_px},
+                             {"lens_table_max_error_px", ortho.summary.lens_table_max_error_px}}},
+      {"scene_file", kSceneName},
+      {"colmap", ReportObject{{"dir", kColmapDirName},
+                              {"camera_model", colmap.camera_model},
+                              {"undistorted", colmap.undistorted},
+                              {"images", colmap.num_images},
+                              {"points", colmap.num_points},
+                              {"observations", colmap.num_observations},
+                              {"mean_point_error_px", colmap.mean_point_error_px}}},
+      {"timings_s", ReportObject{{"read", read_seconds},
+                                 {"features", registration.features_seconds},
+                                 {"matching", registration.matching_seconds},
+                                 {"adjustment", registration.adjustment_seconds},
+                                 {"ortho_geometry", ortho.summary.geometry_seconds},
+                                 {"ortho_exposure", ortho.summary.exposure_seconds},
+                                 {"ortho_resample", ortho.summary.resample_seconds},
+                                 {"write", write_seconds},
+                                 {"total", SecondsSince(stage_start)}}}};
+  context.report.mosaic = std::move(report);
+  if (context.progress) context.progress(num_tiles + 3, num_tiles + 3, "mosaic done");
+}
 
 }  // namespace omm
