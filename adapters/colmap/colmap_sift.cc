@@ -1,7 +1,6 @@
 #include "adapters/colmap/colmap_sift.h"
 
 #include <fcntl.h>
-#include <signal.h>
 #include <spawn.h>
 #include <sqlite3.h>
 #include <sys/wait.h>
@@ -10,7 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
-#include <cmath>
+#include <csignal>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -22,8 +21,6 @@
 #include <tuple>
 
 #include "pipeline/core/error.h"
-
-extern char** environ;
 
 namespace omm {
 namespace {
@@ -54,8 +51,8 @@ using Stmt = std::unique_ptr<sqlite3_stmt, StmtFinalizer>;
 Stmt Prepare(sqlite3* db, const std::string& sql, const std::string& where) {
   sqlite3_stmt* stmt = nullptr;
   if (sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt, nullptr) != SQLITE_OK)
-    throw InputError(where, "not a COLMAP database (" + std::string(sqlite3_errmsg(db)) +
-                                " in '" + sql + "')");
+    throw InputError(
+        where, "not a COLMAP database (" + std::string(sqlite3_errmsg(db)) + " in '" + sql + "')");
   return Stmt(stmt);
 }
 
@@ -209,7 +206,8 @@ ColmapDatabaseMatches ReadColmapDatabaseMatches(const fs::path& database_path,
     throw InputError(where, std::string("cannot open: ") + sqlite3_errmsg(db.get()));
 
   std::map<std::string, int> tile_of_name;
-  for (size_t i = 0; i < image_names.size(); ++i) tile_of_name[image_names[i]] = static_cast<int>(i);
+  for (size_t i = 0; i < image_names.size(); ++i)
+    tile_of_name[image_names[i]] = static_cast<int>(i);
   std::map<std::int64_t, int> tile_of_image;
   {
     const Stmt stmt = Prepare(db.get(), "SELECT image_id, name FROM images", where);
@@ -274,8 +272,8 @@ ColmapDatabaseMatches ReadColmapDatabaseMatches(const fs::path& database_path,
       for (std::int64_t k = 0; k < rows; ++k) {
         const std::uint32_t i1 = data[2 * k], i2 = data[2 * k + 1];
         if (i1 >= q1.cols() || i2 >= q2.cols())
-          throw InputError(where, what + ": match " + std::to_string(k) +
-                                      " names a keypoint out of range");
+          throw InputError(
+              where, what + ": match " + std::to_string(k) + " names a keypoint out of range");
         q_1.col(k) = q1.col(i1);
         q_2.col(k) = q2.col(i2);
       }
@@ -325,19 +323,21 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
 
   // The banner's first line, e.g. "COLMAP 3.8 -- Structure-from-Motion and Multi-View Stereo".
   const fs::path version_log = work_dir / "version.log";
-  const RunOutcome version = RunProcess({options.binary, "-h"}, version_log, 30.0);
+  const RunOutcome version =
+      RunProcess({options.binary, "-h"}, version_log, options.timeout_seconds);
   if (!version.ok) return fail("'" + options.binary + " -h'", version);
   const std::vector<std::string> banner = ReadLines(version_log);
-  result.colmap_version = banner.empty() ? "" : banner.front().substr(0, banner.front().find(" --"));
+  result.colmap_version =
+      banner.empty() ? "" : banner.front().substr(0, banner.front().find(" --"));
 
   const std::string threads = std::to_string(options.num_threads);
   Clock::time_point start = Clock::now();
-  const RunOutcome extraction = RunProcess(
-      {options.binary, "feature_extractor", "--database_path", database.string(), "--image_path",
-       image_dir.string(), "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
-       "--SiftExtraction.num_threads", threads, "--SiftExtraction.max_num_features",
-       std::to_string(options.max_num_features)},
-      log, options.timeout_seconds);
+  const RunOutcome extraction =
+      RunProcess({options.binary, "feature_extractor", "--database_path", database.string(),
+                  "--image_path", image_dir.string(), "--ImageReader.single_camera", "1",
+                  "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", threads,
+                  "--SiftExtraction.max_num_features", std::to_string(options.max_num_features)},
+                 log, options.timeout_seconds);
   result.extraction_seconds = Seconds(start);
   if (!extraction.ok) return fail("feature_extractor", extraction);
 

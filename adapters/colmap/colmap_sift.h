@@ -37,7 +37,7 @@ struct ColmapSiftOptions {
   // Detections per image (SiftExtraction.max_num_features); each detection
   // gives up to two keypoints (two dominant orientations), so up to 2x this.
   int max_num_features = 8192;
-  int num_threads = 2;            // extraction and matching threads
+  int num_threads = 2;  // extraction and matching threads
   // The verification RANSAC's inlier distance (SiftMatching.max_error), px.
   double max_error_px = 4.0;
   // A pair with fewer verified inliers gets no matches (SiftMatching.min_num_inliers).
@@ -59,9 +59,9 @@ struct ColmapPairMatches {
 
 // A COLMAP database's keypoints and verified matches, by tile.
 struct ColmapDatabaseMatches {
-  std::vector<int> num_keypoints;          // per tile; 0 for a tile not in the database
-  std::vector<ColmapPairMatches> pairs;    // pairs with >= 1 match, by (tile_a, tile_b)
-  int num_matches = 0;                     // over all pairs
+  std::vector<int> num_keypoints;        // per tile; 0 for a tile not in the database
+  std::vector<ColmapPairMatches> pairs;  // pairs with >= 1 match, by (tile_a, tile_b)
+  int num_matches = 0;                   // over all pairs
 };
 
 // Reads `database_path`. image_names[i]: the database's image name of tile i;
@@ -72,8 +72,8 @@ ColmapDatabaseMatches ReadColmapDatabaseMatches(const std::filesystem::path& dat
                                                 const std::vector<std::string>& image_names);
 
 struct ColmapSiftResult {
-  bool usable = false;  // false: colmap missing, failed or timed out (brief says which)
-  std::string brief;    // one line: version, keypoints, pairs, matches, time, or the failure
+  bool usable = false;         // false: colmap missing, failed or timed out (brief says which)
+  std::string brief;           // one line: version, keypoints, pairs, matches, time, or the failure
   std::string colmap_version;  // first line of `colmap -h`'s banner, e.g. "COLMAP 3.8"
   ColmapDatabaseMatches matches;
   double extraction_seconds = 0.0, matching_seconds = 0.0, reading_seconds = 0.0;

@@ -69,16 +69,17 @@ class TestDatabase {
   }
   // rows x cols float32, row-major.
   void AddKeypoints(std::int64_t id, int cols, const std::vector<float>& data) {
-    Insert("INSERT INTO keypoints VALUES (?, ?, ?, ?)", id,
-           static_cast<int>(data.size()) / cols, cols, data.data(), data.size() * 4);
+    Insert("INSERT INTO keypoints VALUES (?, ?, ?, ?)", id, static_cast<int>(data.size()) / cols,
+           cols, data.data(), data.size() * 4);
   }
   // Index pairs (into image_id1's, image_id2's keypoints), image_id1 < image_id2.
   void AddTwoView(std::int64_t image_id1, std::int64_t image_id2,
                   const std::vector<std::uint32_t>& data, int cols = 2) {
-    Insert("INSERT INTO two_view_geometries (pair_id, rows, cols, data, config) "
-           "VALUES (?, ?, ?, ?, 2)",
-           image_id1 * kPairIdBase + image_id2, static_cast<int>(data.size()) / cols, cols,
-           data.data(), data.size() * 4);
+    Insert(
+        "INSERT INTO two_view_geometries (pair_id, rows, cols, data, config) "
+        "VALUES (?, ?, ?, ?, 2)",
+        image_id1 * kPairIdBase + image_id2, static_cast<int>(data.size()) / cols, cols,
+        data.data(), data.size() * 4);
   }
 
  private:
@@ -112,12 +113,14 @@ TEST(ReadColmapDatabaseMatches, DecodesBlobsAndPairIdsExactly) {
     db.AddImage(1, "other.png");
     db.AddImage(5, "tile_2.png");
     // image 7 (tile 0): x, y, a11, a12, a21, a22.
-    db.AddKeypoints(7, 6, {10.5f, 20.25f, 1, 0, 0, 1,  //
-                           100.5f, 0.5f, 2, 0, 0, 2,   //
-                           1599.5f, 1199.5f, 3, 0, 0, 3});
+    db.AddKeypoints(7, 6,
+                    {10.5f, 20.25f, 1, 0, 0, 1,  //
+                     100.5f, 0.5f, 2, 0, 0, 2,   //
+                     1599.5f, 1199.5f, 3, 0, 0, 3});
     // image 3 (tile 1): x, y, scale, orientation.
-    db.AddKeypoints(3, 4, {0.5f, 0.75f, 1.5f, 0.1f,  //
-                           30.0f, 40.0f, 2.5f, 0.2f});
+    db.AddKeypoints(3, 4,
+                    {0.5f, 0.75f, 1.5f, 0.1f,  //
+                     30.0f, 40.0f, 2.5f, 0.2f});
     // image 5 (tile 2): x, y.
     db.AddKeypoints(5, 2, {5.5f, 6.5f, 7.5f, 8.5f, 9.5f, 10.5f, 11.5f, 12.5f});
     db.AddKeypoints(1, 2, {1.0f, 1.0f});
@@ -233,6 +236,44 @@ TEST(ColmapSiftMatches, MissingBinaryIsAReportedFailure) {
   fs::remove_all(dir);
 }
 
+// A stand-in for colmap (a shell script): its banner, then `feature_extractor`
+// runs `extractor_body`.
+fs::path FakeColmap(const fs::path& dir, const std::string& extractor_body) {
+  fs::path path = dir / "fake_colmap";
+  std::ofstream(path) << "#!/bin/sh\n"
+                      << "if [ \"$1\" = -h ]; then echo 'COLMAP 9.9 -- fake'; exit 0; fi\n"
+                      << extractor_body << "\n";
+  fs::permissions(path, fs::perms::owner_all);
+  return path;
+}
+
+TEST(ColmapSiftMatches, FailingOrHangingColmapIsAReportedFailure) {
+  const fs::path dir = TempPath("omm_colmap_sift_test_fake");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::vector<fs::path> tiles = {dir / "a.png", dir / "b.png"};
+  for (const fs::path& t : tiles) std::ofstream(t) << "not read";
+  ColmapSiftOptions options;
+  options.binary = FakeColmap(dir, "echo 'first line'; echo 'E: image unreadable' >&2; exit 3");
+  ColmapSiftResult r = ColmapSiftMatches(tiles, options);
+  EXPECT_FALSE(r.usable);
+  EXPECT_EQ(r.colmap_version, "COLMAP 9.9");
+  EXPECT_NE(r.brief.find("feature_extractor failed: exit status 3; log: E: image unreadable"),
+            std::string::npos)
+      << r.brief;
+
+  options.binary = FakeColmap(dir, "sleep 30");
+  options.timeout_seconds = 0.5;
+  const auto start = std::chrono::steady_clock::now();
+  r = ColmapSiftMatches(tiles, options);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_FALSE(r.usable);
+  EXPECT_NE(r.brief.find("feature_extractor failed: timed out"), std::string::npos) << r.brief;
+  EXPECT_LT(seconds, 5.0);
+  fs::remove_all(dir);
+}
+
 // ------------------------------------------------------- the real binary
 
 double Median(std::vector<double> v) {
@@ -298,7 +339,8 @@ TEST(ColmapSiftMatches, RealColmapKeypointsAreInOmmPixels) {
       for (int y = 0; y < height; ++y) {
         for (int x = 0; x < width; ++x) {
           const double r2 = (Eigen::Vector2d(x, y) - c).squaredNorm();
-          image(y, x) += static_cast<float>(b.amplitude * std::exp(-r2 / (2 * b.sigma_px * b.sigma_px)));
+          image(y, x) +=
+              static_cast<float>(b.amplitude * std::exp(-r2 / (2 * b.sigma_px * b.sigma_px)));
         }
       }
     }
