@@ -37,6 +37,14 @@ double Seconds(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
+std::string Fixed(double value, int digits) {
+  std::ostringstream out;
+  out.setf(std::ios::fixed);
+  out.precision(digits);
+  out << value;
+  return out.str();
+}
+
 // ---------------------------------------------------------------- database
 
 struct DbCloser {
@@ -136,7 +144,7 @@ RunOutcome RunProcess(const std::vector<std::string>& argv, const fs::path& log,
     if (Seconds(start) > timeout_seconds) {
       kill(-pid, SIGKILL);
       waitpid(pid, &status, 0);
-      outcome.failure = "timed out after " + std::to_string(timeout_seconds) + " s";
+      outcome.failure = "timed out after " + Fixed(timeout_seconds, 1) + " s";
       return outcome;
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -173,14 +181,6 @@ fs::path MakeWorkDir() {
     throw InputError(fs::temp_directory_path().string(),
                      std::string("cannot create a temporary directory: ") + std::strerror(errno));
   return pattern;
-}
-
-std::string Fixed(double value, int digits) {
-  std::ostringstream out;
-  out.setf(std::ios::fixed);
-  out.precision(digits);
-  out << value;
-  return out.str();
 }
 
 }  // namespace
