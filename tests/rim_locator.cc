@@ -110,8 +110,22 @@ RimFit LocateDarkDiscRim(const ImageF& image, const Eigen::Vector2d& rough_centr
     const int far = static_cast<int>(std::lround(3.5 / kStep));
     const double inside =
         Median(std::vector<double>(profile.begin() + peak - far, profile.begin() + peak - near + 1));
-    const double outside =
-        Median(std::vector<double>(profile.begin() + peak + near, profile.begin() + peak + far + 1));
+    // The surface outside is textured: its level AT the rim is the value
+    // there of a line fitted to the profile 2-4.5 px outside (a median of it
+    // would move the mid-level, and with it the edge, with the texture's slope).
+    const int out_near = static_cast<int>(std::lround(2.0 / kStep));
+    const int out_far = static_cast<int>(std::lround(4.5 / kStep));
+    double sum_x = 0, sum_y = 0, sum_xx = 0, sum_xy = 0;
+    const int count = out_far - out_near + 1;
+    for (int i = peak + out_near; i <= peak + out_far; ++i) {
+      const double x = (i - peak) * kStep;
+      sum_x += x;
+      sum_y += profile[i];
+      sum_xx += x * x;
+      sum_xy += x * profile[i];
+    }
+    const double slope = (count * sum_xy - sum_x * sum_y) / (count * sum_xx - sum_x * sum_x);
+    const double outside = (sum_y - slope * sum_x) / count;
     if (!(outside > inside)) continue;
     const double mid = 0.5 * (inside + outside);
     // The crossing of `mid` nearest to the peak within +-1.5 px.

@@ -11,11 +11,18 @@
 // rough centre, the radial derivative (central difference over +-1 px) is
 // scanned in [r - window, r + window]; the outermost local maximum above half
 // the ray's largest is the rim's coarse position. It is refined to the
-// crossing of the level halfway between the medians of the profile 1.5-3.5
-// px inside and outside it (the mid-level of a symmetric blur of a step lies
-// on the step), by linear interpolation between 0.125 px samples. A circle is
+// crossing of the level halfway between the inside (the median of the
+// profile 1.5-3.5 px inside) and the surface's level at the rim (a line
+// fitted to the profile 2-4.5 px outside, extrapolated: the surface is
+// textured), by linear interpolation between 0.125 px samples (the mid-level
+// of a symmetric blur of a step lies on the step). A circle is
 // fitted to the edge points (algebraic, then geometric Gauss-Newton), points
 // beyond 3 robust sigmas are dropped and the fit repeated.
+//
+// Accuracy: on the demo's flat printed caltab dots the centres agree with
+// the truth to ~0.006 raw px RMS; on textured hole rims the texture's blobs
+// next to the rim move the centres by up to ~0.025 mm (measured in a mosaic
+// built from the true scene; mosaic_stage_test.cc).
 //
 // Pixel convention: (0, 0) is the centre of the top-left pixel; image(row,
 // col) is the value at (x = col, y = row). Pixels equal to 0 (not covered by
