@@ -1,0 +1,44 @@
+// OpenCV's image stitcher (cv::Stitcher) as the baseline the mosaic stage is
+// compared with (benchmarks/mosaic_benchmark.cc), run as a typical user runs
+// it on flat scans: cv::Stitcher::create(cv::Stitcher::SCANS) (affine motion
+// model, ORB features, affine bundle adjustment, no wave correction), its
+// default seam finder, exposure compensator and multi-band blender, composed
+// at the tiles' full resolution. It knows neither the camera nor the table
+// positions: its panorama is in pixels, of unknown scale and orientation.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/image.h"
+
+namespace omm {
+
+struct OpenCvStitcherOptions {
+  int num_threads = 2;  // cv::setNumThreads while stitching
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+struct OpenCvStitcherResult {
+  bool ok = false;
+  std::string status;  // cv::Stitcher::Status by name ("OK", "ERR_NEED_MORE_IMGS", ...)
+  ImageF panorama;     // gray, [0, 1]; 0 where no tile is composed
+  double seconds = 0.0;  // wall time of stitch()
+};
+
+// Stitches `tiles` (gray, [0, 1]; converted to 8-bit BGR, as the Stitcher
+// expects). Throws InputError for invalid options or no tiles.
+OpenCvStitcherResult StitchScans(const std::vector<ImageF>& tiles,
+                                 const OpenCvStitcherOptions& options = {});
+
+// Where `patch` best matches `image` by normalised cross-correlation
+// (cv::matchTemplate, TM_CCOEFF_NORMED): the image position of the patch's
+// centre ((0, 0) at the centre of the top-left pixel, integer px), and the
+// correlation there in *score. patch must be smaller than image.
+Eigen::Vector2d FindPatch(const ImageF& image, const ImageF& patch, double* score = nullptr);
+
+}  // namespace omm
