@@ -95,9 +95,10 @@ TEST_F(CliTest, PlainImagesFailCalibrationWithTheirReasons) {
   EXPECT_THAT(result.output, HasSubstr("stage 'calibrate' failed"));
   EXPECT_THAT(result.output, HasSubstr("calib_01.png: plate not found"));
   EXPECT_FALSE(fs::exists(project_.OutDir()));
+  // No calibrated camera: the mosaic stage says which stage must run first.
   const auto mosaic = Omm("mosaic " + Quoted(project_.dir));
-  EXPECT_EQ(mosaic.exit_code, 3);
-  EXPECT_THAT(mosaic.output, HasSubstr("stage 'mosaic' is not built yet"));
+  EXPECT_EQ(mosaic.exit_code, 2);
+  EXPECT_THAT(mosaic.output, HasSubstr("no calibrated camera: run `omm calibrate`"));
 }
 
 TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
