@@ -285,6 +285,28 @@ TEST_F(MosaicStageTest, CaltabDotsSitAtTheTruthInTheMosaic) {
   EXPECT_LE(fit.rms / raw_px_mm, 0.05);
 }
 
+// `calibration.from` naming a .cameramodel, and no out/ at all: the mosaic
+// stage alone reads the camera from there.
+TEST_F(MosaicStageTest, CameraFromACameraModelFile) {
+  const fs::path dir = dir_->path() / "from-model";
+  testing::CopyProject(sim_->project_dir, dir);
+  const fs::path model = dir_->path() / "elsewhere" / "truth.cameramodel";
+  fs::create_directories(model.parent_path());
+  WriteCameraModel(model, Truth().camera.model);
+  std::string reuse = "\ncalibration:\n  from: ";
+  reuse.append(model.string()).append("\nboard:");
+  testing::ReplaceInFile(dir / "project.yaml", "\nboard:", reuse);
+  RunOptions options;
+  options.stages = {Stage::kMosaic};
+  const RunSummary summary = RunProject(LoadProject(dir), options);
+  ASSERT_TRUE(summary.report.mosaic.has_value());
+  const ReportValue* camera = Member(summary.report.mosaic->extra, "camera");
+  ASSERT_NE(camera, nullptr);
+  EXPECT_EQ(std::get<std::string>(camera->data()), model.string());
+  EXPECT_TRUE(fs::exists(dir / "out" / "mosaic.png"));
+  EXPECT_LT(summary.report.mosaic->rms_px, 0.1);
+}
+
 TEST_F(MosaicStageTest, ColmapReadsTheExportedModel) {
   const Report report = ReadReportJson(Out() / "report.json");
   const auto& colmap = std::get<ReportObject>(Member(report.mosaic->extra, "colmap")->data());
