@@ -27,6 +27,8 @@ std::string RegisterTilesOptions::Check() const {
     return "min_overlap_fraction must be in (0, 1)";
   if (num_probe_corners < 8) return "num_probe_corners must be >= 8";
   if (probe_search_radius_px < 1) return "probe_search_radius_px must be >= 1";
+  if (probe_downsample_factor < 1) return "probe_downsample_factor must be >= 1";
+  if (probe_half_size_px < 2) return "probe_half_size_px must be >= 2";
   if (!(probe_ransac_threshold_px > 0)) return "probe_ransac_threshold_px must be > 0";
   if (search_radius_px < 1) return "search_radius_px must be >= 1";
   if (!(ransac_threshold_px > 0)) return "ransac_threshold_px must be > 0";
@@ -227,7 +229,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
 
   // 1. Features.
   auto t0 = Clock::now();
-  std::vector<ImageF> normalized(num_tiles), spline(num_tiles);
+  std::vector<ImageF> normalized(num_tiles), spline(num_tiles), coarse_probe(num_tiles);
   std::vector<std::vector<Corner>> corners(num_tiles);
   std::vector<std::vector<TagDetection>> tags(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
@@ -236,6 +238,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     if (options.matching_blur_sigma_px > 0)
       normalized[i] = GaussianBlur(normalized[i], options.matching_blur_sigma_px);
     spline[i] = BSplineCoefficients(normalized[i]);
+    coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
     if (options.use_apriltags) tags[i] = DetectAprilTags36h11(tiles[i], options.tags);
   });
   for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());
@@ -342,12 +345,25 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     const int num_probes = std::min<int>(options.num_probe_corners, candidates.size());
     Eigen::Matrix2Xd probe_a(2, num_probes), probe_b(2, num_probes);
     int found = 0;
+    const int f = options.probe_downsample_factor;
+    const double centre = 0.5 * (f - 1);  // of downsampled pixel 0, in full-resolution px
     for (int k = 0; k < num_probes; ++k) {
       const Corner& c = corners[ta][candidates[k]];
-      const PatchMatch m =
-          MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
-                     c.pixel.cast<double>() + shift,
-                     Eigen::Matrix2d::Identity(), options.probe_search_radius_px, options.patch);
+      // The downsampled pixel holding the corner, and its centre's predicted
+      // (downsampled) position in b.
+      const Eigen::Vector2i anchor_coarse = c.pixel / f;
+      const Eigen::Vector2d offset = c.pixel.cast<double>() - (f * anchor_coarse.cast<double>().array() + centre).matrix();
+      const Eigen::Vector2d predicted_coarse =
+          ((c.pixel.cast<double>() + shift - offset).array() - centre) / f;
+      const NccPeak probe_peak = SearchNcc(
+          coarse_probe[ta], anchor_coarse, options.probe_half_size_px, coarse_probe[tb],
+          Eigen::Vector2i(static_cast<int>(std::lround(predicted_coarse.x())),
+                          static_cast<int>(std::lround(predicted_coarse.y()))),
+          (options.probe_search_radius_px + f - 1) / f + 1);
+      if (!probe_peak.ok) continue;
+      const PatchMatch m = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
+                                      (f * probe_peak.q_px.array() + centre).matrix() + offset,
+                                      Eigen::Matrix2d::Identity(), f, options.patch);
       if (!m.ok) continue;
       probe_a.col(found) = c.pixel.cast<double>();
       probe_b.col(found) = m.q_px;
@@ -553,7 +569,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(2, 0) * r.leftCols<2>();
       m.db_da = dqb * dqa.inverse();
       const PatchMatch pm = MatchPatch(normalized[m.tile_a], m.anchor_px, normalized[m.tile_b],
-                                       spline[m.tile_b], m.q_b, m.db_da, 1, options.patch);
+                                       spline[m.tile_b], m.q_b, m.db_da, 0, options.patch);
       if (!pm.ok) {
         m.keep = false;
         return;

@@ -12,7 +12,8 @@
 //    shift_ij ~ A (T_j - T_i), the consensus of all neighbour pairs.
 // 3. Every pair (i < j) that A and the commanded positions predict to
 //    overlap, diagonals too: a few strong corners of i are found in j with a
-//    wide NCC search, a pixel homography is fitted to them (RANSAC), then every
+//    wide NCC search (on downsampled images, then refined at full
+//    resolution), a pixel homography is fitted to them (RANSAC), then every
 //    corner of i predicted inside j is matched in a small window and refined
 //    by least-squares template matching warped by the homography's local
 //    affine (MatchPatch); the matches are then screened by RANSAC on the
@@ -27,7 +28,7 @@
 //    whose residual exceeds outlier_factor x the median residual are dropped
 //    and the scene re-solved; then (rematch_passes) every match is relocated
 //    with the affine the adjusted plane model predicts between the two tiles
-//    and the scene solved again.
+//    and the scene solved again (each from its first position, refined).
 // A tile without any kept observation is held by its table prior alone; the
 // summary lists it (tiles_held_by_prior) and its brief says so.
 #pragma once
@@ -63,6 +64,11 @@ struct RegisterTilesOptions {
   double matching_blur_sigma_px = 1.0;
   int num_probe_corners = 60;      // per pair: corners matched with the wide window
   int probe_search_radius_px = 20;  // +- around the A-predicted position, px
+  // The wide probe search runs on the matching images box-downsampled by this
+  // factor (a template of probe_half_size_px there), then +-factor px at full
+  // resolution: ~30x less work than the full-resolution search.
+  int probe_downsample_factor = 4;
+  int probe_half_size_px = 5;  // at the downsampled level, px
   double probe_ransac_threshold_px = 3.0;  // pixel homography of the probes, px
   int search_radius_px = 3;        // +- around the homography-predicted position, px
   // Plane-induced homography on undistorted rays: inlier distance, px (measured

@@ -33,10 +33,15 @@ ImageF DownsampleBox(const ImageF& image, int factor) {
   const Eigen::Index rows = image.rows() / factor, cols = image.cols() / factor;
   ImageF out(rows, cols);
   const float norm = 1.0f / static_cast<float>(factor * factor);
+  std::vector<float> row_sum(static_cast<size_t>(cols));
   for (Eigen::Index r = 0; r < rows; ++r) {
-    for (Eigen::Index c = 0; c < cols; ++c) {
-      out(r, c) = image.block(r * factor, c * factor, factor, factor).sum() * norm;
+    std::fill(row_sum.begin(), row_sum.end(), 0.0f);
+    for (int k = 0; k < factor; ++k) {
+      const float* in = image.data() + (r * factor + k) * image.cols();
+      for (Eigen::Index c = 0; c < cols; ++c)
+        for (int j = 0; j < factor; ++j) row_sum[c] += in[c * factor + j];
     }
+    for (Eigen::Index c = 0; c < cols; ++c) out(r, c) = row_sum[c] * norm;
   }
   return out;
 }
@@ -117,6 +122,10 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
     for (int c = b; c < cols - b; ++c) {
       const float v = response(r, c);
       if (v <= 0) continue;
+      // Most pixels fail against a direct neighbour: test those first.
+      if (response(r, c - 1) >= v || response(r, c + 1) > v || response(r - 1, c) >= v ||
+          response(r + 1, c) > v)
+        continue;
       bool is_max = true;
       for (int dr = -n; dr <= n && is_max; ++dr) {
         for (int dc = -n; dc <= n; ++dc) {
@@ -199,43 +208,6 @@ ImageF BSplineCoefficients(const ImageF& image) {
   for (int r = 0; r < rows; ++r) BSplinePrefilter1D(c.data() + static_cast<size_t>(r) * cols, cols, 1, &work);
   for (int col = 0; col < cols; ++col) BSplinePrefilter1D(c.data() + col, rows, cols, &work);
   return c;
-}
-
-bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
-                   Eigen::Vector2d* gradient) {
-  const double fx_floor = std::floor(x), fy_floor = std::floor(y);
-  const int ix = static_cast<int>(fx_floor), iy = static_cast<int>(fy_floor);
-  if (ix < 1 || iy < 1 || ix + 2 >= coefficients.cols() || iy + 2 >= coefficients.rows())
-    return false;
-  const double fx = x - fx_floor, fy = y - fy_floor;
-  const auto weights = [](double f, double* w, double* dw) {
-    const double f2 = f * f, f3 = f2 * f, g = 1.0 - f;
-    w[0] = g * g * g / 6.0;
-    w[1] = (4.0 - 6.0 * f2 + 3.0 * f3) / 6.0;
-    w[2] = (1.0 + 3.0 * f + 3.0 * f2 - 3.0 * f3) / 6.0;
-    w[3] = f3 / 6.0;
-    dw[0] = -0.5 * g * g;
-    dw[1] = -2.0 * f + 1.5 * f2;
-    dw[2] = 0.5 + f - 1.5 * f2;
-    dw[3] = 0.5 * f2;
-  };
-  double wx[4], dwx[4], wy[4], dwy[4];
-  weights(fx, wx, dwx);
-  weights(fy, wy, dwy);
-  double v = 0, gx = 0, gy = 0;
-  for (int j = 0; j < 4; ++j) {
-    const float* row =
-        coefficients.data() + static_cast<size_t>(iy - 1 + j) * coefficients.cols() + (ix - 1);
-    const double rv = wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3];
-    v += wy[j] * rv;
-    if (gradient != nullptr) {
-      gx += wy[j] * (dwx[0] * row[0] + dwx[1] * row[1] + dwx[2] * row[2] + dwx[3] * row[3]);
-      gy += dwy[j] * rv;
-    }
-  }
-  *value = v;
-  if (gradient != nullptr) *gradient << gx, gy;
-  return true;
 }
 
 }  // namespace omm

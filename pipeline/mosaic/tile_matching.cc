@@ -103,6 +103,96 @@ TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
   return estimate;
 }
 
+NccPeak SearchNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int half_size_px,
+                  const ImageF& target, const Eigen::Vector2i& center_px, int radius_px) {
+  NccPeak peak;
+  const int h = half_size_px, side = 2 * h + 1, n = side * side;
+  const int ax = anchor_px.x(), ay = anchor_px.y();
+  const int cx = center_px.x(), cy = center_px.y(), rad = radius_px;
+  if (ax - h < 0 || ay - h < 0 || ax + h >= reference.cols() || ay + h >= reference.rows() ||
+      cx - rad - h < 0 || cy - rad - h < 0 || cx + rad + h >= target.cols() ||
+      cy + rad + h >= target.rows())
+    return peak;
+  // The zero-mean template, so that the cross term needs no target mean.
+  std::vector<float> t0(static_cast<size_t>(n));
+  double t_sum = 0;
+  for (int r = 0; r < side; ++r)
+    for (int c = 0; c < side; ++c) t_sum += reference(ay - h + r, ax - h + c);
+  const double t_mean = t_sum / n;
+  double t_ss = 0;
+  for (int r = 0; r < side; ++r) {
+    for (int c = 0; c < side; ++c) {
+      const double v = reference(ay - h + r, ax - h + c) - t_mean;
+      t0[r * side + c] = static_cast<float>(v);
+      t_ss += v * v;
+    }
+  }
+  if (!(t_ss > 0)) return peak;
+  const double t_norm = std::sqrt(t_ss);
+  const int grid = 2 * rad + 1;
+  // Summed-area tables of the searched region (value and square, double), so
+  // that each position's window moments cost O(1) and only the cross term
+  // is summed per pixel.
+  const int region = grid + 2 * h, x0 = cx - rad - h, y0 = cy - rad - h;
+  const int stride = region + 1;
+  std::vector<double> sum(static_cast<size_t>(stride) * stride, 0.0), sum_sq(sum.size(), 0.0);
+  for (int r = 0; r < region; ++r) {
+    const float* row = target.data() + static_cast<size_t>(y0 + r) * target.cols() + x0;
+    double acc = 0, acc_sq = 0;
+    for (int c = 0; c < region; ++c) {
+      acc += row[c], acc_sq += static_cast<double>(row[c]) * row[c];
+      sum[(r + 1) * stride + c + 1] = sum[r * stride + c + 1] + acc;
+      sum_sq[(r + 1) * stride + c + 1] = sum_sq[r * stride + c + 1] + acc_sq;
+    }
+  }
+  const auto box = [&](const std::vector<double>& table, int r, int c) {
+    return table[(r + side) * stride + c + side] - table[r * stride + c + side] -
+           table[(r + side) * stride + c] + table[r * stride + c];
+  };
+  std::vector<double> scores(static_cast<size_t>(grid) * grid, -2.0);
+  double best = -2.0, best_s = 0, best_ss = 0;
+  int best_index = -1;
+  for (int dy = -rad; dy <= rad; ++dy) {
+    for (int dx = -rad; dx <= rad; ++dx) {
+      // The cross term against the zero-mean template: float sums per row
+      // (<= a few hundred terms of normalised intensities), double across rows.
+      double st = 0;
+      for (int r = 0; r < side; ++r) {
+        const float* row = target.data() + static_cast<size_t>(cy + dy - h + r) * target.cols() +
+                           (cx + dx - h);
+        const float* tr = t0.data() + r * side;
+        float fst = 0;
+        for (int c = 0; c < side; ++c) fst += row[c] * tr[c];
+        st += fst;
+      }
+      const double s = box(sum, dy + rad, dx + rad), ss = box(sum_sq, dy + rad, dx + rad);
+      const double var = ss - s * s / n;
+      const int index = (dy + rad) * grid + (dx + rad);
+      scores[index] = var > 0 ? st / (t_norm * std::sqrt(var)) : -2.0;
+      if (scores[index] > best) best = scores[index], best_index = index, best_s = s, best_ss = ss;
+    }
+  }
+  if (best_index < 0) return peak;
+  const int bx = best_index % grid, by = best_index / grid;
+  peak.ok = true;
+  peak.ncc = best;
+  peak.pixel << cx + bx - rad, cy + by - rad;
+  peak.q_px = peak.pixel.cast<double>();
+  peak.target_mean = best_s / n;
+  peak.target_std = std::sqrt(std::max(best_ss / n - peak.target_mean * peak.target_mean, 0.0));
+  if (bx > 0 && bx + 1 < grid) {
+    const double l = scores[by * grid + bx - 1], r = scores[by * grid + bx + 1];
+    const double d = l - 2 * best + r;
+    if (d < 0) peak.q_px.x() += std::clamp(0.5 * (l - r) / d, -0.5, 0.5);
+  }
+  if (by > 0 && by + 1 < grid) {
+    const double u = scores[(by - 1) * grid + bx], d2 = scores[(by + 1) * grid + bx];
+    const double d = u - 2 * best + d2;
+    if (d < 0) peak.q_px.y() += std::clamp(0.5 * (u - d2) / d, -0.5, 0.5);
+  }
+  return peak;
+}
+
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
                       const ImageF& target, const ImageF& target_spline,
                       const Eigen::Vector2d& predicted_q_px,
@@ -119,90 +209,50 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   const double t_mean = templ.mean();
   const Eigen::VectorXd t0 = templ.array() - t_mean;
   const double t_norm = t0.norm();
-  if (t_norm / std::sqrt(static_cast<double>(n)) < options.min_template_std) return match;
+  const double t_std = t_norm / std::sqrt(static_cast<double>(n));
+  if (t_std < options.min_template_std) return match;
 
   // 1. Integer NCC search around the prediction (translation of the template).
   const int px = static_cast<int>(std::lround(predicted_q_px.x()));
   const int py = static_cast<int>(std::lround(predicted_q_px.y()));
   const int rad = search_radius_px;
+  // The search window plus the B-spline's support around any refined position.
   if (px - rad - h - 2 < 0 || py - rad - h - 2 < 0 || px + rad + h + 3 >= target.cols() ||
       py + rad + h + 3 >= target.rows())
     return match;
-  const int grid = 2 * rad + 1;
-  std::vector<double> scores(static_cast<size_t>(grid) * grid, -2.0);
-  for (int dy = -rad; dy <= rad; ++dy) {
-    for (int dx = -rad; dx <= rad; ++dx) {
-      double s = 0, ss = 0, st = 0;
-      for (int r = 0; r < side; ++r) {
-        const float* row = target.data() + static_cast<size_t>(py + dy - h + r) * target.cols() +
-                           (px + dx - h);
-        const double* tr = t0.data() + r * side;
-        for (int c = 0; c < side; ++c) {
-          const double v = row[c];
-          s += v;
-          ss += v * v;
-          st += v * tr[c];
-        }
-      }
-      const double var = ss - s * s / n;
-      scores[(dy + rad) * grid + (dx + rad)] = var > 0 ? st / (t_norm * std::sqrt(var)) : -2.0;
-    }
-  }
-  const auto best_it = std::max_element(scores.begin(), scores.end());
-  const int best_index = static_cast<int>(best_it - scores.begin());
-  const int bx = best_index % grid, by = best_index / grid;
-  if (*best_it < options.min_ncc - 0.1) return match;
-  Eigen::Vector2d start(px + bx - rad, py + by - rad);
-  // Quadratic peak of the NCC surface where the neighbours exist.
-  if (bx > 0 && bx + 1 < grid) {
-    const double l = scores[by * grid + bx - 1], m = *best_it, r = scores[by * grid + bx + 1];
-    const double d = l - 2 * m + r;
-    if (d < 0) start.x() += std::clamp(0.5 * (l - r) / d, -0.5, 0.5);
-  }
-  if (by > 0 && by + 1 < grid) {
-    const double u = scores[(by - 1) * grid + bx], m = *best_it, d2 = scores[(by + 1) * grid + bx];
-    const double d = u - 2 * m + d2;
-    if (d < 0) start.y() += std::clamp(0.5 * (u - d2) / d, -0.5, 0.5);
-  }
+  const NccPeak peak = SearchNcc(reference, anchor_px, h, target, {px, py}, rad);
+  if (!peak.ok || peak.ncc < options.min_ncc - 0.1) return match;
+  // Radius 0: the prediction is already sub-pixel (a relocation); start there.
+  const Eigen::Vector2d start = rad == 0 ? predicted_q_px : peak.q_px;
 
-  // 2. Least-squares template matching: position, gain and offset.
+  // 2. Least-squares template matching: position, gain and offset, starting
+  // from the moments of the best integer window.
+  std::vector<Eigen::Vector2d> offsets(static_cast<size_t>(n));
+  for (int r = -h, i = 0; r <= h; ++r)
+    for (int c = -h; c <= h; ++c, ++i) offsets[i] = dtarget_dreference * Eigen::Vector2d(c, r);
   Eigen::Vector2d q = start;
-  double gain = 1.0, offset = 0.0;
-  {
-    // Initial gain and offset from the moments at the start.
-    double s = 0, ss = 0;
-    int count = 0;
-    for (int r = -h; r <= h; ++r) {
-      for (int c = -h; c <= h; ++c) {
-        const Eigen::Vector2d p = q + dtarget_dreference * Eigen::Vector2d(c, r);
-        double v;
-        if (!SampleBSpline(target_spline, p.x(), p.y(), &v)) return match;
-        s += v, ss += v * v, ++count;
-      }
-    }
-    const double mean = s / count, sd = std::sqrt(std::max(ss / count - mean * mean, 1e-12));
-    gain = (t_norm / std::sqrt(static_cast<double>(n))) / sd;
-    offset = t_mean - gain * mean;
-  }
-  Eigen::VectorXd sampled(n);
+  double gain = t_std / std::max(peak.target_std, 1e-6);
+  double offset = t_mean - gain * peak.target_mean;
   bool converged = false;
   for (int it = 0; it < options.max_iterations && !converged; ++it) {
-    Eigen::Matrix4d normal = Eigen::Matrix4d::Zero();
-    Eigen::Vector4d rhs = Eigen::Vector4d::Zero();
-    for (int r = -h, i = 0; r <= h; ++r) {
-      for (int c = -h; c <= h; ++c, ++i) {
-        const Eigen::Vector2d p = q + dtarget_dreference * Eigen::Vector2d(c, r);
-        double v;
-        Eigen::Vector2d g;
-        if (!SampleBSpline(target_spline, p.x(), p.y(), &v, &g)) return match;
-        sampled(i) = v;
-        const double residual = gain * v + offset - templ(i);
-        const Eigen::Vector4d jac(gain * g.x(), gain * g.y(), v, 1.0);
-        normal.selfadjointView<Eigen::Lower>().rankUpdate(jac);
-        rhs -= jac * residual;
-      }
+    // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain, doffset).
+    double n00 = 0, n01 = 0, n02 = 0, n03 = 0, n11 = 0, n12 = 0, n13 = 0, n22 = 0, n23 = 0;
+    double b0 = 0, b1 = 0, b2 = 0, b3 = 0;
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector2d p = q + offsets[i];
+      double v;
+      Eigen::Vector2d g;
+      if (!SampleBSpline(target_spline, p.x(), p.y(), &v, &g)) return match;
+      const double e = gain * v + offset - templ(i);
+      const double j0 = gain * g.x(), j1 = gain * g.y();
+      n00 += j0 * j0, n01 += j0 * j1, n02 += j0 * v, n03 += j0;
+      n11 += j1 * j1, n12 += j1 * v, n13 += j1;
+      n22 += v * v, n23 += v;
+      b0 -= j0 * e, b1 -= j1 * e, b2 -= v * e, b3 -= e;
     }
-    const Eigen::Vector4d step = normal.selfadjointView<Eigen::Lower>().ldlt().solve(rhs);
+    Eigen::Matrix4d normal;
+    normal << n00, n01, n02, n03, n01, n11, n12, n13, n02, n12, n22, n23, n03, n13, n23, n;
+    const Eigen::Vector4d step = normal.ldlt().solve(Eigen::Vector4d(b0, b1, b2, b3));
     if (!step.allFinite()) return match;
     q += step.head<2>();
     gain += step(2);
@@ -212,11 +262,10 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
     if ((q - start).norm() > options.max_refinement_px) return match;
   }
   // Quality at the final position.
-  for (int r = -h, i = 0; r <= h; ++r) {
-    for (int c = -h; c <= h; ++c, ++i) {
-      const Eigen::Vector2d p = q + dtarget_dreference * Eigen::Vector2d(c, r);
-      if (!SampleBSpline(target_spline, p.x(), p.y(), &sampled(i))) return match;
-    }
+  Eigen::VectorXd sampled(n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d p = q + offsets[i];
+    if (!SampleBSpline(target_spline, p.x(), p.y(), &sampled(i))) return match;
   }
   const Eigen::VectorXd s0 = sampled.array() - sampled.mean();
   match.ncc = s0.dot(t0) / (s0.norm() * t_norm);

@@ -13,7 +13,7 @@
 namespace omm {
 
 struct TranslationSearchOptions {
-  int coarse_max_size_px = 96;   // the exhaustive search runs on images downsampled to this
+  int coarse_max_size_px = 64;   // the exhaustive search runs on images downsampled to this
   double min_overlap_fraction = 0.08;  // shifts overlapping less of the image are not tried
   int finest_factor = 2;         // refinement stops at this downsampling factor
 
@@ -36,6 +36,22 @@ struct TranslationEstimate {
 // (NormalizeTileIntensity) keep a bright background from dominating.
 TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
                                         const TranslationSearchOptions& options);
+
+// The integer position of best normalised cross-correlation of a template
+// from `reference` ((2 half_size_px + 1)^2 pixels centred at the integer
+// anchor_px) in `target`, over the integer centres within +-radius_px (per
+// axis) of center_px, with the quadratic peak of the NCC surface (per axis,
+// clamped to +-0.5 px) where the neighbours exist. ok is false when the
+// template or the searched window leaves its image, or the template is flat.
+struct NccPeak {
+  bool ok = false;
+  Eigen::Vector2i pixel = Eigen::Vector2i::Zero();  // best integer centre in target
+  Eigen::Vector2d q_px = Eigen::Vector2d::Zero();   // with the quadratic peak
+  double ncc = -2.0;                                // at `pixel`
+  double target_mean = 0.0, target_std = 0.0;       // of the target window at `pixel`
+};
+NccPeak SearchNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int half_size_px,
+                  const ImageF& target, const Eigen::Vector2i& center_px, int radius_px);
 
 struct PatchMatchOptions {
   int half_size_px = 15;  // the template is (2 h + 1)^2 pixels of the reference tile
@@ -61,7 +77,9 @@ struct PatchMatch {
 
 // Finds the patch of `reference` centred at pixel `anchor_px` in `target`.
 // 1. NCC at every integer offset within +-search_radius_px of the prediction
-//    (a translation of the raw template);
+//    (a translation of the raw template); with search_radius_px = 0 the
+//    prediction is taken as sub-pixel exact and step 2 starts there (a
+//    relocation of a match already refined);
 // 2. least-squares template matching (Gruen 1985) from the best offset:
 //      min over q, g, o  sum_x (g T(q + J x) + o - R(anchor + x))^2,
 //    x over the template's integer offsets, R the reference tile's raw pixels,

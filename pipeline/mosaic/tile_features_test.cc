@@ -1,0 +1,138 @@
+// The feature kernels against exact answers: Harris on a rotationally
+// symmetric blob (its corner is the blob's centre by symmetry), the cubic
+// B-spline's interpolation of the pixels and reproduction of linear ramps, and
+// box downsampling.
+#include "pipeline/mosaic/tile_features.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace omm {
+namespace {
+
+// A Gaussian blob (sigma 1.2 px) centred at (cx, cy): rotationally
+// symmetric, so Harris' response is too and peaks at the centre (the window
+// isotropic there, anisotropic elsewhere).
+ImageF Blob(int rows, int cols, double cx, double cy) {
+  ImageF image(rows, cols);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c)
+      image(r, c) = static_cast<float>(
+          std::exp(-0.5 * ((c - cx) * (c - cx) + (r - cy) * (r - cy)) / (1.2 * 1.2)));
+  return image;
+}
+
+TEST(DetectHarrisCorners, BlobAtItsCentre) {
+  const Eigen::Vector2d centre(99.3, 100.2);
+  const ImageF image = Blob(200, 200, centre.x(), centre.y());
+  HarrisOptions options;
+  const std::vector<Corner> corners = DetectHarrisCorners(image, options);
+  ASSERT_FALSE(corners.empty());
+  const Corner& best = corners.front();
+  EXPECT_EQ(best.pixel, Eigen::Vector2i(99, 100));  // the nearest pixel
+  // The 3 x 3 quadratic fit of the sampled response: bias well below 0.1 px.
+  EXPECT_LT((best.q_px - centre).norm(), 0.1) << best.q_px.transpose();
+  // Nothing else: one peak.
+  for (const Corner& c : corners)
+    EXPECT_LE((c.q_px - best.q_px).norm(), options.nms_radius_px + 1.0) << c.q_px.transpose();
+}
+
+TEST(DetectHarrisCorners, BucketingKeepsAtMostMaxPerCell) {
+  // A grid of junctions every 16 px: 4 x 4 per 64 px cell, at most 3 kept.
+  ImageF image(256, 256);
+  for (int r = 0; r < 256; ++r)
+    for (int c = 0; c < 256; ++c) image(r, c) = (((c / 16) + (r / 16)) % 2) ? 1.0f : -1.0f;
+  image = GaussianBlur(image, 1.0);  // resolved gradients
+  HarrisOptions options;
+  const std::vector<Corner> corners = DetectHarrisCorners(image, options);
+  std::vector<int> count(16, 0);
+  for (const Corner& c : corners) {
+    ++count[(c.pixel.y() / 64) * 4 + c.pixel.x() / 64];
+    // Every corner is a junction, at the 16 px lattice's pixel boundaries
+    // (15.5 + 16 k) to within the half pixel of the peak's refinement.
+    const Eigen::Vector2d lattice = ((c.q_px.array() + 0.5) / 16.0).round() * 16.0 - 0.5;
+    EXPECT_LE((c.q_px - lattice).cwiseAbs().maxCoeff(), 0.5 + 1e-6) << c.q_px.transpose();
+  }
+  for (int n : count) EXPECT_LE(n, options.max_per_cell);
+  EXPECT_GE(corners.size(), 16u * 2);
+}
+
+TEST(BSpline, InterpolatesThePixelsExactly) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-2.0f, 2.0f);
+  ImageF image(40, 50);
+  for (Eigen::Index i = 0; i < image.size(); ++i) image.data()[i] = u(rng);
+  const ImageF coefficients = BSplineCoefficients(image);
+  double max_error = 0;
+  for (int r = 1; r + 2 < image.rows(); ++r) {
+    for (int c = 1; c + 2 < image.cols(); ++c) {
+      double v;
+      ASSERT_TRUE(SampleBSpline(coefficients, c, r, &v));
+      max_error = std::max(max_error, std::abs(v - image(r, c)));
+    }
+  }
+  // Float coefficients: a few float epsilons of the values' scale.
+  EXPECT_LT(max_error, 2e-6);
+  double v;
+  EXPECT_FALSE(SampleBSpline(coefficients, 0.5, 5, &v));  // the 4 x 4 support leaves the image
+}
+
+TEST(BSpline, ReproducesALinearRampAndItsGradient) {
+  // Cubic B-splines reproduce polynomials of degree <= 3; a ramp has no
+  // border effect in the interior (mirroring keeps it linear near the
+  // middle), so values and gradients are exact at fractional positions.
+  ImageF image(60, 60);
+  for (int r = 0; r < 60; ++r)
+    for (int c = 0; c < 60; ++c) image(r, c) = static_cast<float>(0.3 + 0.02 * c - 0.015 * r);
+  const ImageF coefficients = BSplineCoefficients(image);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(20.0, 40.0);
+  for (int k = 0; k < 100; ++k) {
+    const double x = u(rng), y = u(rng);
+    double v;
+    Eigen::Vector2d g;
+    ASSERT_TRUE(SampleBSpline(coefficients, x, y, &v, &g));
+    EXPECT_NEAR(v, 0.3 + 0.02 * x - 0.015 * y, 1e-5);
+    EXPECT_NEAR(g.x(), 0.02, 1e-5);
+    EXPECT_NEAR(g.y(), -0.015, 1e-5);
+  }
+}
+
+TEST(BSpline, GradientMatchesFiniteDifferences) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  ImageF image(30, 30);
+  for (Eigen::Index i = 0; i < image.size(); ++i) image.data()[i] = u(rng);
+  const ImageF coefficients = BSplineCoefficients(image);
+  std::uniform_real_distribution<double> p(5.0, 25.0);
+  const double eps = 1e-5;
+  for (int k = 0; k < 50; ++k) {
+    const double x = p(rng), y = p(rng);
+    double v = 0, vx0 = 0, vx1 = 0, vy0 = 0, vy1 = 0;
+    Eigen::Vector2d g;
+    ASSERT_TRUE(SampleBSpline(coefficients, x, y, &v, &g));
+    ASSERT_TRUE(SampleBSpline(coefficients, x - eps, y, &vx0));
+    ASSERT_TRUE(SampleBSpline(coefficients, x + eps, y, &vx1));
+    ASSERT_TRUE(SampleBSpline(coefficients, x, y - eps, &vy0));
+    ASSERT_TRUE(SampleBSpline(coefficients, x, y + eps, &vy1));
+    EXPECT_NEAR(g.x(), (vx1 - vx0) / (2 * eps), 1e-6);
+    EXPECT_NEAR(g.y(), (vy1 - vy0) / (2 * eps), 1e-6);
+  }
+}
+
+TEST(DownsampleBox, IsTheBlockMean) {
+  ImageF image(9, 13);
+  for (int r = 0; r < 9; ++r)
+    for (int c = 0; c < 13; ++c) image(r, c) = static_cast<float>(r * 13 + c);
+  const ImageF out = DownsampleBox(image, 3);
+  ASSERT_EQ(out.rows(), 3);
+  ASSERT_EQ(out.cols(), 4);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c)
+      EXPECT_FLOAT_EQ(out(r, c), image.block(3 * r, 3 * c, 3, 3).mean());
+}
+
+}  // namespace
+}  // namespace omm
