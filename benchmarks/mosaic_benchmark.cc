@@ -99,16 +99,15 @@ double Seconds(std::chrono::steady_clock::time_point since) {
 // A raw pixel's size on the part, mm.
 double RawPxMm(const SimulationTruth& truth) {
   const Eigen::Isometry3d part_from_cam = truth.cam_from_part.inverse();
-  const double distance_mm =
-      part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();
+  const double distance_mm = part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();
   return truth.camera.pixel_pitch_um * 1e-3 * distance_mm / truth.camera.focal_length_mm;
 }
 
 struct HoleScore {
   int num_found = 0;
   double similarity_rms_raw_px = 0.0;
-  double rigid_rms_raw_px = 0.0;  // image px * gsd_mm: meaningful for a metric mosaic only
-  double scale = 0.0;             // of the similarity, mm per image px
+  double rigid_rms_raw_px = 0.0;       // image px * gsd_mm: meaningful for a metric mosaic only
+  double scale = 0.0;                  // of the similarity, mm per image px
   double similarity_max_raw_px = 0.0;  // largest residual of the similarity fit
 };
 
@@ -125,7 +124,8 @@ HoleScore ScoreHoles(const SimulationTruth& truth, const ImageF& image, double g
     coarse.window_px = std::max(4.0, 0.2 * radius_px);
     const testing::RimFit first = testing::LocateDarkDiscRim(image, rough_px[k], radius_px, coarse);
     if (!first.ok) continue;
-    const testing::RimFit second = testing::LocateDarkDiscRim(image, first.centre_px, first.radius_px);
+    const testing::RimFit second =
+        testing::LocateDarkDiscRim(image, first.centre_px, first.radius_px);
     if (!second.ok) continue;
     testing::RimLocatorOptions fine;
     fine.window_px = 1.5;
@@ -216,7 +216,8 @@ std::vector<Eigen::Vector2d> RoughInPanorama(const Demo& demo, const ImageF& pan
     Eigen::Matrix2Xd from(2, matched.size()), to(2, matched.size());
     for (size_t m = 0; m < matched.size(); ++m) {
       from.col(static_cast<Eigen::Index>(m)) = truth.holes[matched[m]].center_part_mm;
-      to.col(static_cast<Eigen::Index>(m)) = Eigen::Vector2d(rough[matched[m]].x(), -rough[matched[m]].y());
+      to.col(static_cast<Eigen::Index>(m)) =
+          Eigen::Vector2d(rough[matched[m]].x(), -rough[matched[m]].y());
     }
     const testing::Planar2dFit fit = testing::FitPlanar2d(from, to, true);
     Eigen::Index worst = 0;
@@ -262,7 +263,7 @@ void BM_OmmMosaic(benchmark::State& state) {
     std::printf("omm: %s\n%s\n", registration.brief.c_str(), ortho.summary.brief.c_str());
   }
   const HoleScore score = ScoreHoles(truth, ortho.mosaic.pixels, ortho.mosaic.grid.gsd_mm,
-                                    RoughInMosaic(truth, ortho.mosaic.grid));
+                                     RoughInMosaic(truth, ortho.mosaic.grid));
   state.counters["register_s"] = register_s;
   state.counters["ortho_s"] = ortho_s;
   state.counters["total_s"] = register_s + ortho_s;
@@ -270,10 +271,11 @@ void BM_OmmMosaic(benchmark::State& state) {
   state.counters["holes"] = score.num_found;
   state.counters["sim_rms_raw_px"] = score.similarity_rms_raw_px;
   state.counters["rigid_rms_raw_px"] = score.rigid_rms_raw_px;
-  std::printf("omm: %.2f s wall (register %.2f + ortho %.2f), %.2f CPU s; %d holes: "
-              "similarity RMS %.4f raw px (max %.4f), rigid (metric) RMS %.4f raw px\n",
-              register_s + ortho_s, register_s, ortho_s, cpu_s, score.num_found,
-              score.similarity_rms_raw_px, score.similarity_max_raw_px, score.rigid_rms_raw_px);
+  std::printf(
+      "omm: %.2f s wall (register %.2f + ortho %.2f), %.2f CPU s; %d holes: "
+      "similarity RMS %.4f raw px (max %.4f), rigid (metric) RMS %.4f raw px\n",
+      register_s + ortho_s, register_s, ortho_s, cpu_s, score.num_found,
+      score.similarity_rms_raw_px, score.similarity_max_raw_px, score.rigid_rms_raw_px);
 }
 
 void BM_OpenCvStitcherScans(benchmark::State& state) {
@@ -291,16 +293,17 @@ void BM_OpenCvStitcherScans(benchmark::State& state) {
   if (!result.ok) return;
   // The panorama's scale is unknown: the rough hole radius assumes ~ the tiles' own.
   const HoleScore score = ScoreHoles(demo.plan.truth, result.panorama, RawPxMm(demo.plan.truth),
-                                    RoughInPanorama(demo, result.panorama));
+                                     RoughInPanorama(demo, result.panorama));
   state.counters["total_s"] = result.seconds;
   state.counters["cpu_s"] = cpu_s;
   state.counters["holes"] = score.num_found;
   state.counters["sim_rms_raw_px"] = score.similarity_rms_raw_px;
-  std::printf("cv::Stitcher SCANS: %.2f s wall, %.2f CPU s, panorama %ld x %ld px; %d holes: "
-              "similarity RMS %.4f raw px, max %.4f (scale %.5f mm/px)\n",
-              result.seconds, cpu_s, static_cast<long>(result.panorama.cols()),
-              static_cast<long>(result.panorama.rows()), score.num_found,
-              score.similarity_rms_raw_px, score.similarity_max_raw_px, score.scale);
+  std::printf(
+      "cv::Stitcher SCANS: %.2f s wall, %.2f CPU s, panorama %ld x %ld px; %d holes: "
+      "similarity RMS %.4f raw px, max %.4f (scale %.5f mm/px)\n",
+      result.seconds, cpu_s, static_cast<long>(result.panorama.cols()),
+      static_cast<long>(result.panorama.rows()), score.num_found, score.similarity_rms_raw_px,
+      score.similarity_max_raw_px, score.scale);
 }
 
 BENCHMARK(BM_OmmMosaic)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();

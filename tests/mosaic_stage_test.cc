@@ -20,8 +20,8 @@
 #include "adapters/project_io/report_json.h"
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/board.h"
-#include "pipeline/orchestration/run_project.h"
 #include "pipeline/mosaic/orthorectify.h"
+#include "pipeline/orchestration/run_project.h"
 #include "tests/rim_locator.h"
 #include "tests/sim_cache.h"
 #include "tests/test_util.h"
@@ -104,7 +104,8 @@ class MosaicStageTest : public ::testing::Test {
   // The same in `mosaic` on the grid of `grid` whose part frame has its
   // origin at `origin_truth_mm` of the truth's.
   static Located LocateIn(const ImageF& mosaic, const MosaicReport& grid,
-                          const Eigen::Vector2d& origin_truth_mm, const Eigen::Matrix2Xd& centres_mm,
+                          const Eigen::Vector2d& origin_truth_mm,
+                          const Eigen::Matrix2Xd& centres_mm,
                           const std::vector<double>& diameters_mm, const char* what) {
     // project-format.md: the centre of pixel (col, row) is at
     // (origin_x + (col + 0.5) gsd, origin_y - (row + 0.5) gsd).
@@ -186,8 +187,8 @@ TEST_F(MosaicStageTest, ReportHasTheContractFields) {
   const auto& tiles = std::get<ReportValue::Array>(Member(mosaic.extra, "tiles")->data());
   EXPECT_EQ(tiles.size(), Truth().tiles.size());
   // Demo tiles all overlap their neighbours: none is held by its prior.
-  EXPECT_TRUE(std::get<ReportValue::Array>(Member(mosaic.extra, "tiles_held_by_prior")->data())
-                  .empty());
+  EXPECT_TRUE(
+      std::get<ReportValue::Array>(Member(mosaic.extra, "tiles_held_by_prior")->data()).empty());
 
   const SavedScene scene = ReadSceneJson(Out() / "mosaic" / "scene.json");
   ASSERT_EQ(scene.scene.table_pos_mm.size(), Truth().tiles.size());
@@ -254,17 +255,20 @@ TEST_F(MosaicStageTest, HolesSitWhereTheTruthSceneMosaicHasThem) {
   MosaicReport truth_grid;
   truth_grid.gsd_mm = truth_mosaic.mosaic.grid.gsd_mm;
   truth_grid.origin_mm = truth_mosaic.mosaic.grid.origin_mm;
-  const Located reference = LocateIn(truth_mosaic.mosaic.pixels, truth_grid,
-                                     Eigen::Vector2d::Zero(), centres, diameters, "truth-scene hole");
+  const Located reference =
+      LocateIn(truth_mosaic.mosaic.pixels, truth_grid, Eigen::Vector2d::Zero(), centres, diameters,
+               "truth-scene hole");
   const Located ours = Locate(centres, diameters, "hole");
   ASSERT_EQ(reference.found_mm.cols(), ours.found_mm.cols());
   ASSERT_EQ(reference.truth_mm, ours.truth_mm);
-  const testing::Planar2dFit locator = testing::FitPlanar2d(reference.found_mm, reference.truth_mm, false);
+  const testing::Planar2dFit locator =
+      testing::FitPlanar2d(reference.found_mm, reference.truth_mm, false);
   const testing::Planar2dFit fit = testing::FitPlanar2d(ours.found_mm, reference.found_mm, false);
   const double raw_px_mm = RawPxMm();
-  std::printf("truth-scene mosaic vs truth (the locator's floor): RMS %.4f raw px\n"
-              "our mosaic vs the truth-scene mosaic: RMS %.4f mm = %.4f raw px, rotation %.4f deg\n",
-              locator.rms / raw_px_mm, fit.rms, fit.rms / raw_px_mm, fit.angle_rad * 180 / M_PI);
+  std::printf(
+      "truth-scene mosaic vs truth (the locator's floor): RMS %.4f raw px\n"
+      "our mosaic vs the truth-scene mosaic: RMS %.4f mm = %.4f raw px, rotation %.4f deg\n",
+      locator.rms / raw_px_mm, fit.rms, fit.rms / raw_px_mm, fit.angle_rad * 180 / M_PI);
   EXPECT_LE(fit.rms / raw_px_mm, 0.05);
   EXPECT_LT(std::abs(fit.angle_rad * 180 / M_PI), 0.05);
 }
@@ -273,9 +277,8 @@ TEST_F(MosaicStageTest, HolesSitWhereTheTruthSceneMosaicHasThem) {
 TEST_F(MosaicStageTest, CaltabDotsSitAtTheTruthInTheMosaic) {
   ASSERT_TRUE(Truth().part_from_plate.has_value());
   const Eigen::Matrix3Xd marks = *Truth().part_from_plate * BoardPoints(Truth().board);
-  const Located located =
-      Locate(marks.topRows<2>(), std::vector<double>(marks.cols(), Truth().board.dot_diameter_mm),
-             "dot");
+  const Located located = Locate(
+      marks.topRows<2>(), std::vector<double>(marks.cols(), Truth().board.dot_diameter_mm), "dot");
   ASSERT_GE(located.found_mm.cols(), marks.cols() - 2);
   const testing::Planar2dFit fit = testing::FitPlanar2d(located.found_mm, located.truth_mm, false);
   const double raw_px_mm = RawPxMm();

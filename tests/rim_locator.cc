@@ -108,8 +108,8 @@ RimFit LocateDarkDiscRim(const ImageF& image, const Eigen::Vector2d& rough_centr
     if (peak < 0) continue;
     const int near = static_cast<int>(std::lround(1.5 / kStep));
     const int far = static_cast<int>(std::lround(3.5 / kStep));
-    const double inside =
-        Median(std::vector<double>(profile.begin() + peak - far, profile.begin() + peak - near + 1));
+    const double inside = Median(
+        std::vector<double>(profile.begin() + peak - far, profile.begin() + peak - near + 1));
     // The surface outside is textured: its level AT the rim is the value
     // there of a line fitted to the profile 2-4.5 px outside (a median of it
     // would move the mid-level, and with it the edge, with the texture's slope).

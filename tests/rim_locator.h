@@ -38,9 +38,9 @@
 namespace omm::testing {
 
 struct RimLocatorOptions {
-  double window_px = 4.0;        // rim searched within rough radius +- this, px
+  double window_px = 4.0;         // rim searched within rough radius +- this, px
   double min_ray_fraction = 0.7;  // of the rays cast, at least this many must give an edge
-  double outlier_sigmas = 3.0;   // edge points beyond this many robust sigmas are dropped
+  double outlier_sigmas = 3.0;    // edge points beyond this many robust sigmas are dropped
 };
 
 struct RimFit {

@@ -53,8 +53,7 @@ OpenCvStitcherResult StitchScans(const std::vector<ImageF>& tiles,
   cv::Mat panorama;
   const cv::Stitcher::Status status = stitcher->stitch(images, panorama);
   OpenCvStitcherResult result;
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   cv::setNumThreads(threads_before);
   result.status = StatusName(status);
   result.ok = status == cv::Stitcher::OK && !panorama.empty();

@@ -25,8 +25,8 @@ struct OpenCvStitcherOptions {
 
 struct OpenCvStitcherResult {
   bool ok = false;
-  std::string status;  // cv::Stitcher::Status by name ("OK", "ERR_NEED_MORE_IMGS", ...)
-  ImageF panorama;     // gray, [0, 1]; 0 where no tile is composed
+  std::string status;    // cv::Stitcher::Status by name ("OK", "ERR_NEED_MORE_IMGS", ...)
+  ImageF panorama;       // gray, [0, 1]; 0 where no tile is composed
   double seconds = 0.0;  // wall time of stitch()
 };
 

@@ -92,7 +92,8 @@ std::string SceneToJson(const SavedScene& saved) {
   } else {
     json values = json::array();
     for (Eigen::Index r = 0; r < scene.covariance.rows(); ++r) {
-      for (Eigen::Index c = 0; c < scene.covariance.cols(); ++c) values.push_back(scene.covariance(r, c));
+      for (Eigen::Index c = 0; c < scene.covariance.cols(); ++c)
+        values.push_back(scene.covariance(r, c));
     }
     root["covariance"] = {{"size", scene.covariance.rows()}, {"values", values}};
   }
@@ -145,16 +146,17 @@ SavedScene SceneFromJson(const std::string& text, const std::string& where) {
   const json& covariance = in.At(root, "covariance", "");
   if (!covariance.is_null()) {
     const int size = static_cast<int>(in.Number(covariance, "size", "covariance"));
-    const int expected = PlaneSceneCovarianceSize(static_cast<int>(tiles.size()),
-                                                  static_cast<int>(plates.size()),
-                                                  static_cast<int>(scene.intrinsics.size()));
+    const int expected =
+        PlaneSceneCovarianceSize(static_cast<int>(tiles.size()), static_cast<int>(plates.size()),
+                                 static_cast<int>(scene.intrinsics.size()));
     if (size != expected) {
       in.Fail("covariance.size", "expected " + std::to_string(expected) + " for " +
                                      std::to_string(tiles.size()) + " tiles");
     }
     const Eigen::VectorXd values = in.Vector(covariance, "values", "covariance", size * size);
-    scene.covariance = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic,
-                                                      Eigen::RowMajor>>(values.data(), size, size);
+    scene.covariance =
+        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+            values.data(), size, size);
   }
   return saved;
 }

@@ -61,14 +61,15 @@ std::vector<ImageF> ReadTiles(const Project& project, const CameraModel& camera,
   std::vector<ImageF> tiles;
   tiles.reserve(project.tiles.size());
   for (const TilePosition& tile : project.tiles) {
-    if (progress) progress(static_cast<int>(tiles.size()), static_cast<int>(project.tiles.size()),
-                           "read tiles/" + tile.image);
+    if (progress)
+      progress(static_cast<int>(tiles.size()), static_cast<int>(project.tiles.size()),
+               "read tiles/" + tile.image);
     GrayImage image = ReadGrayImage(project.TilePath(tile.image));
     if (image.width() != camera.width_px || image.height() != camera.height_px) {
-      throw InputError(project.TilePath(tile.image).string(),
-                       fmt::format("{}x{} px, but the calibrated camera's imager is {}x{} px",
-                                   image.width(), image.height(), camera.width_px,
-                                   camera.height_px));
+      throw InputError(
+          project.TilePath(tile.image).string(),
+          fmt::format("{}x{} px, but the calibrated camera's imager is {}x{} px", image.width(),
+                      image.height(), camera.width_px, camera.height_px));
     }
     tiles.push_back(std::move(image.pixels));
   }
@@ -83,10 +84,13 @@ std::string WhyHeld(const TileRegistration& registration, int tile) {
     ++num_pairs;
     if (pair.usable) ++num_usable;
   }
-  if (num_pairs == 0) return "no other tile is predicted to overlap it: held by its table position alone";
+  if (num_pairs == 0)
+    return "no other tile is predicted to overlap it: held by its table position alone";
   if (num_usable == 0) {
-    return fmt::format("none of its {} overlapping pairs had enough good matches: held by its "
-                       "table position alone", num_pairs);
+    return fmt::format(
+        "none of its {} overlapping pairs had enough good matches: held by its "
+        "table position alone",
+        num_pairs);
   }
   return "its matches were all dropped as outliers: held by its table position alone";
 }
@@ -94,16 +98,16 @@ std::string WhyHeld(const TileRegistration& registration, int tile) {
 ReportValue PairsReport(const Project& project, const TileRegistration& registration) {
   ReportValue::Array rows;
   for (const PairRegistration& pair : registration.pairs) {
-    rows.emplace_back(ReportObject{
-        {"images", ReportValue::Array{project.tiles[pair.tile_a].image, project.tiles[pair.tile_b].image}},
-        {"predicted_overlap", pair.predicted_overlap},
-        {"candidates", pair.num_candidates},
-        {"matched", pair.num_matched},
-        {"inliers", pair.num_inliers},
-        {"tag_corners", pair.num_tag_corners},
-        {"used", pair.num_used},
-        {"rms_px", pair.rms_px},
-        {"usable", pair.usable}});
+    rows.emplace_back(ReportObject{{"images", ReportValue::Array{project.tiles[pair.tile_a].image,
+                                                                 project.tiles[pair.tile_b].image}},
+                                   {"predicted_overlap", pair.predicted_overlap},
+                                   {"candidates", pair.num_candidates},
+                                   {"matched", pair.num_matched},
+                                   {"inliers", pair.num_inliers},
+                                   {"tag_corners", pair.num_tag_corners},
+                                   {"used", pair.num_used},
+                                   {"rms_px", pair.rms_px},
+                                   {"usable", pair.usable}});
   }
   return rows;
 }
@@ -112,9 +116,9 @@ ReportValue TilesReport(const Project& project, const TileRegistration& registra
                         const OrthoSummary& ortho) {
   ReportValue::Array rows;
   for (size_t i = 0; i < project.tiles.size(); ++i) {
-    const bool held = std::find(registration.tiles_held_by_prior.begin(),
-                                registration.tiles_held_by_prior.end(),
-                                static_cast<int>(i)) != registration.tiles_held_by_prior.end();
+    const bool held =
+        std::find(registration.tiles_held_by_prior.begin(), registration.tiles_held_by_prior.end(),
+                  static_cast<int>(i)) != registration.tiles_held_by_prior.end();
     ReportObject row{{"image", project.tiles[i].image},
                      {"commanded_mm", Pair(project.tiles[i].table_pos_mm)},
                      {"adjusted_minus_commanded_mm", Pair(registration.table_adjustment_mm[i])},
@@ -186,8 +190,8 @@ void RunMosaicStage(StageContext& context) {
 
   ReportValue::Array held;
   for (int tile : registration.tiles_held_by_prior) {
-    held.emplace_back(ReportObject{{"image", project.tiles[tile].image},
-                                   {"why", WhyHeld(registration, tile)}});
+    held.emplace_back(
+        ReportObject{{"image", project.tiles[tile].image}, {"why", WhyHeld(registration, tile)}});
   }
   const Eigen::Matrix2d& a = registration.image_px_per_table_mm;
   report.extra = ReportObject{
@@ -206,11 +210,12 @@ void RunMosaicStage(StageContext& context) {
       {"pairs", PairsReport(project, registration)},
       {"tiles", TilesReport(project, registration, ortho.summary)},
       {"tiles_held_by_prior", held},
-      {"exposure", ReportObject{{"brief", ortho.summary.exposure.brief},
-                                {"relative_sigma_before", ortho.summary.exposure.relative_sigma_before},
-                                {"relative_sigma_after", ortho.summary.exposure.relative_sigma_after},
-                                {"max_pair_step_before", ortho.summary.exposure.max_pair_step_before},
-                                {"max_pair_step_after", ortho.summary.exposure.max_pair_step_after}}},
+      {"exposure",
+       ReportObject{{"brief", ortho.summary.exposure.brief},
+                    {"relative_sigma_before", ortho.summary.exposure.relative_sigma_before},
+                    {"relative_sigma_after", ortho.summary.exposure.relative_sigma_after},
+                    {"max_pair_step_before", ortho.summary.exposure.max_pair_step_before},
+                    {"max_pair_step_after", ortho.summary.exposure.max_pair_step_after}}},
       {"ortho", ReportObject{{"brief", ortho.summary.brief},
                              {"covered_fraction", ortho.summary.covered_fraction},
                              {"clipped_fraction", ortho.summary.clipped_fraction},
