@@ -310,6 +310,42 @@ TEST_F(MosaicStageTest, CameraFromACameraModelFile) {
   EXPECT_LT(summary.report.mosaic->rms_px, 0.1);
 }
 
+// Two tiles that do not overlap (opposite corners of the 3 x 3 grid): the
+// stage fails on the data, says why, and out/ gets nothing.
+TEST_F(MosaicStageTest, TilesThatDoNotOverlapFailTheStage) {
+  const fs::path dir = dir_->path() / "apart";
+  testing::CopyProject(sim_->project_dir, dir);
+  fs::create_directories(dir / "out");
+  WriteCameraModel(dir / "out" / "camera.cameramodel", Truth().camera.model);
+  std::string table = "image,x_mm,y_mm\n";
+  for (const TileTruth& tile : Truth().tiles) {
+    const bool corner =
+        (tile.grid_row == 0 && tile.grid_col == 0) || (tile.grid_row == 2 && tile.grid_col == 2);
+    if (!corner) {
+      fs::remove(dir / "tiles" / tile.image);
+      continue;
+    }
+    table += tile.image + "," + std::to_string(tile.commanded_mm.x()) + "," +
+             std::to_string(tile.commanded_mm.y()) + "\n";
+  }
+  testing::WriteTextFile(dir / "table.csv", table);
+  // The features and measurements name the removed tiles: drop them.
+  const std::string yaml = testing::ReadTextFile(dir / "project.yaml");
+  testing::WriteTextFile(dir / "project.yaml", yaml.substr(0, yaml.find("\nfeatures:") + 1));
+  fs::remove(dir / "cmm.csv");
+  RunOptions options;
+  options.stages = {Stage::kMosaic};
+  try {
+    RunProject(LoadProject(dir), options);
+    FAIL() << "the stage did not fail";
+  } catch (const StageFailedError& e) {
+    std::printf("%s\n", e.what());
+    EXPECT_EQ(e.stage(), Stage::kMosaic);
+  }
+  EXPECT_FALSE(fs::exists(dir / "out" / "mosaic.png"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
+}
+
 TEST_F(MosaicStageTest, ColmapReadsTheExportedModel) {
   const Report report = ReadReportJson(Out() / "report.json");
   const auto& colmap = std::get<ReportObject>(Member(report.mosaic->extra, "colmap")->data());
