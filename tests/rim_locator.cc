@@ -141,7 +141,7 @@ RimFit LocateDarkDiscRim(const ImageF& image, const Eigen::Vector2d& rough_centr
       }
     }
     if (std::isnan(best_s)) continue;
-    edges.push_back(rough_centre_px + best_s * u);
+    edges.emplace_back(rough_centre_px + best_s * u);
   }
   fit.num_edges = static_cast<int>(edges.size());
   if (fit.num_edges < options.min_ray_fraction * fit.num_rays) {
@@ -153,6 +153,7 @@ RimFit LocateDarkDiscRim(const ImageF& image, const Eigen::Vector2d& rough_centr
   Circle circle = FitCircle(inliers);
   for (int pass = 0; pass < 3; ++pass) {
     std::vector<double> abs_residual;
+    abs_residual.reserve(edges.size());
     for (const Eigen::Vector2d& p : edges) {
       abs_residual.push_back(std::abs((p - circle.centre).norm() - circle.radius));
     }

@@ -45,7 +45,7 @@ class Reader {
     }
     Eigen::VectorXd out(v.size());
     for (size_t i = 0; i < v.size(); ++i) {
-      if (!v[i].is_number()) Fail(path + "." + key, "expected numbers");
+      if (!v[i].is_number()) Fail(std::string(path).append(".").append(key), "expected numbers");
       out[static_cast<Eigen::Index>(i)] = v[i].get<double>();
     }
     return out;
@@ -124,8 +124,8 @@ SavedScene SceneFromJson(const std::string& text, const std::string& where) {
     const json& image = in.At(tiles[i], "image", path);
     if (!image.is_string()) in.Fail(path + ".image", "expected a string");
     saved.tile_images.push_back(image.get<std::string>());
-    saved.commanded_table_pos_mm.push_back(in.Vector(tiles[i], "commanded_mm", path, 2));
-    scene.table_pos_mm.push_back(in.Vector(tiles[i], "adjusted_mm", path, 2));
+    saved.commanded_table_pos_mm.emplace_back(in.Vector(tiles[i], "commanded_mm", path, 2));
+    scene.table_pos_mm.emplace_back(in.Vector(tiles[i], "adjusted_mm", path, 2));
     const json& held = in.At(tiles[i], "held_by_prior", path);
     if (!held.is_boolean()) in.Fail(path + ".held_by_prior", "expected true or false");
     if (held.get<bool>()) saved.tiles_held_by_prior.push_back(static_cast<int>(i));

@@ -41,14 +41,14 @@ ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.
 // The calibrated camera: this run's or an earlier one's out/camera.cameramodel,
 // else the one calibration.from names.
 fs::path CameraModelPath(const StageContext& context) {
-  const fs::path staged = context.Input(kCameraModelName);
+  fs::path staged = context.Input(kCameraModelName);
   if (!staged.empty()) return staged;
   const Project& project = context.project;
   if (project.calibration_from) {
     const CalibrationSource& source = *project.calibration_from;
-    const fs::path from = source.kind == CalibrationSource::Kind::kCameraModel
-                              ? source.path
-                              : source.path / "out" / kCameraModelName;
+    fs::path from = source.kind == CalibrationSource::Kind::kCameraModel
+                        ? source.path
+                        : source.path / "out" / kCameraModelName;
     if (fs::exists(from)) return from;
   }
   throw InputError((context.out_dir / kCameraModelName).string(),
