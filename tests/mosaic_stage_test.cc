@@ -308,6 +308,12 @@ TEST_F(MosaicStageTest, CameraFromACameraModelFile) {
   EXPECT_EQ(std::get<std::string>(camera->data()), model.string());
   EXPECT_TRUE(fs::exists(dir / "out" / "mosaic.png"));
   EXPECT_LT(summary.report.mosaic->rms_px, 0.1);
+  // A second run replaces out/'s mosaic files, directories included.
+  const RunSummary again = RunProject(LoadProject(dir), options);
+  ASSERT_TRUE(again.report.mosaic.has_value());
+  EXPECT_EQ(again.report.mosaic->size_px, summary.report.mosaic->size_px);
+  EXPECT_TRUE(fs::exists(dir / "out" / "colmap" / "points3D.txt"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "mosaic" / "scene.json"));
 }
 
 // Two tiles that do not overlap (opposite corners of the 3 x 3 grid): the
