@@ -73,16 +73,23 @@ Eigen::Matrix3d FitHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd&
     return t;
   };
   const Eigen::Matrix3d ta = normaliser(a), tb = normaliser(b);
-  const Eigen::Index n = a.cols();
-  Eigen::MatrixXd m(2 * n, 9);
-  for (Eigen::Index i = 0; i < n; ++i) {
+  // The null vector of the DLT system M h = 0 as the eigenvector of M^T M
+  // with the smallest eigenvalue: a 9 x 9 problem whatever the point count
+  // (the SVD of the 2n x 9 M cost more than the matching in RANSAC). In
+  // Hartley's normalised coordinates M^T M's conditioning is harmless.
+  Eigen::Matrix<double, 9, 9> mtm = Eigen::Matrix<double, 9, 9>::Zero();
+  for (Eigen::Index i = 0; i < a.cols(); ++i) {
     const Eigen::Vector3d x = ta * a.col(i).homogeneous();
     const Eigen::Vector3d y = tb * b.col(i).homogeneous();
-    m.row(2 * i) << 0, 0, 0, -y.z() * x.transpose(), y.y() * x.transpose();
-    m.row(2 * i + 1) << y.z() * x.transpose(), 0, 0, 0, -y.x() * x.transpose();
+    Eigen::Matrix<double, 9, 1> r0, r1;
+    r0 << 0, 0, 0, -y.z() * x, y.y() * x;
+    r1 << y.z() * x, 0, 0, 0, -y.x() * x;
+    mtm.selfadjointView<Eigen::Lower>().rankUpdate(r0);
+    mtm.selfadjointView<Eigen::Lower>().rankUpdate(r1);
   }
-  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(m, Eigen::ComputeFullV);
-  const Eigen::VectorXd h = svd.matrixV().col(8);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> eigen(
+      mtm.selfadjointView<Eigen::Lower>());
+  const Eigen::Matrix<double, 9, 1> h = eigen.eigenvectors().col(0);
   Eigen::Matrix3d hn;
   hn << h(0), h(1), h(2), h(3), h(4), h(5), h(6), h(7), h(8);
   return tb.inverse() * hn * ta;
@@ -163,6 +170,7 @@ struct Match {
   Eigen::Vector2i anchor_px = Eigen::Vector2i::Zero();
   Eigen::Vector2d q_b = Eigen::Vector2d::Zero();
   Eigen::Matrix2d db_da = Eigen::Matrix2d::Identity();  // affine of the last match
+  double sigma_px = 0.0;  // the last match's predicted sigma (PatchMatch::sigma_px)
   bool tag = false;
   bool keep = true;
 };
@@ -392,6 +400,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                        options.patch);
       if (!pm.ok) continue;
       m.q_b = pm.q_px;
+      m.sigma_px = pm.sigma_px;
       matches.push_back(m);
     }
     pair.num_matched = static_cast<int>(matches.size());
@@ -441,6 +450,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                          m.db_da, options.search_radius_px, options.patch);
         if (!pm.ok) continue;
         m.q_b = pm.q_px;
+      m.sigma_px = pm.sigma_px;
         tag_matches.push_back(m);
       }
     }
@@ -496,7 +506,13 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
           input.observations.push_back({m.tile_a, it->second, m.anchor_px.cast<double>(), 1.0});
           match_of_observation->emplace_back(-1, -1);
         }
-        input.observations.push_back({m.tile_b, it->second, m.q_b, 1.0});
+        // Down-weighting only: weights above 1 (sigmas below
+        // observation_sigma_px) stalled the first, outlier-laden solve.
+        const double weight =
+            options.weight_by_match_sigma
+                ? std::min(1.0, options.observation_sigma_px / std::max(m.sigma_px, 1e-9))
+                : 1.0;
+        input.observations.push_back({m.tile_b, it->second, m.q_b, weight});
         match_of_observation->emplace_back(static_cast<int>(p), static_cast<int>(k));
       }
     }
@@ -575,6 +591,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         return;
       }
       m.q_b = pm.q_px;
+      m.sigma_px = pm.sigma_px;
     });
   };
 

@@ -24,7 +24,9 @@
 //    matches in every j > i; a tag corner likewise from the first tile that
 //    sees the tag. Every observation of a track is the same part point,
 //    because each is located against the same template.
-// 5. AdjustPlaneScene (seed + robust bundle adjustment), then observations
+// 5. AdjustPlaneScene (seed + robust bundle adjustment; each match weighted
+//    by its template match's predicted sigma, so that weak texture counts
+//    less — this halved the low-texture preset's hole error), then observations
 //    whose residual exceeds outlier_factor x the median residual are dropped
 //    and the scene re-solved; then (rematch_passes) every match is relocated
 //    with the affine the adjusted plane model predicts between the two tiles
@@ -80,6 +82,10 @@ struct RegisterTilesOptions {
 
   // Bundle adjustment: the observations' sigma and the outlier pass.
   double observation_sigma_px = 0.05;  // 1-sigma of a matched position, px
+  // Weight each match's observation by min(1, observation_sigma_px / its
+  // predicted sigma (PatchMatch::sigma_px)): weak texture counts less
+  // (anchors keep 1).
+  bool weight_by_match_sigma = true;
   double outlier_factor = 4.0;         // drop |residual| > this x the median |residual|
   double min_outlier_threshold_px = 0.1;  // ... but never below this, px
   int rematch_passes = 1;  // relocations with the adjusted plane model's affine
@@ -110,7 +116,7 @@ struct TileRegistration {
   std::string brief;  // one line: tiles, tracks, RMS, held tiles, why unusable
 
   PlaneScene scene;          // the adjusted scene (tracks: the final input's)
-  PlaneBundleInput input;    // the final observations (kept ones, weight 1)
+  PlaneBundleInput input;    // the final observations (kept ones; weights as weight_by_match_sigma)
   PlaneSeedSummary seed;
   PlaneBundleSummary bundle;
   // Per track of `input`: index of its anchor observation (the template's

@@ -60,15 +60,20 @@ ImageF GaussianBlur(const ImageF& image, double sigma_px) {
   for (int r = 0; r < rows; ++r) {
     const float* in = image.data() + static_cast<size_t>(r) * cols;
     float* o = tmp.data() + static_cast<size_t>(r) * cols;
-    for (int c = 0; c < cols; ++c) {
+    const int lo = std::min(radius, cols), hi = std::max(lo, cols - radius);
+    const auto clamped = [&](int c) {
       float acc = 0;
-      if (c >= radius && c + radius < cols) {
-        for (int k = -radius; k <= radius; ++k) acc += kernel[k + radius] * in[c + k];
-      } else {
-        for (int k = -radius; k <= radius; ++k)
-          acc += kernel[k + radius] * in[std::clamp(c + k, 0, cols - 1)];
-      }
+      for (int k = -radius; k <= radius; ++k)
+        acc += kernel[k + radius] * in[std::clamp(c + k, 0, cols - 1)];
       o[c] = acc;
+    };
+    for (int c = 0; c < lo; ++c) clamped(c);
+    for (int c = hi; c < cols; ++c) clamped(c);
+    // Interior: taps outer, columns inner (vectorises, as the vertical pass).
+    std::fill(o + lo, o + hi, 0.0f);
+    for (int k = -radius; k <= radius; ++k) {
+      const float w = kernel[k + radius];
+      for (int c = lo; c < hi; ++c) o[c] += w * in[c + k];
     }
   }
   for (int r = 0; r < rows; ++r) {

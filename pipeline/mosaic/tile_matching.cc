@@ -31,30 +31,56 @@ std::string PatchMatchOptions::Check() const {
 
 namespace {
 
+// Summed-area tables of an image's values and squares: any rectangle's
+// moments in O(1), so that the exhaustive shift search sums only products.
+class Moments {
+ public:
+  explicit Moments(const ImageF& image)
+      : stride_(static_cast<int>(image.cols()) + 1),
+        sum_(static_cast<size_t>(stride_) * (image.rows() + 1), 0.0),
+        sum_sq_(sum_.size(), 0.0) {
+    for (int r = 0; r < image.rows(); ++r) {
+      double acc = 0, acc_sq = 0;
+      for (int c = 0; c < image.cols(); ++c) {
+        const double v = image(r, c);
+        acc += v, acc_sq += v * v;
+        sum_[(r + 1) * stride_ + c + 1] = sum_[r * stride_ + c + 1] + acc;
+        sum_sq_[(r + 1) * stride_ + c + 1] = sum_sq_[r * stride_ + c + 1] + acc_sq;
+      }
+    }
+  }
+  // Sums over rows [r0, r1), columns [c0, c1).
+  double Sum(int r0, int r1, int c0, int c1) const { return Box(sum_, r0, r1, c0, c1); }
+  double SumSq(int r0, int r1, int c0, int c1) const { return Box(sum_sq_, r0, r1, c0, c1); }
+
+ private:
+  double Box(const std::vector<double>& t, int r0, int r1, int c0, int c1) const {
+    return t[r1 * stride_ + c1] - t[r0 * stride_ + c1] - t[r1 * stride_ + c0] + t[r0 * stride_ + c0];
+  }
+  int stride_;
+  std::vector<double> sum_, sum_sq_;
+};
+
 // NCC of a and b over their overlap when b is shifted by (dx, dy): a(r, c)
 // against b(r + dy, c + dx). -2 if the overlap is smaller than min_pixels.
-double OverlapNcc(const ImageF& a, const ImageF& b, int dx, int dy, Eigen::Index min_pixels,
-                  double* overlap_fraction = nullptr) {
+double OverlapNcc(const ImageF& a, const ImageF& b, const Moments& ma, const Moments& mb, int dx,
+                  int dy, Eigen::Index min_pixels, double* overlap_fraction = nullptr) {
   const int c0 = std::max(0, -dx), c1 = std::min<int>(a.cols(), b.cols() - dx);
   const int r0 = std::max(0, -dy), r1 = std::min<int>(a.rows(), b.rows() - dy);
   if (c1 <= c0 || r1 <= r0) return -2.0;
   const Eigen::Index n = static_cast<Eigen::Index>(c1 - c0) * (r1 - r0);
   if (n < min_pixels) return -2.0;
-  double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+  double sab = 0;
   for (int r = r0; r < r1; ++r) {
     const float* pa = a.data() + static_cast<size_t>(r) * a.cols();
     const float* pb = b.data() + static_cast<size_t>(r + dy) * b.cols() + dx;
-    float fa = 0, fb = 0, faa = 0, fbb = 0, fab = 0;
-    for (int c = c0; c < c1; ++c) {
-      const float va = pa[c], vb = pb[c];
-      fa += va;
-      fb += vb;
-      faa += va * va;
-      fbb += vb * vb;
-      fab += va * vb;
-    }
-    sa += fa, sb += fb, saa += faa, sbb += fbb, sab += fab;
+    float fab = 0;
+    for (int c = c0; c < c1; ++c) fab += pa[c] * pb[c];
+    sab += fab;
   }
+  const double sa = ma.Sum(r0, r1, c0, c1), saa = ma.SumSq(r0, r1, c0, c1);
+  const double sb = mb.Sum(r0 + dy, r1 + dy, c0 + dx, c1 + dx);
+  const double sbb = mb.SumSq(r0 + dy, r1 + dy, c0 + dx, c1 + dx);
   const double inv_n = 1.0 / static_cast<double>(n);
   const double var_a = saa - sa * sa * inv_n, var_b = sbb - sb * sb * inv_n;
   if (overlap_fraction != nullptr) *overlap_fraction = static_cast<double>(n) / a.size();
@@ -70,12 +96,13 @@ TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
   const int largest = static_cast<int>(std::max(a.rows(), a.cols()));
   int factor = std::max(1, (largest + options.coarse_max_size_px - 1) / options.coarse_max_size_px);
   ImageF la = DownsampleBox(a, factor), lb = DownsampleBox(b, factor);
+  Moments ma(la), mb(lb);
   const auto min_pixels = static_cast<Eigen::Index>(options.min_overlap_fraction * la.size());
   double best = -2.0;
   int best_dx = 0, best_dy = 0;
   for (int dy = -static_cast<int>(la.rows()) + 1; dy < la.rows(); ++dy) {
     for (int dx = -static_cast<int>(la.cols()) + 1; dx < la.cols(); ++dx) {
-      const double ncc = OverlapNcc(la, lb, dx, dy, min_pixels);
+      const double ncc = OverlapNcc(la, lb, ma, mb, dx, dy, min_pixels);
       if (ncc > best) best = ncc, best_dx = dx, best_dy = dy;
     }
   }
@@ -86,11 +113,13 @@ TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
     const int radius = factor / next + 1;
     la = DownsampleBox(a, next);
     lb = DownsampleBox(b, next);
+    ma = Moments(la);
+    mb = Moments(lb);
     const auto min_level = static_cast<Eigen::Index>(options.min_overlap_fraction * la.size());
     best = -2.0;
     for (int dy = cy - radius; dy <= cy + radius; ++dy) {
       for (int dx = cx - radius; dx <= cx + radius; ++dx) {
-        const double ncc = OverlapNcc(la, lb, dx, dy, min_level);
+        const double ncc = OverlapNcc(la, lb, ma, mb, dx, dy, min_level);
         if (ncc > best) best = ncc, best_dx = dx, best_dy = dy;
       }
     }
@@ -99,7 +128,7 @@ TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
   }
   estimate.ok = true;
   estimate.shift_px = Eigen::Vector2d(best_dx, best_dy) * factor;
-  estimate.ncc = OverlapNcc(la, lb, best_dx, best_dy, 1, &estimate.overlap_fraction);
+  estimate.ncc = OverlapNcc(la, lb, ma, mb, best_dx, best_dy, 1, &estimate.overlap_fraction);
   return estimate;
 }
 
@@ -234,6 +263,8 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   double gain = t_std / std::max(peak.target_std, 1e-6);
   double offset = t_mean - gain * peak.target_mean;
   bool converged = false;
+  Eigen::VectorXd sampled(n);  // the target at the last iteration's position
+  Eigen::Matrix4d normal;
   for (int it = 0; it < options.max_iterations && !converged; ++it) {
     // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain, doffset).
     double n00 = 0, n01 = 0, n02 = 0, n03 = 0, n11 = 0, n12 = 0, n13 = 0, n22 = 0, n23 = 0;
@@ -243,6 +274,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       double v;
       Eigen::Vector2d g;
       if (!SampleBSpline(target_spline, p.x(), p.y(), &v, &g)) return match;
+      sampled(i) = v;
       const double e = gain * v + offset - templ(i);
       const double j0 = gain * g.x(), j1 = gain * g.y();
       n00 += j0 * j0, n01 += j0 * j1, n02 += j0 * v, n03 += j0;
@@ -250,27 +282,24 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       n22 += v * v, n23 += v;
       b0 -= j0 * e, b1 -= j1 * e, b2 -= v * e, b3 -= e;
     }
-    Eigen::Matrix4d normal;
     normal << n00, n01, n02, n03, n01, n11, n12, n13, n02, n12, n22, n23, n03, n13, n23, n;
     const Eigen::Vector4d step = normal.ldlt().solve(Eigen::Vector4d(b0, b1, b2, b3));
     if (!step.allFinite()) return match;
+    match.iterations = it + 1;
+    converged = step.head<2>().norm() < options.convergence_px;
+    if (converged) break;  // the samples stay those of q (within convergence_px of q + step)
     q += step.head<2>();
     gain += step(2);
     offset += step(3);
-    match.iterations = it + 1;
-    converged = step.head<2>().norm() < options.convergence_px;
     if ((q - start).norm() > options.max_refinement_px) return match;
   }
-  // Quality at the final position.
-  Eigen::VectorXd sampled(n);
-  for (int i = 0; i < n; ++i) {
-    const Eigen::Vector2d p = q + offsets[i];
-    if (!SampleBSpline(target_spline, p.x(), p.y(), &sampled(i))) return match;
-  }
+  // Quality at the final position (the last iteration's samples).
   const Eigen::VectorXd s0 = sampled.array() - sampled.mean();
   match.ncc = s0.dot(t0) / (s0.norm() * t_norm);
   match.residual_rms = (gain * sampled.array() + offset - templ.array()).matrix().norm() /
                        std::sqrt(static_cast<double>(n));
+  const double variance = match.residual_rms * match.residual_rms * n / (n - 4);
+  match.sigma_px = std::sqrt(0.5 * variance * normal.inverse().topLeftCorner<2, 2>().trace());
   match.q_px = q;
   match.ok = converged && match.ncc >= options.min_ncc;
   return match;

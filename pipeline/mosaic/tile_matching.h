@@ -13,7 +13,7 @@
 namespace omm {
 
 struct TranslationSearchOptions {
-  int coarse_max_size_px = 64;   // the exhaustive search runs on images downsampled to this
+  int coarse_max_size_px = 96;   // the exhaustive search runs on images downsampled to this
   double min_overlap_fraction = 0.08;  // shifts overlapping less of the image are not tried
   int finest_factor = 2;         // refinement stops at this downsampling factor
 
@@ -72,6 +72,10 @@ struct PatchMatch {
   Eigen::Vector2d q_px = Eigen::Vector2d::Zero();  // the anchor's position in the target tile
   double ncc = 0.0;                                // after refinement
   double residual_rms = 0.0;  // RMS of gain * target + offset - template (normalised units)
+  // Predicted 1-sigma of q_px per axis, px: sqrt(trace(C) / 2) of the position
+  // block C of the least-squares covariance s^2 N^-1 (N the normal matrix,
+  // s^2 the residual variance): small where the texture is strong.
+  double sigma_px = 0.0;
   int iterations = 0;
 };
 
