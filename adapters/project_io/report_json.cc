@@ -37,6 +37,10 @@ Json ToJson(const ReportValue& value) {
 
 Json Optional(const std::optional<double>& value) { return value ? Json(*value) : Json(nullptr); }
 
+Json Optional(const std::optional<Eigen::Vector2d>& value) {
+  return value ? Json{value->x(), value->y()} : Json(nullptr);
+}
+
 // Appends `extra` after the named fields; a name clash is a bug of the stage
 // that filled `extra`.
 void AppendExtra(Json& section, const ReportObject& extra, const char* section_name) {
@@ -125,13 +129,19 @@ class Section {
 
   // Two numbers [a, b].
   Eigen::Vector2d Pair(const std::string& key) {
+    const auto pair = OptionalPair(key);
+    if (!pair) Fail(key, "missing");
+    return *pair;
+  }
+
+  std::optional<Eigen::Vector2d> OptionalPair(const std::string& key) {
     const Json* value = Find(key);
-    if (value == nullptr) Fail(key, "missing");
+    if (value == nullptr) return std::nullopt;
     if (!value->is_array() || value->size() != 2 || !(*value)[0].is_number() ||
         !(*value)[1].is_number()) {
       Fail(key, "expected two numbers [a, b]");
     }
-    return {(*value)[0].get<double>(), (*value)[1].get<double>()};
+    return Eigen::Vector2d((*value)[0].get<double>(), (*value)[1].get<double>());
   }
 
   ReportObject Extra() const {
@@ -180,6 +190,22 @@ MosaicReport ReadMosaic(const Json& json, const std::string& where) {
   mosaic.origin_mm = section.Pair("origin_mm");
   mosaic.extra = section.Extra();
   return mosaic;
+}
+
+FeatureReport ReadFeature(const Json& json, const std::string& path, const std::string& where) {
+  Section section(json, path, where);
+  FeatureReport feature;
+  feature.name = section.String("name");
+  const std::string type = section.String("type");
+  if (type != FeatureTypeName(FeatureType::kCircle))
+    section.Fail("type", fmt::format("unknown feature type '{}'", type));
+  feature.centre_mm = section.OptionalPair("centre_mm");
+  feature.diameter_mm = section.Number("diameter_mm");
+  feature.centre_sigma_mm = section.OptionalPair("centre_sigma_mm");
+  feature.diameter_sigma_mm = section.Number("diameter_sigma_mm");
+  feature.error = section.String("error", /*required=*/false);
+  feature.extra = section.Extra();
+  return feature;
 }
 
 MeasurementReport ReadMeasurement(const Json& json, const std::string& path,
@@ -235,6 +261,21 @@ std::string ReportToJson(const Report& report) {
     AppendExtra(section, m.extra, "mosaic");
     json["mosaic"] = std::move(section);
   }
+  if (report.features) {
+    Json list = Json::array();
+    for (const FeatureReport& f : *report.features) {
+      Json item = {{"name", f.name},
+                   {"type", FeatureTypeName(f.type)},
+                   {"centre_mm", Optional(f.centre_mm)},
+                   {"diameter_mm", Optional(f.diameter_mm)},
+                   {"centre_sigma_mm", Optional(f.centre_sigma_mm)},
+                   {"diameter_sigma_mm", Optional(f.diameter_sigma_mm)}};
+      if (!f.error.empty()) item["error"] = f.error;
+      AppendExtra(item, f.extra, "features[]");
+      list.push_back(std::move(item));
+    }
+    json["features"] = std::move(list);
+  }
   if (report.measurements) {
     Json list = Json::array();
     for (const MeasurementReport& m : *report.measurements) {
@@ -275,6 +316,13 @@ Report ReportFromJson(const std::string& text, const std::string& where) {
     report.calibration = ReadCalibration(*calibration, where);
   }
   if (const Json* mosaic = root.Find("mosaic")) report.mosaic = ReadMosaic(*mosaic, where);
+  if (const Json* list = root.Find("features")) {
+    if (!list->is_array()) root.Fail("features", "expected an array");
+    report.features.emplace();
+    for (size_t i = 0; i < list->size(); ++i) {
+      report.features->push_back(ReadFeature((*list)[i], fmt::format("features[{}]", i), where));
+    }
+  }
   if (const Json* list = root.Find("measurements")) {
     if (!list->is_array()) root.Fail("measurements", "expected an array");
     report.measurements.emplace();

@@ -31,6 +31,17 @@ Report FullReport() {
   mosaic.size_px = {4800, 4300};
   mosaic.origin_mm = {-120.0, -90.25};
   report.mosaic = mosaic;
+  FeatureReport found;
+  found.name = "hole_A";
+  found.centre_mm = Eigen::Vector2d(12.5, -3.25);
+  found.diameter_mm = 40.0012;
+  found.centre_sigma_mm = Eigen::Vector2d(0.0011, 0.0012);
+  found.diameter_sigma_mm = 0.0009;
+  found.extra = {{"edge_points", 240}};
+  FeatureReport missing;
+  missing.name = "hole_B";
+  missing.error = "cut by the mosaic border";
+  report.features = std::vector<FeatureReport>{found, missing};
   MeasurementReport made;
   made.name = "A_to_B";
   made.type = MeasurementType::kDistance;
@@ -81,6 +92,19 @@ TEST(ReportJson, RoundTripIsExact) {
   ASSERT_TRUE(read.mosaic.has_value());
   EXPECT_EQ(read.mosaic->size_px, Eigen::Vector2i(4800, 4300));
   EXPECT_EQ(read.mosaic->origin_mm, Eigen::Vector2d(-120.0, -90.25));
+  ASSERT_TRUE(read.features.has_value());
+  ASSERT_EQ(read.features->size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    const FeatureReport& a = (*read.features)[i];
+    const FeatureReport& b = (*report.features)[i];
+    EXPECT_EQ(a.name, b.name);
+    EXPECT_EQ(a.centre_mm, b.centre_mm);
+    EXPECT_EQ(a.diameter_mm, b.diameter_mm);
+    EXPECT_EQ(a.centre_sigma_mm, b.centre_sigma_mm);
+    EXPECT_EQ(a.diameter_sigma_mm, b.diameter_sigma_mm);
+    EXPECT_EQ(a.error, b.error);
+    EXPECT_EQ(a.extra, b.extra);
+  }
   ASSERT_TRUE(read.measurements.has_value());
   ASSERT_EQ(read.measurements->size(), 2u);
   ExpectSameMeasurement((*read.measurements)[0], (*report.measurements)[0]);
@@ -98,6 +122,8 @@ TEST(ReportJson, FollowsTheContract) {
   // A measurement that could not be made: value null and an error.
   EXPECT_THAT(text, HasSubstr(R"("value_mm": null)"));
   EXPECT_THAT(text, HasSubstr(R"("error": "hole not found near [812, 400]")"));
+  // So is a feature that was not found.
+  EXPECT_THAT(text, HasSubstr(R"("centre_mm": null)"));
   // Named fields come before extras.
   EXPECT_LT(text.find("\"deviation_sigma\""), text.find("\"sigma_breakdown_mm\""));
 }

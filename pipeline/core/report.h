@@ -86,6 +86,19 @@ struct MeasurementReport {
   ReportObject extra;
 };
 
+// A located feature (a circle of project.yaml's `features`), part frame, mm.
+struct FeatureReport {
+  std::string name;
+  FeatureType type = FeatureType::kCircle;
+  std::optional<Eigen::Vector2d> centre_mm;  // absent when not found (then `error` says why)
+  std::optional<double> diameter_mm;
+  // 1-sigma of centre x, y and of the diameter, every modelled source.
+  std::optional<Eigen::Vector2d> centre_sigma_mm;
+  std::optional<double> diameter_sigma_mm;
+  std::string error;  // empty when found
+  ReportObject extra;
+};
+
 struct Report {
   std::string format = kReportFormat;
   std::string project;           // project name
@@ -93,6 +106,7 @@ struct Report {
   std::string inputs_sha256;     // hash of the project's input files (see orchestration)
   std::optional<CalibrationReport> calibration;
   std::optional<MosaicReport> mosaic;
+  std::optional<std::vector<FeatureReport>> features;
   std::optional<std::vector<MeasurementReport>> measurements;
   ReportObject extra;
 };
