@@ -85,7 +85,9 @@ std::string SceneToJson(const SavedScene& saved) {
                       {"scale", plate.scale}});
   }
   root["plates"] = plates;
+  root["lens_model"] = saved.lens_model;
   root["intrinsics"] = Vec(scene.intrinsics);
+  root["intrinsics_refined"] = saved.intrinsics_refined;
   root["rms_px"] = saved.rms_px;
   if (scene.covariance.size() == 0) {
     root["covariance"] = nullptr;
@@ -142,6 +144,17 @@ SavedScene SceneFromJson(const std::string& text, const std::string& where) {
     scene.plates.push_back(plate);
   }
   scene.intrinsics = in.Vector(root, "intrinsics", "");
+  // Optional: files written before they existed held the intrinsics.
+  if (root.contains("lens_model")) {
+    const json& lens_model = root.at("lens_model");
+    if (!lens_model.is_string()) in.Fail("lens_model", "expected a string");
+    saved.lens_model = lens_model.get<std::string>();
+  }
+  if (root.contains("intrinsics_refined")) {
+    const json& refined = root.at("intrinsics_refined");
+    if (!refined.is_boolean()) in.Fail("intrinsics_refined", "expected true or false");
+    saved.intrinsics_refined = refined.get<bool>();
+  }
   saved.rms_px = in.Number(root, "rms_px", "");
   const json& covariance = in.At(root, "covariance", "");
   if (!covariance.is_null()) {

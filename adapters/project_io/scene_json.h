@@ -11,13 +11,19 @@
 //   "tiles": [{"image": "tile_r0c0.png", "commanded_mm": [x, y],
 //              "adjusted_mm": [x, y], "held_by_prior": false}],
 //   "plates": [{"x_mm": .., "y_mm": .., "theta_rad": .., "height_mm": .., "scale": ..}],
+//   "lens_model": "LENSMODEL_OPENCV8",   // of the intrinsics below
 //   "intrinsics": [...],        // the intrinsics the scene was solved with
+//   "intrinsics_refined": true, // refined under the calibration's covariance as a
+//                               // prior: the covariance's intrinsics block is then
+//                               // joint with the rest; false: held at the
+//                               // calibration's values, that block is zero
 //   "rms_px": 0.03,             // the adjustment's RMS reprojection error
 //   "covariance": {"size": N, "values": [N x N, row-major]}   // or null
 // }
 // The covariance is PlaneScene::covariance: the vector
 // [r (3), t (3), T_0 (2), ..., T_{n-1} (2), per plate (x, y, theta, h, s),
-// intrinsics (N)], rad, mm and the intrinsics' own units. Tracks are not
+// intrinsics (N)], rad, mm and the intrinsics' own units; a parameter held
+// constant has zero rows and columns. Tracks are not
 // saved (the COLMAP export in out/colmap/ has them). Numbers are written with
 // round-trip precision.
 #pragma once
@@ -42,6 +48,8 @@ struct SavedScene {
   std::vector<int> tiles_held_by_prior;                 // no feature kept: table prior only
   double table_sigma_mm = 0.0;
   double rms_px = 0.0;
+  std::string lens_model;           // of scene.intrinsics ("" in files without it)
+  bool intrinsics_refined = false;  // false in files without the key
 };
 
 std::string SceneToJson(const SavedScene& saved);

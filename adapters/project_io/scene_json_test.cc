@@ -23,6 +23,8 @@ SavedScene Example() {
   saved.tiles_held_by_prior = {1};
   saved.table_sigma_mm = 0.02;
   saved.rms_px = 0.031;
+  saved.lens_model = "LENSMODEL_OPENCV4";
+  saved.intrinsics_refined = true;
   return saved;
 }
 
@@ -42,6 +44,22 @@ TEST(SceneJson, RoundTripIsExact) {
   EXPECT_EQ(back.tiles_held_by_prior, saved.tiles_held_by_prior);
   EXPECT_EQ(back.table_sigma_mm, saved.table_sigma_mm);
   EXPECT_EQ(back.rms_px, saved.rms_px);
+  EXPECT_EQ(back.lens_model, saved.lens_model);
+  EXPECT_EQ(back.intrinsics_refined, saved.intrinsics_refined);
+}
+
+// A file from before lens_model and intrinsics_refined: the intrinsics were held.
+TEST(SceneJson, OlderFilesHeldTheIntrinsics) {
+  std::string text = SceneToJson(Example());
+  for (const std::string key :
+       {"\"lens_model\": \"LENSMODEL_OPENCV4\",", "\"intrinsics_refined\": true,"}) {
+    const size_t at = text.find(key);
+    ASSERT_NE(at, std::string::npos) << key;
+    text.erase(at, key.size());
+  }
+  const SavedScene back = SceneFromJson(text, "test");
+  EXPECT_EQ(back.lens_model, "");
+  EXPECT_FALSE(back.intrinsics_refined);
 }
 
 TEST(SceneJson, NoCovarianceIsNull) {

@@ -1,7 +1,9 @@
 // Runner of the mosaic stage (see stage.h): the calibrated camera and the
-// tiles in, RegisterTiles and Orthorectify (pipeline/mosaic), and out
-// mosaic.png (16 bit), mosaic/scene.json (the adjusted scene for the measure
-// stage), colmap/ (the scene as a COLMAP sparse model) and report.mosaic.
+// tiles in, RegisterTiles, the final adjustment with the plate lying on the
+// part and the calibration's intrinsics prior (plate_on_part.h), Orthorectify
+// (pipeline/mosaic), and out mosaic.png (16 bit), mosaic/scene.json (the
+// adjusted scene and its joint covariance for the measure stage), colmap/ (the
+// scene as a COLMAP sparse model) and report.mosaic.
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -13,11 +15,14 @@
 
 #include "adapters/colmap/colmap_model.h"
 #include "adapters/mrcal/cameramodel_io.h"
+#include "adapters/mrcal/solve_record_json.h"
+#include "adapters/mrcal/uncertainty.h"
 #include "adapters/opencv/image_io.h"
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
 #include "pipeline/mosaic/ortho_file.h"
 #include "pipeline/mosaic/orthorectify.h"
+#include "pipeline/mosaic/plate_on_part.h"
 #include "pipeline/mosaic/register_tiles.h"
 #include "pipeline/orchestration/stage.h"
 
@@ -30,6 +35,7 @@ constexpr const char* kCameraModelName = "camera.cameramodel";
 constexpr const char* kMosaicName = "mosaic.png";
 constexpr const char* kSceneName = "mosaic/scene.json";
 constexpr const char* kColmapDirName = "colmap";
+constexpr const char* kSolveRecordName = "calibration/solve.json";
 constexpr int kMosaicBitDepth = 16;
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {
@@ -54,6 +60,46 @@ fs::path CameraModelPath(const StageContext& context) {
   throw InputError((context.out_dir / kCameraModelName).string(),
                    "no calibrated camera: run `omm calibrate` (or `omm run`) first, or set "
                    "calibration.from in project.yaml");
+}
+
+// The calibration's intrinsics prior: from the calibrate stage's solve record
+// (this run's, out/'s, or calibration.from's project), if it belongs to
+// *camera; then *camera takes the record's exact intrinsics (mrcal writes the
+// .cameramodel with 6 decimals).
+IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camera) {
+  const Project& project = context.project;
+  IntrinsicsPrior prior;
+  fs::path record_path = context.Input(kSolveRecordName);
+  if (record_path.empty() && project.calibration_from &&
+      project.calibration_from->kind == CalibrationSource::Kind::kProject) {
+    record_path = project.calibration_from->path / "out" / kSolveRecordName;
+  }
+  if (project.calibration_from &&
+      project.calibration_from->kind == CalibrationSource::Kind::kCameraModel) {
+    prior.why_held = "calibration from a .cameramodel without covariance";
+    return prior;
+  }
+  if (record_path.empty() || !fs::exists(record_path)) {
+    prior.why_held = "no calibration solve record (" + std::string(kSolveRecordName) + ")";
+    return prior;
+  }
+  const SolveRecord record = ReadSolveRecord(record_path);
+  const Eigen::VectorXd& k = camera->intrinsics;
+  if (record.camera.lens_model != camera->lens_model ||
+      record.camera.intrinsics.size() != k.size() ||
+      !((record.camera.intrinsics - k).cwiseAbs().array() <= 1e-6).all()) {
+    prior.why_held = record_path.string() + " is not the solve of the camera used";
+    return prior;
+  }
+  std::string why_not;
+  const std::optional<CalibrationUncertainty> uncertainty =
+      CalibrationUncertainty::Compute(record, 0.0, &why_not);
+  if (!uncertainty) {
+    prior.why_held = "the calibration's covariance could not be computed: " + why_not;
+    return prior;
+  }
+  camera->intrinsics = record.camera.intrinsics;
+  return IntrinsicsPriorFromCovariance(uncertainty->IntrinsicsCovariance());
 }
 
 std::vector<ImageF> ReadTiles(const Project& project, const CameraModel& camera,
@@ -132,6 +178,49 @@ ReportValue TilesReport(const Project& project, const TileRegistration& registra
   return rows;
 }
 
+// Largest |refined - calibrated| / calibration sigma over the intrinsics (0 if held).
+double IntrinsicsChangeSigmas(const CameraModel& camera, const FinalAdjustment& adjusted,
+                              const IntrinsicsPrior& prior) {
+  if (!adjusted.intrinsics_refined) return 0.0;
+  const Eigen::VectorXd sigma = prior.information.inverse().diagonal().cwiseSqrt();
+  return ((adjusted.scene.intrinsics - camera.intrinsics).cwiseQuotient(sigma))
+      .cwiseAbs()
+      .maxCoeff();
+}
+
+// report.mosaic's plate_scale_check: the table's scale against the plate, or
+// why there is none.
+ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
+                        const FinalAdjustment& adjusted) {
+  if (!plate.found) {
+    return fmt::format("{}: scale from the table positions alone (sigma {:.0f} ppm)", plate.brief,
+                       adjusted.scale_sigma_ppm);
+  }
+  const auto names = [&](const std::vector<int>& tiles) {
+    ReportValue::Array out;
+    for (int i : tiles) out.emplace_back(project.tiles[i].image);
+    return out;
+  };
+  ReportObject report{{"brief", plate.brief},
+                      {"whole_in_tiles", names(plate.whole_in_tiles)},
+                      {"seen_in_tiles", names(plate.seen_in_tiles)},
+                      {"marks", static_cast<int>(adjusted.input.plate_observations.size())},
+                      {"outliers", adjusted.plate_outliers},
+                      {"rms_px", adjusted.plate_rms_px},
+                      {"max_perspective_bias_px", plate.max_bias_correction_px},
+                      {"height", plate.height_source},
+                      {"height_mm", adjusted.plate_height_mm},
+                      {"height_sigma_mm", adjusted.plate_height_sigma_mm}};
+  if (adjusted.scale_check.ok) {
+    report.emplace_back("scale_minus_1_ppm", adjusted.scale_check.scale_minus_1_ppm);
+    report.emplace_back("sigma_ppm", adjusted.scale_check.sigma_ppm);
+  } else {
+    report.emplace_back("scale_check",
+                        "not computed (the solve with the plate's scale free failed)");
+  }
+  return report;
+}
+
 }  // namespace
 
 void RunMosaicStage(StageContext& context) {
@@ -142,7 +231,8 @@ void RunMosaicStage(StageContext& context) {
                      fmt::format("{} tile(s): a mosaic needs at least 2", project.tiles.size()));
   }
   const fs::path camera_path = CameraModelPath(context);
-  const CameraModel camera = ReadCameraModel(camera_path);
+  CameraModel camera = ReadCameraModel(camera_path);
+  const IntrinsicsPrior prior = CalibrationPrior(context, &camera);
   const std::vector<ImageF> tiles = ReadTiles(project, camera, context.progress);
   const double read_seconds = SecondsSince(stage_start);
 
@@ -154,15 +244,43 @@ void RunMosaicStage(StageContext& context) {
   }
   const int num_tiles = static_cast<int>(tiles.size());
   if (context.progress) context.progress(num_tiles, num_tiles + 3, "register tiles");
-  const TileRegistration registration =
-      RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera, RegisterTilesOptions{});
+  RegisterTilesOptions register_options;
+  register_options.compute_covariance = false;  // the final adjustment's
+  TileRegistration registration =
+      RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera, register_options);
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
+
+  // The final adjustment: the plate on the part, the intrinsics prior.
+  const auto final_start = std::chrono::steady_clock::now();
+  PlateOnPart plate;
+  if (project.board) {
+    plate = FindPlateOnPart(tiles, *project.board, camera, registration.input, registration.scene,
+                            PlateOnPartOptions{});
+  } else {
+    plate.brief = "no plate on the part: project.yaml has no board";
+  }
+  spdlog::info("mosaic: {}", plate.brief);
+  FinalAdjustmentOptions final_options;
+  final_options.bundle = register_options.bundle;
+  const FinalAdjustment adjusted = AdjustWithPlateAndPrior(
+      camera, registration.input, registration.scene, plate, prior, final_options);
+  spdlog::info("mosaic: final {}", adjusted.summary.brief);
+  if (!adjusted.summary.usable) throw StageFailedError(Stage::kMosaic, adjusted.summary.brief);
+  registration.scene = adjusted.scene;
+  registration.bundle = adjusted.summary;
+  registration.rms_px = adjusted.summary.final_rms_px;
+  registration.table_adjustment_mm = adjusted.summary.table_adjustment_mm;
+  registration.plane_tilt_deg = adjusted.summary.plane_tilt_deg;
+  const double final_seconds = SecondsSince(final_start);
+  // The camera of the adjusted scene: its (refined or held) intrinsics.
+  CameraModel scene_camera = camera;
+  scene_camera.intrinsics = adjusted.scene.intrinsics;
 
   if (context.progress) context.progress(num_tiles + 1, num_tiles + 3, "orthorectify");
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
-  const OrthoResult ortho = Orthorectify(camera, registration.scene, tiles, ortho_options);
+  const OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options);
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) throw StageFailedError(Stage::kMosaic, ortho.summary.brief);
 
@@ -180,11 +298,13 @@ void RunMosaicStage(StageContext& context) {
   saved.tiles_held_by_prior = registration.tiles_held_by_prior;
   saved.table_sigma_mm = project.table_sigma_mm;
   saved.rms_px = registration.rms_px;
+  saved.lens_model = camera.lens_model;
+  saved.intrinsics_refined = adjusted.intrinsics_refined;
   fs::create_directories(context.staging_dir / "mosaic");
   WriteSceneJson(saved, context.staging_dir / kSceneName);
 
   const ColmapExportSummary colmap =
-      WriteColmapModel(context.staging_dir / kColmapDirName, camera, registration.scene,
+      WriteColmapModel(context.staging_dir / kColmapDirName, scene_camera, registration.scene,
                        registration.input.observations, image_names);
   const double write_seconds = SecondsSince(write_start);
 
@@ -206,7 +326,12 @@ void RunMosaicStage(StageContext& context) {
       {"image_px_per_table_mm", ReportValue::Array{ReportValue::Array{a(0, 0), a(0, 1)},
                                                    ReportValue::Array{a(1, 0), a(1, 1)}}},
       {"covariance_computed", registration.scene.covariance.size() > 0},
-      {"intrinsics", "held at the calibration's values"},
+      {"intrinsics", adjusted.intrinsics_refined
+                         ? "refined with the calibration covariance as prior"
+                         : "held: " + prior.why_held},
+      {"intrinsics_max_change_sigmas", IntrinsicsChangeSigmas(camera, adjusted, prior)},
+      {"scale_sigma_ppm", adjusted.scale_sigma_ppm},
+      {"plate_scale_check", PlateReport(project, plate, adjusted)},
       {"pairs", PairsReport(project, registration)},
       {"tiles", TilesReport(project, registration, ortho.summary)},
       {"tiles_held_by_prior", held},
@@ -233,6 +358,8 @@ void RunMosaicStage(StageContext& context) {
                                  {"features", registration.features_seconds},
                                  {"matching", registration.matching_seconds},
                                  {"adjustment", registration.adjustment_seconds},
+                                 {"plate_detection", plate.seconds},
+                                 {"final_adjustment", final_seconds},
                                  {"ortho_geometry", ortho.summary.geometry_seconds},
                                  {"ortho_exposure", ortho.summary.exposure_seconds},
                                  {"ortho_resample", ortho.summary.resample_seconds},

@@ -1,0 +1,408 @@
+#include "pipeline/mosaic/plate_on_part.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <thread>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+
+#include "adapters/ceres/plane_bundle.h"
+#include "adapters/mrcal/lens.h"
+#include "pipeline/calibration/perspective_bias.h"
+#include "pipeline/core/error.h"
+#include "pipeline/mosaic/mrcal_projection.h"
+#include "pipeline/mosaic/plane_seed.h"
+
+namespace omm {
+
+std::string PlateOnPartOptions::Check() const {
+  for (const std::string& e : {detection.Check(), refinement.Check()}) {
+    if (!e.empty()) return e;
+  }
+  if (height_mm && !std::isfinite(*height_mm)) return "height_mm must be finite";
+  if (!(border_margin_px >= 0)) return "border_margin_px must be >= 0";
+  if (!(max_offset_px > 0)) return "max_offset_px must be > 0";
+  if (!(min_mark_sigma_px > 0)) return "min_mark_sigma_px must be > 0";
+  if (num_threads < 1) return "num_threads must be >= 1";
+  return {};
+}
+
+std::string FinalAdjustmentOptions::Check() const {
+  if (const std::string e = bundle.Check(); !e.empty()) return e;
+  if (!(plate_outlier_sigmas > 0)) return "plate_outlier_sigmas must be > 0";
+  return {};
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
+}
+
+Eigen::Matrix3d Rotation(const Eigen::Vector3d& r) {
+  const double angle = r.norm();
+  return angle > 0 ? Eigen::AngleAxisd(angle, r / angle).toRotationMatrix()
+                   : Eigen::Matrix3d::Identity();
+}
+
+// cam_from_plate with the table at table_pos_mm (plane_scene.h's plate model
+// with s = 1: plate (u, v, w) -> (x, y, h) + [M(theta) 0; 0 -1] (u, v, w)).
+Eigen::Isometry3d CamFromPlate(const PlaneScene& scene, const PlatePose& plate,
+                               const Eigen::Vector2d& table_pos_mm) {
+  const double c = std::cos(plate.theta_rad), s = std::sin(plate.theta_rad);
+  Eigen::Isometry3d part_from_plate = Eigen::Isometry3d::Identity();
+  part_from_plate.linear() << c, s, 0, s, -c, 0, 0, 0, -1;
+  part_from_plate.translation() << plate.x_mm + table_pos_mm.x(), plate.y_mm + table_pos_mm.y(),
+      plate.height_mm;
+  Eigen::Isometry3d cam_from_part = Eigen::Isometry3d::Identity();
+  cam_from_part.linear() = Rotation(scene.cam_from_part_r);
+  cam_from_part.translation() = scene.cam_from_part_t_mm;
+  return cam_from_part * part_from_plate;
+}
+
+// Centroid of the pixels darker than the local mid-level within radius + 2 px
+// of the current estimate, a few passes from `predicted`: pulls a prediction
+// a few px off (an unknown plate height) onto the dot.
+Eigen::Vector2d DarkCentroid(const ImageF& image, const Eigen::Vector2d& predicted,
+                             double radius_px, double reach_px) {
+  const int x0 = static_cast<int>(std::floor(predicted.x() - radius_px - reach_px));
+  const int y0 = static_cast<int>(std::floor(predicted.y() - radius_px - reach_px));
+  const int size = static_cast<int>(std::ceil(2 * (radius_px + reach_px))) + 1;
+  const auto window = image.block(y0, x0, size, size);
+  const float threshold = 0.5f * (window.minCoeff() + window.maxCoeff());
+  Eigen::Vector2d centre = predicted;
+  const double r2 = (radius_px + 2) * (radius_px + 2);
+  for (int pass = 0; pass < 4; ++pass) {
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    double count = 0;
+    for (int y = y0; y < y0 + size; ++y) {
+      for (int x = x0; x < x0 + size; ++x) {
+        if (image(y, x) >= threshold) continue;
+        const Eigen::Vector2d p(x, y);
+        if ((p - centre).squaredNorm() > r2) continue;
+        sum += p;
+        ++count;
+      }
+    }
+    if (count == 0) break;
+    centre = sum / count;
+  }
+  return centre;
+}
+
+// The registered input with the plate's observations and marks added.
+PlaneBundleInput WithPlate(const PlaneBundleInput& registered, const PlateOnPart& plate) {
+  PlaneBundleInput input = registered;
+  input.plates = {plate.marks};
+  input.plate_observations = plate.observations;
+  return input;
+}
+
+}  // namespace
+
+PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
+                            const CameraModel& camera, const PlaneBundleInput& registered_input,
+                            const PlaneScene& registered_scene, const PlateOnPartOptions& options) {
+  if (const std::string e = options.Check(); !e.empty())
+    throw InputError("", "plate on the part: " + e);
+  if (tiles.size() != registered_scene.table_pos_mm.size())
+    throw InputError("",
+                     "plate on the part: tiles and the scene's table positions differ in number");
+  const Clock::time_point start = Clock::now();
+  const int num_tiles = static_cast<int>(tiles.size());
+  PlateOnPart result;
+  result.marks.mark_uv_mm = BoardPoints(board).topRows<2>();
+  result.marks_per_tile.assign(num_tiles, 0);
+
+  // 1. Whole plates.
+  std::vector<PlateObservation> whole(num_tiles);
+  {
+    std::vector<std::thread> threads;
+    const int num_threads = std::min(options.num_threads, num_tiles);
+    for (int t = 0; t < num_threads; ++t) {
+      threads.emplace_back([&, t] {
+        for (int i = t; i < num_tiles; i += num_threads) {
+          GrayImage image;
+          image.pixels = tiles[i];
+          whole[i] = DetectPlate(image, board, options.detection);
+        }
+      });
+    }
+    for (std::thread& thread : threads) thread.join();
+  }
+  const int num_marks = static_cast<int>(result.marks.mark_uv_mm.cols());
+  // Per tile and mark: the located centre and its sigma (sigma 0: not seen).
+  std::vector<Eigen::Matrix2Xd> q_px(num_tiles, Eigen::Matrix2Xd::Zero(2, num_marks));
+  std::vector<Eigen::VectorXd> sigma_px(num_tiles, Eigen::VectorXd::Zero(num_marks));
+  for (int i = 0; i < num_tiles; ++i) {
+    if (!whole[i].usable) continue;
+    result.whole_in_tiles.push_back(i);
+    for (int m = 0; m < num_marks; ++m) {
+      if (whole[i].weight(m) <= 0) continue;
+      q_px[i].col(m) = whole[i].q_px.col(m);
+      sigma_px[i](m) = std::max(whole[i].sigma_px(m), options.min_mark_sigma_px);
+    }
+  }
+  if (result.whole_in_tiles.empty()) {
+    result.brief = "no plate on the part: the whole plate is in no tile";
+    result.seconds = Seconds(start);
+    return result;
+  }
+
+  // 2. The plate's pose on the part from the whole plates (the seed's fit).
+  const auto observations_of = [&](int tile) {
+    std::vector<PlateMarkObservation> obs;
+    for (int m = 0; m < num_marks; ++m) {
+      if (sigma_px[tile](m) > 0) obs.push_back({tile, 0, m, q_px[tile].col(m), 1.0});
+    }
+    return obs;
+  };
+  {
+    PlateOnPart whole_only = result;
+    whole_only.marks.height_mm = options.height_mm.value_or(0.0);
+    for (int i : result.whole_in_tiles) {
+      for (const PlateMarkObservation& o : observations_of(i)) whole_only.observations.push_back(o);
+    }
+    PlaneScene seeded;
+    const PlaneSeedSummary seed =
+        SeedPlaneScene(camera, WithPlate(registered_input, whole_only), &seeded);
+    if (!seed.ok) {
+      result.brief = "plate on the part not used: seeding its pose failed: " + seed.why_failed;
+      result.seconds = Seconds(start);
+      return result;
+    }
+    result.initial_pose = seeded.plates[0];
+  }
+
+  // 3. Marks predicted where the plate is cut (dots only: a chessboard's
+  // corners have no ellipse to fit).
+  const bool dots = board.type != BoardType::kChessboard;
+  const Eigen::Matrix3d rot = Rotation(registered_scene.cam_from_part_r);
+  const double radius_mm = 0.5 * board.dot_diameter_mm;
+  for (int i = 0; i < num_tiles && dots; ++i) {
+    if (whole[i].usable) continue;
+    const Eigen::Isometry3d cam_from_plate =
+        CamFromPlate(registered_scene, result.initial_pose, registered_scene.table_pos_mm[i]);
+    const Eigen::Matrix3Xd p_cam = cam_from_plate * BoardPoints(board);
+    if ((p_cam.row(2).array() <= 0).any()) continue;
+    Eigen::Matrix2Xd predicted;
+    Eigen::MatrixXd dq_dp, dq_dintrinsics;
+    if (!ProjectPoints(camera, p_cam, &predicted, &dq_dp, &dq_dintrinsics)) continue;
+    for (int m = 0; m < num_marks; ++m) {
+      // The dot's image: the circle through the local affine of the plane.
+      const Eigen::Matrix2d j = dq_dp.block<2, 3>(2 * m, 0) * rot.leftCols<2>() * radius_mm;
+      const Eigen::Matrix2d shape = (j * j.transpose()).inverse();
+      Ellipse rough;
+      rough.centre_px = predicted.col(m);
+      rough.shape = shape;
+      const double a = rough.SemiMajorPx(), b = rough.SemiMinorPx();
+      const double reach = a + options.max_offset_px + options.refinement.edges.ray_half_length_px +
+                           options.border_margin_px;
+      const Eigen::Vector2d c = predicted.col(m);
+      if (c.x() - reach < 0 || c.y() - reach < 0 || c.x() + reach > camera.width_px - 1 ||
+          c.y() + reach > camera.height_px - 1)
+        continue;
+      rough.centre_px = DarkCentroid(tiles[i], c, a, options.max_offset_px);
+      const MarkFit fit = RefineEllipticalMark(tiles[i], rough, options.refinement);
+      if (!fit.ok || (fit.ellipse.centre_px - c).norm() > options.max_offset_px ||
+          std::abs(fit.ellipse.SemiMajorPx() / a - 1) > 0.2 ||
+          std::abs(fit.ellipse.SemiMinorPx() / b - 1) > 0.2)
+        continue;
+      q_px[i].col(m) = fit.ellipse.centre_px;
+      sigma_px[i](m) = std::max(fit.sigma_px, options.min_mark_sigma_px);
+    }
+  }
+
+  // 4. Perspective bias of every centre, with the tile's plate pose.
+  for (int i = 0; i < num_tiles; ++i) {
+    if ((sigma_px[i].array() <= 0).all()) continue;
+    Eigen::Matrix2Xd delta;
+    if (!PerspectiveBiasCorrections(
+            board, camera,
+            CamFromPlate(registered_scene, result.initial_pose, registered_scene.table_pos_mm[i]),
+            &delta))
+      continue;
+    for (int m = 0; m < num_marks; ++m) {
+      if (sigma_px[i](m) <= 0) continue;
+      q_px[i].col(m) += delta.col(m);
+      result.max_bias_correction_px = std::max(result.max_bias_correction_px, delta.col(m).norm());
+    }
+  }
+
+  for (int i = 0; i < num_tiles; ++i) {
+    for (int m = 0; m < num_marks; ++m) {
+      if (sigma_px[i](m) <= 0) continue;
+      result.observations.push_back(
+          {i, 0, m, q_px[i].col(m), registered_input.observation_sigma_px / sigma_px[i](m)});
+      ++result.marks_per_tile[i];
+    }
+    if (result.marks_per_tile[i] > 0) result.seen_in_tiles.push_back(i);
+  }
+  const int num_seen = static_cast<int>(result.seen_in_tiles.size());
+  if (options.height_mm) {
+    result.marks.height_mm = *options.height_mm;
+    result.height_source = "given";
+  } else if (num_seen >= 2) {
+    result.marks.height_mm.reset();
+    result.height_source = "estimated (seen in " + std::to_string(num_seen) + " tiles)";
+  } else {
+    result.marks.height_mm = 0.0;
+    result.height_source =
+        "assumed 0: seen in one tile only, where the plate's height and the scale are confounded";
+  }
+  result.found = true;
+  std::ostringstream brief;
+  brief << "plate on the part: whole in " << result.whole_in_tiles.size() << " tile(s), "
+        << result.observations.size() << " marks in " << num_seen << " tile(s); height "
+        << result.height_source;
+  result.brief = brief.str();
+  result.seconds = Seconds(start);
+  return result;
+}
+
+IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance) {
+  IntrinsicsPrior prior;
+  if (covariance.rows() == 0 || covariance.rows() != covariance.cols()) {
+    prior.why_held = "no intrinsics covariance";
+    return prior;
+  }
+  const Eigen::VectorXd variance = covariance.diagonal();
+  if (!(variance.array() > 0).all() || !covariance.allFinite()) {
+    prior.why_held = "the calibration held some intrinsics fixed: no prior for them";
+    return prior;
+  }
+  // Inverted as a correlation matrix: the parameters' scales differ by ~1e7
+  // (focal length vs high-order distortions).
+  const Eigen::VectorXd inv_sigma = variance.cwiseSqrt().cwiseInverse();
+  const Eigen::MatrixXd correlation = inv_sigma.asDiagonal() * covariance * inv_sigma.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(correlation);
+  if (eigen.info() != Eigen::Success || !(eigen.eigenvalues().minCoeff() > 0)) {
+    prior.why_held = "the calibration's intrinsics covariance is not positive definite";
+    return prior;
+  }
+  // A rational lens model's parameters are nearly redundant: combinations
+  // determined ~1e-7 of their marginal sigmas (correlation eigenvalues
+  // ~1e-15). They are given at most kMaxConditioning, i.e. a sigma of 1e-6 of
+  // the marginal ones: still held in effect, and the prior's Cholesky factor
+  // keeps its precision.
+  constexpr double kMaxConditioning = 1e12;
+  const Eigen::VectorXd lambda =
+      eigen.eigenvalues().cwiseMax(eigen.eigenvalues().maxCoeff() / kMaxConditioning);
+  const Eigen::MatrixXd inv_correlation =
+      eigen.eigenvectors() * lambda.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
+  prior.information = inv_sigma.asDiagonal() * inv_correlation * inv_sigma.asDiagonal();
+  prior.information = 0.5 * (prior.information + prior.information.transpose()).eval();
+  return prior;
+}
+
+double TableScaleSigmaPpm(const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                          const Eigen::MatrixXd& scene_covariance) {
+  const int n = static_cast<int>(commanded_table_pos_mm.size());
+  if (scene_covariance.rows() < 6 + 2 * n) return 0.0;
+  // Scale of the fit T ~ s C + d about the means: s = sum (C_i - mean) . T_i / sum |C_i - mean|^2,
+  // linear in T with gradient g.
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const Eigen::Vector2d& c : commanded_table_pos_mm) mean += c / n;
+  double spread = 0;
+  Eigen::VectorXd g(2 * n);
+  for (int i = 0; i < n; ++i) {
+    g.segment<2>(2 * i) = commanded_table_pos_mm[i] - mean;
+    spread += g.segment<2>(2 * i).squaredNorm();
+  }
+  if (!(spread > 0)) return 0.0;
+  g /= spread;
+  const double variance = g.dot(scene_covariance.block(6, 6, 2 * n, 2 * n) * g);
+  return std::sqrt(std::max(0.0, variance)) * 1e6;
+}
+
+FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
+                                        const PlaneBundleInput& registered_input,
+                                        const PlaneScene& registered_scene,
+                                        const PlateOnPart& plate, const IntrinsicsPrior& prior,
+                                        const FinalAdjustmentOptions& options) {
+  if (const std::string e = options.Check(); !e.empty())
+    throw InputError("", "final adjustment: " + e);
+  if (registered_scene.intrinsics.size() != camera.intrinsics.size())
+    throw InputError("", "final adjustment: the scene's intrinsics do not fit the camera");
+  const Clock::time_point start = Clock::now();
+  FinalAdjustment result;
+  result.intrinsics_refined = prior.information.size() > 0;
+  result.input = plate.found ? WithPlate(registered_input, plate) : registered_input;
+  if (result.intrinsics_refined) result.input.intrinsics_information = prior.information;
+  PlaneBundleConfig config;
+  config.refine_intrinsics = result.intrinsics_refined;
+  config.compute_covariance = options.compute_covariance;
+  if (const std::string e =
+          CheckPlaneBundleInput(result.input, config, static_cast<int>(camera.intrinsics.size()));
+      !e.empty())
+    throw InputError("", "final adjustment: " + e);
+
+  const MrcalLensProjection lens(camera);
+  // Every solve starts from the registered scene: its intrinsics are the
+  // calibration's, i.e. the prior's mean (SolvePlaneBundle takes the initial
+  // intrinsics as the mean).
+  PlaneScene initial = registered_scene;
+  initial.covariance.resize(0, 0);
+  if (plate.found) initial.plates = {plate.initial_pose};
+  result.scene = initial;
+  result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
+
+  if (plate.found && result.summary.usable) {
+    // Misread marks: drop and solve again.
+    const double sigma = result.input.observation_sigma_px;
+    std::vector<PlateMarkObservation> kept;
+    for (size_t n = 0; n < result.input.plate_observations.size(); ++n) {
+      const PlateMarkObservation& obs = result.input.plate_observations[n];
+      const Eigen::Vector2d res = result.scene.plate_residual_px.col(static_cast<Eigen::Index>(n));
+      if (res.allFinite() && res.norm() * obs.weight <= options.plate_outlier_sigmas * sigma) {
+        kept.push_back(obs);
+      } else {
+        ++result.plate_outliers;
+      }
+    }
+    if (result.plate_outliers > 0) {
+      result.input.plate_observations = kept;
+      result.scene = initial;
+      result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
+    }
+  }
+  if (plate.found) {
+    double sum_sq = 0;
+    const Eigen::Matrix2Xd& res = result.scene.plate_residual_px;
+    for (Eigen::Index n = 0; n < res.cols(); ++n) sum_sq += res.col(n).squaredNorm();
+    result.plate_rms_px = res.cols() > 0 ? std::sqrt(sum_sq / res.cols()) : 0.0;
+    result.plate_height_mm = result.scene.plates[0].height_mm;
+    const int num_tiles = static_cast<int>(registered_scene.table_pos_mm.size());
+    const int h = 6 + 2 * num_tiles + 3;
+    if (result.scene.covariance.rows() > h)
+      result.plate_height_sigma_mm = std::sqrt(std::max(0.0, result.scene.covariance(h, h)));
+  }
+  result.scale_sigma_ppm =
+      TableScaleSigmaPpm(registered_input.commanded_table_pos_mm, result.scene.covariance);
+
+  if (plate.found && result.summary.usable && options.plate_scale_check) {
+    PlaneBundleConfig check_config = config;
+    check_config.refine_plate_scale = true;
+    check_config.compute_covariance = true;
+    PlaneScene check = result.scene;
+    check.intrinsics = registered_scene.intrinsics;  // the prior's mean again
+    const PlaneBundleSummary summary =
+        SolvePlaneBundle(lens, result.input, check_config, options.bundle, &check);
+    const int num_tiles = static_cast<int>(registered_scene.table_pos_mm.size());
+    const int s = 6 + 2 * num_tiles + 4;
+    if (summary.usable && summary.covariance_ok) {
+      result.scale_check.ok = true;
+      result.scale_check.scale_minus_1_ppm = (check.plates[0].scale - 1) * 1e6;
+      result.scale_check.sigma_ppm = std::sqrt(std::max(0.0, check.covariance(s, s))) * 1e6;
+    }
+  }
+  result.seconds = Seconds(start);
+  return result;
+}
+
+}  // namespace omm

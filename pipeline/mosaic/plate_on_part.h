@@ -1,0 +1,159 @@
+// The mosaic's final adjustment: the calibration plate lying on the part as an
+// independent metric scale, and the calibration's intrinsics covariance as a
+// prior, so that the scene's covariance is joint over the plane pose, the
+// table positions, the plate and the intrinsics.
+//
+// Why. The table prior alone fixes the mosaic's scale and its rotation about
+// Z (pipeline/core/plane_scene.h, invariance (b)): with n tiles of sigma s_T
+// per axis, the scale's sigma is ~ s_T / sqrt(sum |T_i - mean|^2), ~50 ppm for
+// the demo's 9 tiles at 0.02 mm, i.e. ~0.02 mm on a 430 mm distance. A plate
+// of known pitch seen in the tiles is a metric reference to a few ppm.
+//
+// Finding the plate (FindPlateOnPart). DetectPlate (adapters/opencv) finds the
+// whole plate in a tile and identifies its marks. Its pose on the part is the
+// seed's Procrustes fit (plane_seed.h) of those marks; through the registered
+// scene every mark is then predicted in every other tile, and marks that lie
+// wholly inside a tile where the plate is cut by the border are located there:
+// the centroid of the dark pixels around the prediction (a few passes), then
+// the sub-pixel ellipse fit (pipeline/core/subpixel_edges.h). Every centre is
+// corrected for the perspective bias of a circle's image (pipeline/
+// calibration/perspective_bias.h) with the tile's plate pose.
+//
+// Height of the marks above the top surface (the plate's thickness). Seen in
+// one tile only, the plate's image size depends on (d - h) / s (d the camera's
+// distance, s the table's scale): the height and the scale are confounded, so
+// h must be given (PlateOnPartOptions::height_mm, project.yaml
+// mosaic.plate_height_mm) or is assumed 0 (printed flat; the brief says so).
+// Seen in >= 2 tiles, the plate moves by T / (d - h) in the image while the
+// surface moves by T / d: the difference determines h, which is then
+// estimated (its sigma is in the covariance), and the plate's own motion in
+// pitch units gives the scale whatever h is.
+//
+// Scale check. The final solve holds the plate's scale at 1 (its pitch is the
+// metric reference); a second solve with the scale s free measures the
+// table's scale relative to the plate: s - 1 and its sigma (both in ppm).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "adapters/opencv/plate_detector.h"
+#include "pipeline/core/board.h"
+#include "pipeline/core/camera.h"
+#include "pipeline/core/image.h"
+#include "pipeline/core/plane_scene.h"
+
+namespace omm {
+
+struct PlateOnPartOptions {
+  PlateDetectionOptions detection;   // DetectPlate, whole plates
+  MarkRefinementOptions refinement;  // marks predicted in the other tiles
+  // Height of the marks above the part's top surface, mm; unset: estimated if
+  // the plate is seen in >= 2 tiles, else assumed 0.
+  std::optional<double> height_mm;
+  // A predicted mark is searched if its ellipse plus this margin lies inside
+  // the image, px.
+  double border_margin_px = 6.0;
+  // A located mark further than this from its prediction is not the mark, px.
+  double max_offset_px = 10.0;
+  // Floor of a mark centre's 1-sigma: the fit's own sigma leaves out the
+  // model's systematic misfit, px.
+  double min_mark_sigma_px = 0.01;
+  int num_threads = 2;
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+// The plate as the bundle adjustment takes it (one plate, index 0).
+struct PlateOnPart {
+  bool found = false;
+  std::string brief;  // one line: where, how many marks, height source
+  PlateMarks marks;   // the board's marks; height_mm as PlateOnPartOptions says
+  std::vector<PlateMarkObservation> observations;
+  PlatePose initial_pose;               // seed of the plate's pose on the part
+  std::vector<int> whole_in_tiles;      // DetectPlate found the whole plate
+  std::vector<int> seen_in_tiles;       // >= 1 mark located (whole tiles included)
+  std::vector<int> marks_per_tile;      // per tile
+  std::string height_source;            // "given", "estimated (seen in N tiles)", "assumed 0 (...)"
+  double max_bias_correction_px = 0.0;  // largest perspective-bias shift applied
+  double seconds = 0.0;
+};
+
+// Finds `board` lying on the part in `tiles` (gray, the camera's size), using
+// the registered scene (RegisterTiles' input and adjusted scene) to predict
+// marks where the plate is cut. found == false (brief says why) if no tile
+// sees the whole plate. Throws InputError for invalid options.
+PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
+                            const CameraModel& camera, const PlaneBundleInput& registered_input,
+                            const PlaneScene& registered_scene, const PlateOnPartOptions& options);
+
+// The calibration's information on the intrinsics: the inverse of their
+// covariance (CalibrationUncertainty::IntrinsicsCovariance, N x N). Empty
+// information (with why_held) when they cannot be refined: a parameter the
+// calibration held (zero variance: no prior for it), or a covariance that is
+// not positive definite.
+struct IntrinsicsPrior {
+  Eigen::MatrixXd information;  // N x N, positive definite, or empty
+  std::string why_held;         // set when information is empty
+};
+IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance);
+
+struct FinalAdjustmentOptions {
+  PlaneBundleOptions bundle;
+  bool compute_covariance = true;  // the joint covariance (PlaneScene::covariance)
+  bool plate_scale_check = true;   // the second solve, with the plate's scale free
+  // Plate observations whose residual exceeds this many of their sigmas are
+  // dropped and the scene solved again (a mark misread, a speck on the plate).
+  double plate_outlier_sigmas = 5.0;
+
+  std::string Check() const;
+};
+
+// The table's scale relative to the plate (the solve with s free).
+struct PlateScaleCheck {
+  bool ok = false;
+  double scale_minus_1_ppm = 0.0;  // s - 1: > 0 when the table's millimetres are long
+  double sigma_ppm = 0.0;
+};
+
+struct FinalAdjustment {
+  PlaneScene scene;        // joint covariance over [r, t, T_i, plate, intrinsics]
+  PlaneBundleInput input;  // the registration's, plus the plate and the prior
+  PlaneBundleSummary summary;
+  bool intrinsics_refined = false;
+  // 1-sigma of the mosaic's scale from the covariance: of the scale of the
+  // least-squares similarity fit of the adjusted to the commanded table
+  // positions, ppm (0 if no covariance).
+  double scale_sigma_ppm = 0.0;
+  // Plate (if found): residual RMS of its used marks, px; observations
+  // dropped as outliers; height and its sigma (0 if held), mm.
+  double plate_rms_px = 0.0;
+  int plate_outliers = 0;
+  double plate_height_mm = 0.0;
+  double plate_height_sigma_mm = 0.0;
+  PlateScaleCheck scale_check;
+  double seconds = 0.0;
+};
+
+// Adjusts the registered scene once more with the plate (if plate.found) and
+// the intrinsics prior (if prior.information is set), warm-started from
+// `registered_scene`, whose intrinsics must be the calibration's. Data
+// failures come back in summary (usable, brief); throws InputError for
+// invalid options or sizes.
+FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
+                                        const PlaneBundleInput& registered_input,
+                                        const PlaneScene& registered_scene,
+                                        const PlateOnPart& plate, const IntrinsicsPrior& prior,
+                                        const FinalAdjustmentOptions& options);
+
+// sigma of the similarity scale of `table_pos` (the scene's adjusted table
+// positions) about the commanded ones, from the scene covariance's table
+// block; ppm.
+double TableScaleSigmaPpm(const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                          const Eigen::MatrixXd& scene_covariance);
+
+}  // namespace omm
