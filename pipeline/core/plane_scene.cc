@@ -9,6 +9,12 @@
 
 namespace omm {
 
+Eigen::Matrix3d RotationFromAngleAxis(const Eigen::Vector3d& r) {
+  const double angle = r.norm();
+  if (angle == 0.0) return Eigen::Matrix3d::Identity();
+  return Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
+}
+
 std::string PlaneBundleConfig::Check() const {
   if (gauge == PlaneGauge::kFixedTrack && gauge_track < 0) {
     return "gauge kFixedTrack needs gauge_track >= 0";

@@ -209,6 +209,14 @@ struct PlaneBundleSummary {
 std::string CheckPlaneBundleInput(const PlaneBundleInput& input,
                                   const PlaneBundleConfig& config, int num_intrinsics);
 
+// The rotation matrix of an angle-axis vector (rad).
+Eigen::Matrix3d RotationFromAngleAxis(const Eigen::Vector3d& r);
+
+// Index of the intrinsics' first entry in PlaneScene::covariance's vector.
+inline int PlaneSceneCovarianceIntrinsicsIndex(int num_tiles, int num_plates) {
+  return PlaneSceneCovarianceSize(num_tiles, num_plates, 0);
+}
+
 // Angle between the camera's z axis and the part's -Z (the plane's tilt), deg.
 double PlaneTiltDeg(const Eigen::Vector3d& cam_from_part_r);
 

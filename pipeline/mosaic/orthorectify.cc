@@ -47,12 +47,6 @@ void ParallelFor(int num_threads, int n, const std::function<void(int)>& fn) {
   for (std::thread& t : threads) t.join();
 }
 
-Eigen::Matrix3d RotationFromAngleAxis(const Eigen::Vector3d& r) {
-  const double angle = r.norm();
-  if (angle == 0.0) return Eigen::Matrix3d::Identity();
-  return Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
-}
-
 // Catmull-Rom sample of `image` at q, which must satisfy BorderDistancePx > 0.
 float SampleCatmullRom(const ImageF& image, const Eigen::Vector2d& q) {
   const int ix = static_cast<int>(q.x()), iy = static_cast<int>(q.y());
@@ -309,8 +303,7 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
         const Eigen::Vector2d& qi = q[static_cast<size_t>(i) * width + col];
         double v = SampleCatmullRom(tiles[i], qi);
         if (!exposure.empty()) v /= exposure[i].Factor(frame.Rho2(qi));
-        const double w = d < best[col] ? std::min(d / band, 1.0) * std::exp((d - best[col]) / band)
-                                       : std::min(d / band, 1.0);
+        const double w = TileBlendWeight(d, best[col], band);
         sum_w += w;
         sum_wv += w * v;
       }

@@ -34,6 +34,8 @@
 // the mosaic aliases fine texture; edges stay unbiased.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -47,6 +49,20 @@
 #include "pipeline/mosaic/ortho_lens_table.h"
 
 namespace omm {
+
+// Distance of a tile pixel q to the border of the region the tile is sampled
+// in, [1, W - 2] x [1, H - 2] (the Catmull-Rom support); > 0 inside, tile px.
+inline double TileBorderDistancePx(const Eigen::Vector2d& q_px, int width_px, int height_px) {
+  return std::min(std::min(q_px.x() - 1.0, width_px - 2.0 - q_px.x()),
+                  std::min(q_px.y() - 1.0, height_px - 2.0 - q_px.y()));
+}
+
+// Unnormalised blend weight of a tile that sees a mosaic pixel at border
+// distance d_px (> 0) when the best tile's is best_px (the header comment's w_i).
+inline double TileBlendWeight(double d_px, double best_px, double band_px) {
+  const double ramp = std::min(d_px / band_px, 1.0);
+  return d_px < best_px ? ramp * std::exp((d_px - best_px) / band_px) : ramp;
+}
 
 // The mosaic's pixel grid on the part plane (project-format.md, out/ table).
 struct OrthoGrid {
@@ -117,8 +133,7 @@ struct OrthoGeometry {
   // Distance of q to the border of the region a tile is sampled in,
   // [1, W - 2] x [1, H - 2]; > 0 inside, tile px.
   double BorderDistancePx(const Eigen::Vector2d& q_px) const {
-    return std::min(std::min(q_px.x() - 1.0, image_width_px - 2.0 - q_px.x()),
-                    std::min(q_px.y() - 1.0, image_height_px - 2.0 - q_px.y()));
+    return TileBorderDistancePx(q_px, image_width_px, image_height_px);
   }
 };
 
