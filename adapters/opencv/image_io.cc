@@ -1,6 +1,10 @@
 #include "adapters/opencv/image_io.h"
 
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
 #include <system_error>
+#include <vector>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -82,6 +86,25 @@ void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int
     std::filesystem::remove(tmp, ec);
     throw InputError(path.string(), "cannot write image");
   }
+}
+
+std::string EncodePreviewPng(const ImageF& pixels, int max_width_px) {
+  if (pixels.size() == 0 || max_width_px < 1) {
+    throw std::invalid_argument("EncodePreviewPng: empty image or max_width_px < 1");
+  }
+  const cv::Mat as_float(static_cast<int>(pixels.rows()), static_cast<int>(pixels.cols()), CV_32F,
+                         const_cast<float*>(pixels.data()));
+  cv::Mat shrunk = as_float;
+  if (as_float.cols > max_width_px) {
+    const double scale = static_cast<double>(max_width_px) / as_float.cols;
+    const int height = std::max(1, static_cast<int>(std::lround(as_float.rows * scale)));
+    cv::resize(as_float, shrunk, cv::Size(max_width_px, height), 0, 0, cv::INTER_AREA);
+  }
+  cv::Mat out;
+  shrunk.convertTo(out, CV_8U, 255.0);  // saturating, rounded
+  std::vector<uchar> bytes;
+  if (!cv::imencode(".png", out, bytes)) throw std::runtime_error("cv::imencode failed for PNG");
+  return {bytes.begin(), bytes.end()};
 }
 
 }  // namespace omm

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 
 #include "pipeline/core/image.h"
 
@@ -21,5 +22,11 @@ Eigen::Vector2i ReadImageSize(const std::filesystem::path& path);
 // temporary file beside `path` and renames it, so a reader never sees a
 // half-written file. Throws InputError if it cannot be written.
 void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int bit_depth);
+
+// An 8-bit gray PNG file's bytes, in memory, of `pixels` (values clamped to
+// [0, 1]) shrunk by area averaging (cv::INTER_AREA) to max_width_px wide,
+// aspect kept (height rounded, at least 1 px); an image no wider is encoded
+// as it is. For previews embedded in other files (report.html).
+std::string EncodePreviewPng(const ImageF& pixels, int max_width_px);
 
 }  // namespace omm

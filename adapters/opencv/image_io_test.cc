@@ -42,5 +42,40 @@ TEST(ImageIo, MissingAndCorruptFilesNameTheFile) {
   EXPECT_THROW(ReadGrayImage(corrupt), InputError);
 }
 
+// Decodes a PNG held in memory through the file reader.
+GrayImage DecodePng(const std::string& bytes, const std::string& name) {
+  const auto path = TempDir() / name;
+  std::ofstream(path, std::ios::binary) << bytes;
+  return ReadGrayImage(path);
+}
+
+TEST(ImageIo, PreviewPngIsTheBlockMeanAtEightBits) {
+  // 30 x 21 px shrunk to 10 px wide: exactly 3 x 3 blocks, so INTER_AREA is
+  // each block's mean; 8 bits round it to within half a digital number.
+  ImageF pixels(21, 30);
+  for (int r = 0; r < 21; ++r)
+    for (int c = 0; c < 30; ++c) pixels(r, c) = static_cast<float>((r * 7 + c * 13) % 29) / 28.f;
+  const GrayImage preview = DecodePng(EncodePreviewPng(pixels, 10), "preview.png");
+  EXPECT_EQ(preview.bit_depth, 8);
+  ASSERT_EQ(preview.width(), 10);
+  ASSERT_EQ(preview.height(), 7);
+  for (int r = 0; r < 7; ++r) {
+    for (int c = 0; c < 10; ++c) {
+      const float mean = pixels.block(3 * r, 3 * c, 3, 3).mean();
+      EXPECT_NEAR(preview.pixels(r, c), mean, 0.5f / 255.f + 1e-6f) << r << "," << c;
+    }
+  }
+}
+
+TEST(ImageIo, PreviewPngKeepsANarrowImageAndClamps) {
+  ImageF pixels(2, 3);
+  pixels << -0.5f, 0.0f, 0.2f, 0.6f, 1.0f, 1.5f;
+  const GrayImage preview = DecodePng(EncodePreviewPng(pixels, 1200), "narrow.png");
+  ASSERT_EQ(preview.width(), 3);
+  ASSERT_EQ(preview.height(), 2);
+  EXPECT_LT((preview.pixels - pixels.cwiseMax(0.f).cwiseMin(1.f)).cwiseAbs().maxCoeff(),
+            0.5f / 255.f + 1e-6f);
+}
+
 }  // namespace
 }  // namespace omm
