@@ -1,13 +1,15 @@
 // Runner of the calibrate stage (see stage.h): calib/ images -> the stage
 // (pipeline/calibration/calibrate_stage.h) -> out/camera.cameramodel,
-// out/calibration/{solve.json,residuals.svg[,study.svg]} and the report's
-// calibration section. With `calibration.from`, the earlier calibration is
-// taken instead and calib/ is not read.
+// out/calibration/{solve.json,residuals.svg,uncertainty.svg[,study.svg]} and
+// the report's calibration section. With `calibration.from`, the earlier
+// calibration is taken instead and calib/ is not read.
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <exception>
 #include <filesystem>
+#include <optional>
 #include <thread>
 
 #include <fmt/format.h>
@@ -35,6 +37,7 @@ constexpr const char* kCameraModelName = "camera.cameramodel";
 constexpr const char* kSolveRecordName = "calibration/solve.json";
 constexpr const char* kResidualsPlotName = "calibration/residuals.svg";
 constexpr const char* kStudyPlotName = "calibration/study.svg";
+constexpr const char* kUncertaintyPlotName = "calibration/uncertainty.svg";
 
 ReportValue Array(const Eigen::VectorXd& values) {
   ReportValue::Array array;
@@ -140,12 +143,39 @@ std::vector<NamedImage> ReadCalibImages(const Project& project, const ProgressCa
   return images;
 }
 
+// calibration/uncertainty.svg: the map of the projection uncertainty whose
+// median and max `uncertainty` summarises (same grid, same distance: the
+// plates' median range). The covariance is computed again here, as the
+// stage's summary keeps only those two numbers; it is cheap (0.025 s on the
+// demo: OPENCV8, 18 plates). Returns false (and writes nothing) when the
+// uncertainty is unavailable.
+bool WriteUncertaintyMap(const fs::path& staging_dir, const CalibrationResult& result,
+                         const UncertaintySummary& uncertainty, int grid_nx, int grid_ny) {
+  if (!uncertainty.available) return false;
+  const auto start = std::chrono::steady_clock::now();
+  const std::optional<CalibrationUncertainty> covariance =
+      CalibrationUncertainty::Compute(result.record);
+  if (!covariance) return false;
+  const ImagerUncertainty grid = ProjectionUncertaintyOverImager(
+      *covariance, result.camera, uncertainty.distance_mm, grid_nx, grid_ny);
+  Eigen::VectorXd worst_px(static_cast<Eigen::Index>(grid.points.size()));
+  for (size_t i = 0; i < grid.points.size(); ++i) worst_px(i) = grid.points[i].worst_stdev_px;
+  WriteTextFileAtomically(
+      staging_dir / kUncertaintyPlotName,
+      UncertaintyMapSvg(grid.q_px, worst_px, grid_nx, grid_ny, result.camera.width_px,
+                        result.camera.height_px, grid.distance_mm));
+  spdlog::debug("calibrate: uncertainty map in {:.3f} s",
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  return true;
+}
+
 // The common part of a report from a solve (fresh or reused), and the
 // residual plot. rms_px is the plain pixel residual per coordinate; mrcal's
 // rms is of WEIGHTED residuals (weight = nominal / estimated mark sigma, up to
 // 4 for sharp marks), so it is reported beside it, not as it.
 CalibrationReport ReportFromSolve(const fs::path& staging_dir, const CalibrationResult& result,
-                                  const UncertaintySummary& uncertainty) {
+                                  const UncertaintySummary& uncertainty,
+                                  const CalibrationStageOptions& options) {
   Eigen::Matrix2Xd q_px, residual_px;
   ResidualVectors(result, &q_px, &residual_px);
   const double rms_px = residual_px.cols() > 0
@@ -166,6 +196,10 @@ CalibrationReport ReportFromSolve(const fs::path& staging_dir, const Calibration
   report.extra.emplace_back("num_outliers", result.num_outliers);
   report.extra.emplace_back("projection_uncertainty", Uncertainty(uncertainty));
   report.extra.emplace_back("residuals_plot", kResidualsPlotName);
+  if (WriteUncertaintyMap(staging_dir, result, uncertainty, options.uncertainty_grid_nx,
+                          options.uncertainty_grid_ny)) {
+    report.extra.emplace_back("uncertainty_plot", kUncertaintyPlotName);
+  }
   return report;
 }
 
@@ -216,7 +250,7 @@ void CalibrateFromImages(StageContext& context) {
   WriteCameraModel(context.staging_dir / kCameraModelName, summary.result.camera);
   WriteSolveRecord(context.staging_dir / kSolveRecordName, summary.result.record);
   CalibrationReport report =
-      ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty);
+      ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty, options);
   report.images_rejected = rejected;
   report.extra.emplace_back("source", "calib/");
   ReportValue::Array outliers;
@@ -269,7 +303,7 @@ void ReuseProjectCalibration(StageContext& context, const fs::path& from) {
   const CalibrationStageOptions options;
   const UncertaintySummary uncertainty = SummarizeUncertainty(
       record, WorkingDistanceMm(result), options.uncertainty_grid_nx, options.uncertainty_grid_ny);
-  CalibrationReport report = ReportFromSolve(context.staging_dir, result, uncertainty);
+  CalibrationReport report = ReportFromSolve(context.staging_dir, result, uncertainty, options);
   report.lens_model = camera.lens_model;
   // The earlier run's rejections, if its report is there.
   const fs::path earlier_report = from / "out" / "report.json";
