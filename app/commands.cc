@@ -10,6 +10,7 @@
 
 #include "adapters/project_io/project_reader.h"
 #include "adapters/project_io/report_json.h"
+#include "adapters/report_html/report_html.h"
 #include "app/exit_codes.h"
 #include "app/terminal_progress.h"
 #include "pipeline/core/error.h"
@@ -188,6 +189,18 @@ int ReportCommand(const fs::path& project_dir, bool json) {
       throw InputError(path.string(), "no report yet (run 'omm run " + project_dir.string() + "')");
     }
     const Report report = ReadReportJson(path);
+    // The distances' lines need project.yaml's measurements; an archived out/
+    // whose project no longer loads still gets its page, without them.
+    std::vector<MeasurementSpec> measurements;
+    try {
+      measurements = LoadProject(project_dir).measurements;
+    } catch (const InputError& e) {
+      spdlog::warn("report.html without distance lines: {}", e.what());
+    }
+    WriteReportJson(path, report);
+    const fs::path html_path = project_dir / "out" / "report.html";
+    WriteReportHtml(html_path, report, {project_dir / "out"}, measurements);
+    spdlog::info("wrote {} and {}", path.string(), html_path.string());
     if (json) {
       fmt::print("{}", ReportToJson(report));
       return;

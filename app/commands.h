@@ -26,7 +26,9 @@ int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force);
 int SimulateCommand(const std::filesystem::path& project_dir, std::uint64_t seed,
                     const std::string& preset, const std::optional<std::filesystem::path>& truth);
 
-// `omm report`: a summary of out/report.json, or the JSON itself.
+// `omm report`: regenerates out/report.html and out/report.json (normalised)
+// from out/ without running a stage, then prints a summary of the report, or
+// its JSON. kExitBadInput if out/report.json is missing or invalid.
 int ReportCommand(const std::filesystem::path& project_dir, bool json);
 
 }  // namespace omm

@@ -134,10 +134,12 @@ int main(int argc, char** argv) {
   bool json = false;
   CLI::App* report = app.add_subcommand(
       "report",
-      "Print a summary of PROJECT/out/report.json (calibration, mosaic, measurements vs CMM).\n"
-      "Reads PROJECT/out/report.json. Writes nothing.");
+      "Regenerate the reports from the saved results (no stage is rerun) and print a summary\n"
+      "(calibration, mosaic, measurements vs CMM).\n"
+      "Reads PROJECT/out/ (report.json, the mosaic, the plots) and project.yaml.\n"
+      "Writes PROJECT/out/report.html and out/report.json (normalised).");
   report->add_option("PROJECT", project, "project directory")->required();
-  report->add_flag("--json", json, "print the report's JSON instead");
+  report->add_flag("--json", json, "print the report's JSON instead of the summary");
 
   try {
     app.parse(argc, argv);

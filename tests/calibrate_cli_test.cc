@@ -4,6 +4,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <regex>
 #include <sstream>
 
 #include "adapters/mrcal/cameramodel_io.h"
@@ -83,6 +84,33 @@ TEST_F(CalibrateCliTest, WritesTheCameraSolveRecordPlotAndReport) {
                           "lens_model_choice", "perspective_bias_correction", "residuals_plot"}) {
     EXPECT_NE(Member(report.calibration->extra, key), nullptr) << key;
   }
+}
+
+// The uncertainty map is the grid the report's worst_px summarises (same
+// distance, same maximum), and report.html inlines it and the residual plot.
+TEST_F(CalibrateCliTest, UncertaintyMapMatchesTheReportAndThePageInlinesIt) {
+  ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
+  const fs::path out = Calibrated() / "out";
+  const Report report = ReadReportJson(out / "report.json");
+  ASSERT_TRUE(report.calibration);
+  const ReportValue* plot = Member(report.calibration->extra, "uncertainty_plot");
+  ASSERT_NE(plot, nullptr);
+  EXPECT_EQ(*plot, ReportValue("calibration/uncertainty.svg"));
+  const auto& uncertainty =
+      std::get<ReportObject>(Member(report.calibration->extra, "projection_uncertainty")->data());
+  const double worst_px = std::get<double>(Member(uncertainty, "worst_px")->data());
+  const double distance_mm = std::get<double>(Member(uncertainty, "distance_mm")->data());
+  const std::string svg = testing::ReadTextFile(out / "calibration" / "uncertainty.svg");
+  std::smatch title;
+  ASSERT_TRUE(std::regex_search(
+      svg, title, std::regex("at ([0-9]+) mm, 16x12 grid: ([0-9.]+) to ([0-9.]+) px")))
+      << svg.substr(0, 400);
+  EXPECT_NEAR(std::stod(title[1]), distance_mm, 0.5);
+  EXPECT_NEAR(std::stod(title[3]), worst_px, 0.5e-4);  // printed to 4 decimals
+  const std::string html = testing::ReadTextFile(out / "report.html");
+  EXPECT_THAT(html, HasSubstr(svg.substr(0, svg.find("</text>"))));
+  EXPECT_THAT(html, HasSubstr("Residuals (projected - observed) of"));
+  EXPECT_THAT(html, HasSubstr("The mosaic stage has not run."));
 }
 
 TEST_F(CalibrateCliTest, Python3MrcalLoadsTheCameraModel) {

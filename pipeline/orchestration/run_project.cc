@@ -13,6 +13,7 @@
 #include <spdlog/spdlog.h>
 
 #include "adapters/project_io/report_json.h"
+#include "adapters/report_html/report_html.h"
 #include "pipeline/core/error.h"
 #include "pipeline/orchestration/input_hash.h"
 #include "pipeline/orchestration/version.h"
@@ -24,6 +25,7 @@ namespace {
 
 constexpr const char* kStagingPrefix = ".staging-";
 constexpr const char* kReportName = "report.json";
+constexpr const char* kReportHtmlName = "report.html";
 
 // Removes out/.staging-<pid> directories whose process is gone.
 void RemoveStaleStaging(const fs::path& out_dir) {
@@ -71,6 +73,15 @@ void DropSectionsFrom(Stage first, Report& report) {
     case Stage::kMosaic: report.mosaic.reset(); [[fallthrough]];
     case Stage::kMeasure: report.measurements.reset();
   }
+}
+
+// report.json and report.html into the staging directory; the page draws on
+// this run's files, else on those earlier runs left in out/.
+void WriteReports(const Project& project, const fs::path& staging_dir, const fs::path& out_dir,
+                  const Report& report) {
+  WriteReportJson(staging_dir / kReportName, report);
+  WriteReportHtml(staging_dir / kReportHtmlName, report, {staging_dir, out_dir},
+                  project.measurements);
 }
 
 // Moves the staged outputs into out/, report.json last.
@@ -154,7 +165,7 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
         // The stages before it are complete and consistent: keep them, so a
         // user (and the demo) sees what the built part of the pipeline gives.
         if (!summary.stages_run.empty()) {
-          WriteReportJson(staging_dir / kReportName, report);
+          WriteReports(project, staging_dir, out_dir, report);
           Commit(staging_dir, out_dir);
         }
         throw;
@@ -162,7 +173,7 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
       spdlog::info("{}: done", StageName(stage));
       summary.stages_run.push_back(stage);
     }
-    WriteReportJson(staging_dir / kReportName, report);
+    WriteReports(project, staging_dir, out_dir, report);
     Commit(staging_dir, out_dir);
     summary.report = std::move(report);
   } catch (...) {

@@ -1,0 +1,600 @@
+#include "adapters/report_html/report_html.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <optional>
+#include <stdexcept>
+#include <string_view>
+#include <system_error>
+
+#include <fmt/format.h>
+
+#include "adapters/opencv/image_io.h"
+#include "adapters/project_io/text_file.h"
+#include "pipeline/core/error.h"
+
+namespace omm {
+namespace {
+
+namespace fs = std::filesystem;
+
+// ------------------------------------------------------------------ text ---
+
+std::string Escape(std::string_view text) {
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      case '\'': out += "&#39;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string Base64(std::string_view bytes) {
+  static constexpr char kDigits[] =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    const size_t n = std::min<size_t>(3, bytes.size() - i);
+    std::uint32_t v = 0;
+    for (size_t k = 0; k < 3; ++k)
+      v = (v << 8) | (k < n ? static_cast<unsigned char>(bytes[i + k]) : 0u);
+    for (size_t k = 0; k < 4; ++k) out += k <= n ? kDigits[(v >> (18 - 6 * k)) & 63] : '=';
+  }
+  return out;
+}
+
+// "-" for an absent value.
+std::string Number(const std::optional<double>& value, int decimals = 4) {
+  return value ? fmt::format("{:.{}f}", *value, decimals) : "&ndash;";
+}
+
+// ------------------------------------------------- the report's extras ---
+
+const ReportValue* Member(const ReportObject& object, std::string_view key) {
+  for (const auto& [name, value] : object)
+    if (name == key) return &value;
+  return nullptr;
+}
+
+std::optional<double> AsNumber(const ReportValue* value) {
+  if (value == nullptr) return std::nullopt;
+  if (const auto* i = std::get_if<std::int64_t>(&value->data())) return static_cast<double>(*i);
+  if (const auto* d = std::get_if<double>(&value->data())) return *d;
+  return std::nullopt;
+}
+
+std::optional<bool> AsBool(const ReportValue* value) {
+  if (value == nullptr) return std::nullopt;
+  if (const auto* b = std::get_if<bool>(&value->data())) return *b;
+  return std::nullopt;
+}
+
+const std::string* AsString(const ReportValue* value) {
+  return value == nullptr ? nullptr : std::get_if<std::string>(&value->data());
+}
+
+const ReportValue::Array* AsArray(const ReportValue* value) {
+  return value == nullptr ? nullptr : std::get_if<ReportValue::Array>(&value->data());
+}
+
+const ReportObject* AsObject(const ReportValue* value) {
+  return value == nullptr ? nullptr : std::get_if<ReportObject>(&value->data());
+}
+
+// Any value as escaped text: numbers to 6 significant digits, arrays in
+// parentheses, objects as "key value; ...".
+std::string Text(const ReportValue& value) {
+  return std::visit(
+      [](const auto& v) -> std::string {
+        using T = std::decay_t<decltype(v)>;
+        if constexpr (std::is_same_v<T, std::nullptr_t>) {
+          return "&ndash;";
+        } else if constexpr (std::is_same_v<T, bool>) {
+          return v ? "yes" : "no";
+        } else if constexpr (std::is_same_v<T, std::int64_t>) {
+          return std::to_string(v);
+        } else if constexpr (std::is_same_v<T, double>) {
+          return fmt::format("{:.6g}", v);
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          return Escape(v);
+        } else if constexpr (std::is_same_v<T, ReportValue::Array>) {
+          std::string out = "(";
+          for (size_t i = 0; i < v.size(); ++i) out += (i ? ", " : "") + Text(v[i]);
+          return out + ")";
+        } else {
+          std::string out;
+          for (const auto& [key, item] : v)
+            out += (out.empty() ? "" : "; ") + Escape(key) + " " + Text(item);
+          return out;
+        }
+      },
+      value.data());
+}
+
+std::string Text(const ReportValue* value) { return value ? Text(*value) : "&ndash;"; }
+
+std::string NumberOf(const ReportObject& object, std::string_view key, int decimals = 4) {
+  return Number(AsNumber(Member(object, key)), decimals);
+}
+
+// --------------------------------------------------------------- tables ---
+
+// An HTML table; cells are HTML already (escaped by the caller). `align`
+// has one letter per column: 'r' right-aligns it (numbers), else left.
+class Table {
+ public:
+  Table(std::vector<std::string> header, std::string align)
+      : header_(std::move(header)), align_(std::move(align)) {
+    align_.resize(header_.size(), 'l');
+  }
+  void Row(std::vector<std::string> cells, const std::string& css_class = "") {
+    rows_.push_back({std::move(cells), css_class});
+  }
+  bool empty() const { return rows_.empty(); }
+  std::string Html(const std::string& id = "") const {
+    std::string out =
+        id.empty() ? "<table>\n<thead><tr>" : "<table id=\"" + id + "\">\n<thead><tr>";
+    for (size_t i = 0; i < header_.size(); ++i)
+      out += (align_[i] == 'r' ? "<th class=\"r\">" : "<th>") + header_[i] + "</th>";
+    out += "</tr></thead>\n<tbody>\n";
+    for (const auto& [cells, css_class] : rows_) {
+      out += css_class.empty() ? "<tr>" : "<tr class=\"" + css_class + "\">";
+      for (size_t i = 0; i < cells.size(); ++i)
+        out += (i < align_.size() && align_[i] == 'r' ? "<td class=\"r\">" : "<td>") + cells[i] +
+               "</td>";
+      out += "</tr>\n";
+    }
+    return out + "</tbody></table>\n";
+  }
+
+ private:
+  std::vector<std::string> header_;
+  std::string align_;
+  std::vector<std::pair<std::vector<std::string>, std::string>> rows_;
+};
+
+// Two-column key / value table.
+class Facts {
+ public:
+  void Add(const std::string& key, const std::string& value_html) {
+    rows_ += "<tr><th>" + key + "</th><td>" + value_html + "</td></tr>\n";
+  }
+  std::string Html() const { return "<table class=\"facts\">\n" + rows_ + "</table>\n"; }
+
+ private:
+  std::string rows_;
+};
+
+std::string Missing(const std::string& text) { return "<p class=\"missing\">" + text + "</p>\n"; }
+
+// An SVG document for inlining: from "<svg" on (no XML prolog).
+std::string InlineSvg(const std::string& svg) {
+  const size_t at = svg.find("<svg");
+  return at == std::string::npos ? "" : "<div class=\"plot\">" + svg.substr(at) + "</div>\n";
+}
+
+constexpr const char* kStyle = R"(
+body { font-family: sans-serif; font-size: 14px; margin: 1.5em; color: #222; max-width: 1250px; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.25em; margin-top: 1.8em; border-bottom: 1px solid #ccc; }
+h3 { font-size: 1.05em; margin-top: 1.2em; }
+table { border-collapse: collapse; margin: 0.5em 0; }
+th, td { border: 1px solid #ccc; padding: 2px 8px; text-align: left; vertical-align: top; }
+th { background: #f0f0f0; } .r { text-align: right; }
+table.facts th { font-weight: normal; color: #555; }
+tr.beyond td { background: #fdd; font-weight: bold; }
+tr.failed td { background: #f3f3f3; color: #777; }
+.error { color: #b00; }
+p.missing { color: #777; font-style: italic; }
+.plot svg { max-width: 100%; height: auto; }
+svg.mosaic { width: 100%; max-width: 1200px; height: auto; max-height: 1000px; }
+)";
+
+// ------------------------------------------------------------ sections ---
+
+std::string HeaderSection(const Report& report) {
+  std::string out = "<h1>omm report: " + Escape(report.project) + "</h1>\n";
+  Facts facts;
+  facts.Add("project", Escape(report.project));
+  facts.Add("report format", Escape(report.format));
+  facts.Add("omm version", Escape(report.software_version));
+  facts.Add("inputs SHA-256", "<code>" + Escape(report.inputs_sha256) + "</code>");
+  for (const auto& [key, value] : report.extra) facts.Add(Escape(key), Text(value));
+  return out + facts.Html();
+}
+
+// A measurement's row is highlighted when its deviation from the CMM value is
+// beyond 3 sigma: the stage's flag, else |deviation_sigma| > 3.
+bool Beyond3Sigma(const MeasurementReport& m) {
+  if (const auto flag = AsBool(Member(m.extra, "beyond_3_sigma"))) return *flag;
+  return m.deviation_sigma && std::abs(*m.deviation_sigma) > 3.0;
+}
+
+std::string MeasurementsSection(const Report& report) {
+  std::string out = "<h2 id=\"measurements\">Measurements</h2>\n";
+  if (!report.measurements) return out + Missing("The measure stage has not run.");
+  if (report.measurements->empty()) return out + Missing("project.yaml lists no measurements.");
+  Table table({"measurement", "type", "value mm", "1-sigma mm", "CMM mm", "deviation mm",
+               "deviation / sigma", "1-sigma by source, mm", "error"},
+              "llrrrrrll");
+  int beyond = 0, failed = 0;
+  for (const MeasurementReport& m : *report.measurements) {
+    std::string sources;
+    if (const ReportObject* breakdown = AsObject(Member(m.extra, "sigma_breakdown_mm"))) {
+      for (const auto& [source, value] : *breakdown)
+        sources += (sources.empty() ? "" : ", ") + Escape(source) + " " + Number(AsNumber(&value));
+    }
+    std::string css_class;
+    if (!m.value_mm) {
+      css_class = "failed";
+      ++failed;
+    } else if (Beyond3Sigma(m)) {
+      css_class = "beyond";
+      ++beyond;
+    }
+    table.Row({Escape(m.name), MeasurementTypeName(m.type), Number(m.value_mm), Number(m.sigma_mm),
+               Number(m.cmm_mm), Number(m.deviation_mm), Number(m.deviation_sigma, 2),
+               sources.empty() ? "&ndash;" : sources,
+               "<span class=\"error\">" + Escape(m.error) + "</span>"},
+              css_class);
+  }
+  out += fmt::format(
+      "<p>{} measurement(s): {} made, {} failed, {} beyond 3 sigma of the CMM "
+      "value (highlighted).</p>\n",
+      report.measurements->size(), report.measurements->size() - failed, failed, beyond);
+  return out + table.Html("measurements-table");
+}
+
+std::string FeaturesSection(const Report& report) {
+  std::string out = "<h3 id=\"features\">Features (part frame)</h3>\n";
+  if (!report.features)
+    return out + Missing("No features located (the measure stage has not run).");
+  if (report.features->empty()) return out + Missing("project.yaml lists no features.");
+  Table table({"feature", "type", "centre x mm", "centre y mm", "diameter mm", "1-sigma x mm",
+               "1-sigma y mm", "1-sigma diameter mm", "error"},
+              "llrrrrrrl");
+  for (const FeatureReport& f : *report.features) {
+    auto coordinate = [](const std::optional<Eigen::Vector2d>& v, int axis) {
+      return v ? std::optional<double>((*v)(axis)) : std::nullopt;
+    };
+    table.Row({Escape(f.name), FeatureTypeName(f.type), Number(coordinate(f.centre_mm, 0)),
+               Number(coordinate(f.centre_mm, 1)), Number(f.diameter_mm),
+               Number(coordinate(f.centre_sigma_mm, 0)), Number(coordinate(f.centre_sigma_mm, 1)),
+               Number(f.diameter_sigma_mm), "<span class=\"error\">" + Escape(f.error) + "</span>"},
+              f.centre_mm ? "" : "failed");
+  }
+  return out + table.Html("features-table");
+}
+
+std::string MosaicFigure(const Report& report, const ReportHtmlInputs& inputs) {
+  std::string out = "<h2 id=\"mosaic-figure\">Mosaic with the measured features</h2>\n";
+  if (!report.mosaic) return out + Missing("The mosaic stage has not run.");
+  const MosaicReport& mosaic = *report.mosaic;
+  if (inputs.mosaic_png.empty()) {
+    return out + Missing("No mosaic image: " + Escape(inputs.mosaic_missing_why));
+  }
+  const double w = mosaic.size_px.x(), h = mosaic.size_px.y(), gsd = mosaic.gsd_mm;
+  if (w <= 0 || h <= 0 || gsd <= 0) {
+    return out + Missing("The report's mosaic section has no size or gsd.");
+  }
+  // Part frame (mm) to the overlay's user space (see the header).
+  auto to_svg = [&](const Eigen::Vector2d& part_mm) {
+    return Eigen::Vector2d((part_mm.x() - mosaic.origin_mm.x()) / gsd,
+                           (mosaic.origin_mm.y() - part_mm.y()) / gsd);
+  };
+  // Sizes in user units that come out at ~1200 px wide as screen pixels.
+  const double unit = w / 1200.0;
+  std::string svg = fmt::format(
+      "<svg class=\"mosaic\" xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 {0:g} {1:g}\" "
+      "font-family=\"sans-serif\" font-size=\"{2:.2f}\">\n"
+      "<image x=\"0\" y=\"0\" width=\"{0:g}\" height=\"{1:g}\" preserveAspectRatio=\"none\" "
+      "href=\"data:image/png;base64,{3}\"/>\n",
+      w, h, 14 * unit, Base64(inputs.mosaic_png));
+  std::map<std::string, Eigen::Vector2d> centres;  // features found, user space
+  std::string not_found;
+  if (report.features) {
+    for (const FeatureReport& f : *report.features) {
+      if (!f.centre_mm) {
+        not_found += (not_found.empty() ? "" : ", ") + Escape(f.name);
+        continue;
+      }
+      const Eigen::Vector2d c = to_svg(*f.centre_mm);
+      centres[f.name] = c;
+      const double r = f.diameter_mm ? *f.diameter_mm / 2 / gsd : 6 * unit;
+      svg += fmt::format(
+          "<g class=\"feature\"><circle cx=\"{:.3f}\" cy=\"{:.3f}\" r=\"{:.3f}\" fill=\"none\" "
+          "stroke=\"#ff2a6d\" stroke-width=\"2\" vector-effect=\"non-scaling-stroke\"/>"
+          "<text x=\"{:.3f}\" y=\"{:.3f}\" fill=\"#ff2a6d\" stroke=\"white\" "
+          "stroke-width=\"{:.2f}\" paint-order=\"stroke\">{}</text></g>\n",
+          c.x(), c.y(), r, c.x() + 0.75 * r, c.y() - 0.75 * r, 3 * unit, Escape(f.name));
+    }
+  }
+  std::map<std::string, const MeasurementReport*> values;
+  if (report.measurements) {
+    for (const MeasurementReport& m : *report.measurements) values[m.name] = &m;
+  }
+  for (const MeasurementSpec& spec : inputs.measurements) {
+    if (spec.type != MeasurementType::kDistance || spec.features.size() != 2) continue;
+    const auto a = centres.find(spec.features[0]), b = centres.find(spec.features[1]);
+    if (a == centres.end() || b == centres.end()) continue;
+    std::string label = Escape(spec.name);
+    if (const auto m = values.find(spec.name); m != values.end() && m->second->value_mm) {
+      label += fmt::format(" {:.4f}", *m->second->value_mm);
+      if (m->second->sigma_mm) label += fmt::format(" &#177; {:.4f}", *m->second->sigma_mm);
+      label += " mm";
+    }
+    const Eigen::Vector2d mid = (a->second + b->second) / 2;
+    svg += fmt::format(
+        "<g class=\"distance\"><line x1=\"{:.3f}\" y1=\"{:.3f}\" x2=\"{:.3f}\" y2=\"{:.3f}\" "
+        "stroke=\"#05d9e8\" stroke-width=\"1.5\" vector-effect=\"non-scaling-stroke\"/>"
+        "<text x=\"{:.3f}\" y=\"{:.3f}\" text-anchor=\"middle\" fill=\"#005f73\" stroke=\"white\" "
+        "stroke-width=\"{:.2f}\" paint-order=\"stroke\">{}</text></g>\n",
+        a->second.x(), a->second.y(), b->second.x(), b->second.y(), mid.x(), mid.y() - 4 * unit,
+        3 * unit, label);
+  }
+  svg += "</svg>\n";
+  out += "<figure>" + svg + "<figcaption>";
+  out += fmt::format(
+      "{:g} x {:g} px at {:g} mm/px, top-left outer corner at part ({:g}, {:g}) "
+      "mm; columns along +X, rows along -Y. ",
+      w, h, gsd, mosaic.origin_mm.x(), mosaic.origin_mm.y());
+  if (!report.features) out += "No features drawn: the measure stage has not run.";
+  if (!not_found.empty()) out += "Not found: " + not_found + ".";
+  return out + "</figcaption></figure>\n";
+}
+
+std::string CalibrationSection(const Report& report, const ReportHtmlInputs& inputs) {
+  std::string out = "<h2 id=\"calibration\">Calibration</h2>\n";
+  if (!report.calibration) return out + Missing("The calibrate stage has not run.");
+  const CalibrationReport& c = *report.calibration;
+  const ReportObject& extra = c.extra;
+  Facts facts;
+  if (const std::string* source = AsString(Member(extra, "source")))
+    facts.Add("source", Escape(*source));
+  facts.Add("lens model", Escape(c.lens_model));
+  if (const ReportObject* choice = AsObject(Member(extra, "lens_model_choice"))) {
+    facts.Add("why this lens model", Text(Member(*choice, "why")));
+  }
+  if (AsBool(Member(extra, "rms_px_known")) == false) {
+    facts.Add("rms residual", "unknown (camera model file, no solve)");
+  } else {
+    facts.Add("rms residual", fmt::format("{:.4f} px", c.rms_px));
+    if (const auto weighted = AsNumber(Member(extra, "weighted_rms")))
+      facts.Add("rms of the weighted residuals (mrcal)", fmt::format("{:.4f}", *weighted));
+    facts.Add("images used", std::to_string(c.images_used));
+    facts.Add("images rejected", std::to_string(c.images_rejected.size()));
+  }
+  if (const auto outliers = AsNumber(Member(extra, "num_outliers")))
+    facts.Add("outlier marks", fmt::format("{:g}", *outliers));
+  if (const ReportObject* u = AsObject(Member(extra, "projection_uncertainty"))) {
+    if (AsBool(Member(*u, "included")).value_or(false)) {
+      facts.Add("projection uncertainty (worst-direction 1-sigma)",
+                fmt::format("{} px typical (median over the imager), {} px worst, at {} mm",
+                            NumberOf(*u, "typical_px"), NumberOf(*u, "worst_px"),
+                            NumberOf(*u, "distance_mm", 0)));
+    } else {
+      facts.Add("projection uncertainty", "not included: " + Text(Member(*u, "why_not")));
+    }
+  }
+  if (const std::string* brief = AsString(Member(extra, "brief")))
+    facts.Add("summary", Escape(*brief));
+  out += facts.Html();
+
+  out += "<h3>Images rejected</h3>\n";
+  if (c.images_rejected.empty()) {
+    out += "<p>None.</p>\n";
+  } else {
+    Table rejected({"image", "why"}, "ll");
+    for (const RejectedImage& r : c.images_rejected) rejected.Row({Escape(r.image), Escape(r.why)});
+    out += rejected.Html("rejected-table");
+  }
+  if (const ReportValue::Array* per_image = AsArray(Member(extra, "per_image"))) {
+    out += "<h3>Residuals per image</h3>\n";
+    Table table({"image", "rms px", "inlier marks", "outlier marks"}, "lrrr");
+    for (const ReportValue& row : *per_image) {
+      const ReportObject* r = AsObject(&row);
+      if (r == nullptr) continue;
+      table.Row({Text(Member(*r, "image")), NumberOf(*r, "rms_px"), Text(Member(*r, "inliers")),
+                 Text(Member(*r, "outliers"))});
+    }
+    out += table.Html("per-image-table");
+  }
+  out += "<h3>Residuals</h3>\n";
+  out +=
+      inputs.residuals_svg.empty() ? Missing("No residual plot.") : InlineSvg(inputs.residuals_svg);
+  out += "<h3>Projection uncertainty over the imager</h3>\n";
+  out += inputs.uncertainty_svg.empty() ? Missing("No uncertainty map.")
+                                        : InlineSvg(inputs.uncertainty_svg);
+  if (!inputs.study_svg.empty()) {
+    out += "<h3>Image-count study</h3>\n";
+    if (const ReportObject* study = AsObject(Member(extra, "study")))
+      out += "<p>" + Text(Member(*study, "brief")) + "</p>\n";
+    out += InlineSvg(inputs.study_svg);
+  }
+  return out;
+}
+
+std::string MosaicSection(const Report& report) {
+  std::string out = "<h2 id=\"mosaic\">Mosaic registration</h2>\n";
+  if (!report.mosaic) return out + Missing("The mosaic stage has not run.");
+  const MosaicReport& m = *report.mosaic;
+  const ReportObject& extra = m.extra;
+  Facts facts;
+  facts.Add("rms reprojection residual", fmt::format("{:.4f} px", m.rms_px));
+  facts.Add("file", Escape(m.file));
+  facts.Add("size",
+            fmt::format("{} x {} px at {:g} mm/px", m.size_px.x(), m.size_px.y(), m.gsd_mm));
+  facts.Add("origin (outer corner of pixel (0, 0))",
+            fmt::format("({:g}, {:g}) mm", m.origin_mm.x(), m.origin_mm.y()));
+  if (Member(extra, "plane_tilt_deg"))
+    facts.Add("plane tilt", NumberOf(extra, "plane_tilt_deg", 4) + " deg");
+  if (Member(extra, "num_tracks")) facts.Add("tracks", Text(Member(extra, "num_tracks")));
+  if (const std::string* brief = AsString(Member(extra, "brief")))
+    facts.Add("summary", Escape(*brief));
+  out += facts.Html();
+
+  if (const ReportValue::Array* pairs = AsArray(Member(extra, "pairs"))) {
+    out += "<h3>Tile pairs</h3>\n";
+    Table table({"tile a", "tile b", "predicted overlap", "candidates", "matched", "inliers",
+                 "tag corners", "used", "rms px", "usable"},
+                "llrrrrrrrl");
+    for (const ReportValue& row : *pairs) {
+      const ReportObject* p = AsObject(&row);
+      if (p == nullptr) continue;
+      const ReportValue::Array* images = AsArray(Member(*p, "images"));
+      const bool two = images != nullptr && images->size() == 2;
+      table.Row({two ? Text((*images)[0]) : "?", two ? Text((*images)[1]) : "?",
+                 NumberOf(*p, "predicted_overlap", 2), Text(Member(*p, "candidates")),
+                 Text(Member(*p, "matched")), Text(Member(*p, "inliers")),
+                 Text(Member(*p, "tag_corners")), Text(Member(*p, "used")), NumberOf(*p, "rms_px"),
+                 Text(Member(*p, "usable"))},
+                AsBool(Member(*p, "usable")).value_or(true) ? "" : "failed");
+    }
+    out += table.Html("pairs-table");
+  }
+  if (const ReportValue::Array* tiles = AsArray(Member(extra, "tiles"))) {
+    out += "<h3>Tiles: adjusted minus commanded table position</h3>\n";
+    Table table({"tile", "commanded x mm", "commanded y mm", "adjusted - commanded x &#181;m",
+                 "adjusted - commanded y &#181;m", "held by prior", "exposure gain"},
+                "lrrrrlr");
+    for (const ReportValue& row : *tiles) {
+      const ReportObject* t = AsObject(&row);
+      if (t == nullptr) continue;
+      auto component = [&](const char* key, int axis, double scale, int decimals) {
+        const ReportValue::Array* v = AsArray(Member(*t, key));
+        if (v == nullptr || v->size() != 2) return std::string("&ndash;");
+        const auto x = AsNumber(&(*v)[axis]);
+        return Number(x ? std::optional<double>(*x * scale) : std::nullopt, decimals);
+      };
+      table.Row({Text(Member(*t, "image")), component("commanded_mm", 0, 1.0, 3),
+                 component("commanded_mm", 1, 1.0, 3),
+                 component("adjusted_minus_commanded_mm", 0, 1000.0, 2),
+                 component("adjusted_minus_commanded_mm", 1, 1000.0, 2),
+                 Text(Member(*t, "held_by_prior")), NumberOf(*t, "exposure_gain", 4)});
+    }
+    out += table.Html("tiles-table");
+  }
+  if (const ReportValue::Array* held = AsArray(Member(extra, "tiles_held_by_prior"))) {
+    out += "<h3>Tiles held by the table prior alone</h3>\n";
+    if (held->empty()) {
+      out += "<p>None: every tile is registered by features.</p>\n";
+    } else {
+      Table table({"tile", "why"}, "ll");
+      for (const ReportValue& row : *held) {
+        if (const ReportObject* t = AsObject(&row))
+          table.Row({Text(Member(*t, "image")), Text(Member(*t, "why"))});
+      }
+      out += table.Html("held-table");
+    }
+  }
+  if (const ReportObject* exposure = AsObject(Member(extra, "exposure"))) {
+    out += "<h3>Exposure compensation</h3>\n";
+    Facts e;
+    e.Add("summary", Text(Member(*exposure, "brief")));
+    e.Add("relative sigma between tiles, before / after",
+          NumberOf(*exposure, "relative_sigma_before") + " / " +
+              NumberOf(*exposure, "relative_sigma_after"));
+    e.Add("largest step between overlapping tiles, before / after",
+          NumberOf(*exposure, "max_pair_step_before") + " / " +
+              NumberOf(*exposure, "max_pair_step_after"));
+    out += e.Html();
+  }
+  return out;
+}
+
+// The file `name` (relative to out/, as the report names it) in the first of
+// `dirs` that holds it; empty if none does or if the name would leave out/.
+fs::path FindNamed(const std::string& name, const std::vector<fs::path>& dirs) {
+  const fs::path relative(name);
+  if (name.empty() || relative.is_absolute() ||
+      std::find(relative.begin(), relative.end(), "..") != relative.end()) {
+    return {};
+  }
+  std::error_code ec;
+  for (const fs::path& dir : dirs)
+    if (fs::is_regular_file(dir / relative, ec)) return dir / relative;
+  return {};
+}
+
+// The text of FindNamed(name, dirs); empty if there is none.
+std::string ReadNamed(const std::string& name, const std::vector<fs::path>& dirs) {
+  const fs::path path = FindNamed(name, dirs);
+  if (path.empty()) return "";
+  try {
+    return ReadTextFile(path, "cannot read");
+  } catch (const InputError&) {
+    return "";  // the page says the plot is missing
+  }
+}
+
+}  // namespace
+
+std::string ReportHtmlOptions::Check() const {
+  if (mosaic_preview_width_px < 16) return "mosaic_preview_width_px must be >= 16";
+  return "";
+}
+
+std::string ReportHtml(const Report& report, const ReportHtmlInputs& inputs) {
+  std::string html =
+      "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>omm report: " +
+      Escape(report.project) + "</title>\n<style>" + kStyle + "</style>\n</head>\n<body>\n";
+  html += HeaderSection(report);
+  html += MeasurementsSection(report);
+  html += FeaturesSection(report);
+  html += MosaicFigure(report, inputs);
+  html += CalibrationSection(report, inputs);
+  html += MosaicSection(report);
+  return html + "</body>\n</html>\n";
+}
+
+ReportHtmlInputs ReadReportHtmlInputs(const Report& report, const std::vector<fs::path>& dirs,
+                                      const std::vector<MeasurementSpec>& measurements,
+                                      const ReportHtmlOptions& options) {
+  if (const std::string problem = options.Check(); !problem.empty()) {
+    throw std::invalid_argument("ReportHtmlOptions: " + problem);
+  }
+  ReportHtmlInputs inputs;
+  inputs.measurements = measurements;
+  if (report.mosaic) {
+    const fs::path path = FindNamed(report.mosaic->file, dirs);
+    if (path.empty()) {
+      inputs.mosaic_missing_why = "'" + report.mosaic->file + "' not found";
+    } else {
+      try {
+        inputs.mosaic_png =
+            EncodePreviewPng(ReadGrayImage(path).pixels, options.mosaic_preview_width_px);
+      } catch (const InputError& e) {
+        inputs.mosaic_missing_why = e.what();
+      }
+    }
+  }
+  if (report.calibration) {
+    const ReportObject& extra = report.calibration->extra;
+    if (const std::string* name = AsString(Member(extra, "residuals_plot")))
+      inputs.residuals_svg = ReadNamed(*name, dirs);
+    if (const std::string* name = AsString(Member(extra, "uncertainty_plot")))
+      inputs.uncertainty_svg = ReadNamed(*name, dirs);
+    if (const ReportObject* study = AsObject(Member(extra, "study"))) {
+      if (const std::string* name = AsString(Member(*study, "plot")))
+        inputs.study_svg = ReadNamed(*name, dirs);
+    }
+  }
+  return inputs;
+}
+
+void WriteReportHtml(const fs::path& path, const Report& report, const std::vector<fs::path>& dirs,
+                     const std::vector<MeasurementSpec>& measurements,
+                     const ReportHtmlOptions& options) {
+  WriteTextFileAtomically(
+      path, ReportHtml(report, ReadReportHtmlInputs(report, dirs, measurements, options)));
+}
+
+}  // namespace omm

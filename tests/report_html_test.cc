@@ -1,0 +1,387 @@
+// report.html (adapters/report_html): the page's content from hand-made
+// reports with known geometry, the files it embeds, `omm report`, and the
+// page as headless Chromium (Debian's `chromium`) renders it.
+#include "adapters/report_html/report_html.h"
+
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <regex>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "adapters/opencv/image_io.h"
+#include "adapters/project_io/report_json.h"
+#include "tests/test_util.h"
+
+namespace omm {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+// The mosaic of the fixture: 600 x 400 px at 0.1 mm/px.
+constexpr double kGsdMm = 0.1;
+const Eigen::Vector2d kOriginMm(-10.0, 20.0);
+constexpr float kMosaicGray = 0.3f;  // 77 of 255 in the 8-bit preview
+
+// Part-frame centre of mosaic pixel (col, row), by project-format.md's
+// convention, which the overlay must invert.
+Eigen::Vector2d PixelCentreMm(double col, double row) {
+  return {kOriginMm.x() + (col + 0.5) * kGsdMm, kOriginMm.y() - (row + 0.5) * kGsdMm};
+}
+
+FeatureReport Feature(const std::string& name, const Eigen::Vector2d& centre_mm, double diameter) {
+  FeatureReport f;
+  f.name = name;
+  f.centre_mm = centre_mm;
+  f.diameter_mm = diameter;
+  f.centre_sigma_mm = Eigen::Vector2d(0.0011, 0.0012);
+  f.diameter_sigma_mm = 0.0021;
+  return f;
+}
+
+MeasurementReport Measurement(const std::string& name, MeasurementType type, double value,
+                              double sigma, double cmm) {
+  MeasurementReport m;
+  m.name = name;
+  m.type = type;
+  m.value_mm = value;
+  m.sigma_mm = sigma;
+  m.cmm_mm = cmm;
+  m.deviation_mm = value - cmm;
+  m.deviation_sigma = (value - cmm) / sigma;
+  m.extra = {{"sigma_breakdown_mm",
+              ReportObject{{"calibration", 0.0011}, {"registration", 0.0022}, {"edges", 0.0015}}},
+             {"beyond_3_sigma", std::abs(value - cmm) > 3 * sigma}};
+  return m;
+}
+
+// Every section filled, with names that need escaping.
+Report FullReport() {
+  Report report;
+  report.project = "die <casting> & \"co\"";
+  report.software_version = "0.1.0";
+  report.inputs_sha256 = "0123456789abcdef";
+  report.extra = {{"run_date", "2026-11-22T01:00:00Z"}};
+
+  CalibrationReport c;
+  c.lens_model = "LENSMODEL_OPENCV8";
+  c.rms_px = 0.0037;
+  c.images_used = 2;
+  c.images_rejected = {{"calib_<02>.png", "plate not found"}};
+  c.extra = {
+      {"source", "calib/"},
+      {"per_image",
+       ReportValue::Array{
+           ReportObject{
+               {"image", "calib_00.png"}, {"rms_px", 0.0134}, {"inliers", 49}, {"outliers", 0}},
+           ReportObject{
+               {"image", "calib_01.png"}, {"rms_px", 0.0151}, {"inliers", 48}, {"outliers", 1}}}},
+      {"projection_uncertainty", ReportObject{{"included", true},
+                                              {"distance_mm", 406.0},
+                                              {"typical_px", 0.0018},
+                                              {"worst_px", 0.0267}}},
+      {"residuals_plot", "calibration/residuals.svg"},
+      {"uncertainty_plot", "calibration/uncertainty.svg"}};
+  report.calibration = c;
+
+  MosaicReport m;
+  m.file = "mosaic.png";
+  m.rms_px = 0.018;
+  m.gsd_mm = kGsdMm;
+  m.size_px = {600, 400};
+  m.origin_mm = kOriginMm;
+  m.extra = {{"pairs",
+              ReportValue::Array{ReportObject{{"images", ReportValue::Array{"t1.png", "t2.png"}},
+                                              {"predicted_overlap", 0.43},
+                                              {"matched", 411},
+                                              {"used", 403},
+                                              {"rms_px", 0.0151},
+                                              {"usable", true}},
+                                 ReportObject{{"images", ReportValue::Array{"t1.png", "t<3>.png"}},
+                                              {"predicted_overlap", 0.15},
+                                              {"matched", 3},
+                                              {"used", 0},
+                                              {"rms_px", 0.0},
+                                              {"usable", false}}}},
+             {"tiles", ReportValue::Array{ReportObject{
+                           {"image", "t1.png"},
+                           {"commanded_mm", ReportValue::Array{67.5, -50.5}},
+                           {"adjusted_minus_commanded_mm", ReportValue::Array{-0.01483, 0.00123}},
+                           {"held_by_prior", false},
+                           {"exposure_gain", 0.9553}}}},
+             {"tiles_held_by_prior",
+              ReportValue::Array{ReportObject{{"image", "t<3>.png"}, {"why", "no good matches"}}}},
+             {"exposure", ReportObject{{"brief", "gains 0.91..1.00"},
+                                       {"relative_sigma_before", 0.031},
+                                       {"relative_sigma_after", 0.002}}}};
+  report.mosaic = m;
+
+  FeatureReport lost;
+  lost.name = "<lost>";
+  lost.error = "not found near <812, 400>";
+  report.features =
+      std::vector<FeatureReport>{Feature("hole_A", PixelCentreMm(123, 45), 4.0),
+                                 Feature("hole_B", PixelCentreMm(400, 250), 6.0), lost};
+  MeasurementReport broken;
+  broken.name = "<b>broken</b>";
+  broken.error = "feature '<lost>' not found";
+  report.measurements = std::vector<MeasurementReport>{
+      Measurement("A_to_B", MeasurementType::kDistance, 34.4, 0.003, 34.39),      // 3.33 sigma
+      Measurement("A_diameter", MeasurementType::kDiameter, 4.0, 0.002, 4.0024),  // -1.2 sigma
+      broken};
+  return report;
+}
+
+std::vector<MeasurementSpec> Specs() {
+  return {{"A_to_B", MeasurementType::kDistance, {"hole_A", "hole_B"}},
+          {"A_diameter", MeasurementType::kDiameter, {"hole_A"}},
+          {"<b>broken</b>", MeasurementType::kDistance, {"hole_A", "<lost>"}}};
+}
+
+ReportHtmlInputs FullInputs() {
+  ReportHtmlInputs inputs;
+  inputs.mosaic_png = EncodePreviewPng(ImageF::Constant(400, 600, kMosaicGray), 1200);
+  inputs.residuals_svg = "<svg xmlns=\"http://www.w3.org/2000/svg\"><text>resid</text></svg>";
+  inputs.uncertainty_svg =
+      "<?xml version=\"1.0\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\"><text>unc</text></svg>";
+  inputs.measurements = Specs();
+  return inputs;
+}
+
+int Count(const std::string& text, const std::string& what) {
+  int n = 0;
+  for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+  return n;
+}
+
+TEST(ReportHtml, EscapesEveryTextFromUserFiles) {
+  const std::string html = ReportHtml(FullReport(), FullInputs());
+  EXPECT_THAT(html,
+              HasSubstr("<title>omm report: die &lt;casting&gt; &amp; &quot;co&quot;</title>"));
+  EXPECT_THAT(html, HasSubstr("&lt;b&gt;broken&lt;/b&gt;"));
+  EXPECT_THAT(html, HasSubstr("feature &#39;&lt;lost&gt;&#39; not found"));
+  EXPECT_THAT(html, HasSubstr("calib_&lt;02&gt;.png"));
+  EXPECT_THAT(html, HasSubstr("t&lt;3&gt;.png"));
+  for (const char* raw : {"<casting>", "<b>broken", "<lost>", "<02>", "<3>", "<812"})
+    EXPECT_THAT(html, Not(HasSubstr(raw))) << raw;
+}
+
+TEST(ReportHtml, IsSelfContained) {
+  const std::string html = ReportHtml(FullReport(), FullInputs());
+  // The only URL is SVG's namespace name (an identifier, never fetched).
+  EXPECT_EQ(Count(html, "http"), Count(html, "http://www.w3.org/2000/svg"));
+  EXPECT_EQ(Count(html, "<script"), 0);
+  EXPECT_EQ(Count(html, "src="), 0);
+  EXPECT_THAT(html, HasSubstr("href=\"data:image/png;base64,iVBORw0KGgo"));  // PNG signature
+  EXPECT_THAT(html, Not(HasSubstr("<?xml")));  // the plot's prolog is dropped when inlined
+}
+
+TEST(ReportHtml, OverlayFollowsThePixelConvention) {
+  const std::string html = ReportHtml(FullReport(), FullInputs());
+  // User space = the mosaic's pixel grid: pixel (123, 45)'s centre is at
+  // (123.5, 45.5); radius = diameter / 2 / gsd.
+  EXPECT_THAT(html, HasSubstr("viewBox=\"0 0 600 400\""));
+  EXPECT_THAT(html, HasSubstr("<circle cx=\"123.500\" cy=\"45.500\" r=\"20.000\""));
+  EXPECT_THAT(html, HasSubstr("<circle cx=\"400.500\" cy=\"250.500\" r=\"30.000\""));
+  EXPECT_EQ(Count(html, "<g class=\"feature\">"), 2);  // <lost> is not drawn
+  EXPECT_THAT(html, HasSubstr("Not found: &lt;lost&gt;."));
+  // One distance between found features, labelled with value and sigma.
+  EXPECT_EQ(Count(html, "<g class=\"distance\">"), 1);
+  EXPECT_THAT(html, HasSubstr("<line x1=\"123.500\" y1=\"45.500\" x2=\"400.500\" y2=\"250.500\""));
+  EXPECT_THAT(html, HasSubstr(">A_to_B 34.4000 &#177; 0.0030 mm</text>"));
+}
+
+TEST(ReportHtml, MeasurementsTableFlagsAndBreaksDown) {
+  const std::string html = ReportHtml(FullReport(), FullInputs());
+  EXPECT_THAT(html, HasSubstr("3 measurement(s): 2 made, 1 failed, 1 beyond 3 sigma"));
+  const std::regex beyond("<tr class=\"beyond\"><td>A_to_B</td>");
+  EXPECT_TRUE(std::regex_search(html, beyond));
+  EXPECT_THAT(html, HasSubstr("<tr><td>A_diameter</td>"));
+  EXPECT_THAT(html, HasSubstr("<tr class=\"failed\"><td>&lt;b&gt;broken&lt;/b&gt;</td>"));
+  EXPECT_THAT(html, HasSubstr("calibration 0.0011, registration 0.0022, edges 0.0015"));
+  EXPECT_THAT(html, HasSubstr("<td class=\"r\">3.33</td>"));  // deviation / sigma
+  EXPECT_THAT(html, HasSubstr("<td class=\"r\">-1.20</td>"));
+}
+
+TEST(ReportHtml, EverySectionWhenEveryStageRan) {
+  const std::string html = ReportHtml(FullReport(), FullInputs());
+  for (const char* id : {"measurements-table", "features-table", "rejected-table",
+                         "per-image-table", "pairs-table", "tiles-table", "held-table"}) {
+    EXPECT_THAT(html, HasSubstr(std::string("<table id=\"") + id + "\">")) << id;
+  }
+  EXPECT_THAT(html, HasSubstr("<th>run_date</th><td>2026-11-22T01:00:00Z</td>"));
+  EXPECT_THAT(html, HasSubstr("0.0018 px typical (median over the imager), 0.0267 px worst, "
+                              "at 406 mm"));
+  EXPECT_THAT(html, HasSubstr("<text>resid</text>"));
+  EXPECT_THAT(html, HasSubstr("<text>unc</text>"));
+  // adjusted - commanded in micrometres.
+  EXPECT_THAT(html, HasSubstr("<td class=\"r\">-14.83</td><td class=\"r\">1.23</td>"));
+  EXPECT_THAT(html, HasSubstr("<tr class=\"failed\"><td>t1.png</td><td>t&lt;3&gt;.png</td>"));
+  EXPECT_THAT(html, Not(HasSubstr("has not run")));
+}
+
+TEST(ReportHtml, OnlyCalibrationRan) {
+  Report report = FullReport();
+  report.mosaic.reset();
+  report.features.reset();
+  report.measurements.reset();
+  ReportHtmlInputs inputs = FullInputs();
+  inputs.mosaic_png.clear();
+  inputs.uncertainty_svg.clear();
+  const std::string html = ReportHtml(report, inputs);
+  EXPECT_THAT(html, HasSubstr("The measure stage has not run."));
+  EXPECT_EQ(Count(html, "The mosaic stage has not run."), 2);  // figure and registration
+  EXPECT_THAT(html, HasSubstr("No uncertainty map."));
+  EXPECT_THAT(html, HasSubstr("<table id=\"per-image-table\">"));
+  for (const char* gone : {"measurements-table", "features-table", "pairs-table", "<image"})
+    EXPECT_THAT(html, Not(HasSubstr(gone))) << gone;
+}
+
+TEST(ReportHtml, CameraModelOnlyAndEmptyReport) {
+  Report report;
+  report.project = "p";
+  CalibrationReport c;
+  c.lens_model = "LENSMODEL_OPENCV8";
+  c.extra = {
+      {"source", "from camera model /x.cameramodel"},
+      {"projection_uncertainty", ReportObject{{"included", false}, {"why_not", "no solve record"}}},
+      {"rms_px_known", false}};
+  report.calibration = c;
+  std::string html = ReportHtml(report, {});
+  EXPECT_THAT(html, HasSubstr("unknown (camera model file, no solve)"));
+  EXPECT_THAT(html, HasSubstr("not included: no solve record"));
+  EXPECT_THAT(html, Not(HasSubstr("per-image-table")));
+  report.calibration.reset();
+  html = ReportHtml(report, {});
+  EXPECT_THAT(html, HasSubstr("The calibrate stage has not run."));
+  EXPECT_THAT(html, HasSubstr("</html>"));
+}
+
+TEST(ReportHtml, MosaicSectionWithoutItsImageSaysWhy) {
+  ReportHtmlInputs inputs = FullInputs();
+  inputs.mosaic_png.clear();
+  inputs.mosaic_missing_why = "'mosaic.png' not found";
+  const std::string html = ReportHtml(FullReport(), inputs);
+  EXPECT_THAT(html, HasSubstr("No mosaic image: &#39;mosaic.png&#39; not found"));
+  EXPECT_THAT(html, HasSubstr("<table id=\"pairs-table\">"));  // the tables still come
+}
+
+TEST(ReportHtml, ReadsTheNamedFilesFromTheFirstDirHoldingThem) {
+  const testing::TempDir dir;
+  const fs::path staging = dir.path() / "staging", out = dir.path() / "out";
+  fs::create_directories(staging / "calibration");
+  fs::create_directories(out / "calibration");
+  testing::WriteTextFile(staging / "calibration/uncertainty.svg", "<svg>new</svg>");
+  testing::WriteTextFile(out / "calibration/uncertainty.svg", "<svg>old</svg>");
+  testing::WriteTextFile(out / "calibration/residuals.svg", "<svg>resid</svg>");
+  testing::WriteTextFile(dir.path() / "secret.svg", "<svg>secret</svg>");
+  // 2400 px wide: the preview is area-averaged down to 1200 x 100.
+  WriteGrayImage(out / "mosaic.png", ImageF::Constant(200, 2400, kMosaicGray), 16);
+  Report report = FullReport();
+  const ReportHtmlInputs inputs = ReadReportHtmlInputs(report, {staging, out}, Specs(), {});
+  EXPECT_EQ(inputs.uncertainty_svg, "<svg>new</svg>");
+  EXPECT_EQ(inputs.residuals_svg, "<svg>resid</svg>");
+  EXPECT_EQ(inputs.measurements.size(), 3u);
+  testing::WriteTextFile(dir.path() / "preview.png", inputs.mosaic_png);
+  const GrayImage preview = ReadGrayImage(dir.path() / "preview.png");
+  EXPECT_EQ(preview.width(), 1200);
+  EXPECT_EQ(preview.height(), 100);
+  EXPECT_NEAR(preview.pixels(50, 600), kMosaicGray, 0.5 / 255 + 1e-6);
+
+  // Names that leave out/ are not followed; a missing mosaic is explained.
+  report.calibration->extra = {{"residuals_plot", "../secret.svg"}};
+  report.mosaic->file = "missing.png";
+  const ReportHtmlInputs missing = ReadReportHtmlInputs(report, {out}, {}, {});
+  EXPECT_EQ(missing.residuals_svg, "");
+  EXPECT_EQ(missing.mosaic_png, "");
+  EXPECT_EQ(missing.mosaic_missing_why, "'missing.png' not found");
+}
+
+// `omm report` rewrites report.json (normalised) and report.html from out/,
+// with the distance lines from project.yaml; bad input exits 2.
+TEST(ReportCommand, RegeneratesTheReportsFromOut) {
+  const testing::TempDir dir;
+  const Project project = testing::TinyProject(dir.path() / "tiny");
+  testing::WriteTinyProject(project);
+  const std::string command =
+      testing::OmmProgram().string() + " report \"" + project.dir.string() + "\"";
+  const testing::CommandResult none = testing::RunCommand(command);
+  EXPECT_EQ(none.exit_code, 2);
+  EXPECT_THAT(none.output, HasSubstr("no report yet"));
+
+  const Report report = FullReport();  // hole_A, hole_B, A_to_B: the tiny project's names
+  fs::create_directories(project.OutDir() / "calibration");
+  WriteGrayImage(project.OutDir() / "mosaic.png", ImageF::Constant(400, 600, kMosaicGray), 16);
+  testing::WriteTextFile(project.OutDir() / "report.json", ReportToJson(report) + "\n\n");
+  const testing::CommandResult made = testing::RunCommand(command);
+  ASSERT_EQ(made.exit_code, 0) << made.output;
+  EXPECT_EQ(testing::ReadTextFile(project.OutDir() / "report.json"), ReportToJson(report));
+  const std::string html = testing::ReadTextFile(project.OutDir() / "report.html");
+  EXPECT_THAT(html, HasSubstr("<line x1=\"123.500\" y1=\"45.500\" x2=\"400.500\" y2=\"250.500\""));
+  EXPECT_THAT(html, HasSubstr("href=\"data:image/png;base64,"));
+  EXPECT_THAT(html, HasSubstr("No residual plot."));  // named in the report, not in out/
+
+  testing::WriteTextFile(project.OutDir() / "report.json", "{\"format\": \"other/1\"}");
+  EXPECT_EQ(testing::RunCommand(command).exit_code, 2);
+}
+
+// The page in headless Chromium: the DOM it builds holds the expected rows
+// (a parser's view of the escaping and the table structure), no console
+// message, and the screenshot shows the embedded mosaic.
+TEST(ReportHtmlChromium, RendersWithoutErrors) {
+  if (testing::RunCommand("command -v chromium").exit_code != 0) {
+    GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
+  }
+  const testing::TempDir dir;
+  const fs::path page = dir.path() / "report.html";
+  testing::WriteTextFile(page, ReportHtml(FullReport(), FullInputs()));
+  const std::string chromium =
+      "timeout 60 chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
+      "--disable-component-update --no-first-run --hide-scrollbars --user-data-dir=\"" +
+      (dir.path() / "profile").string() + "\" ";
+  const std::string url = "\"file://" + page.string() + "\"";
+  const fs::path dom_path = dir.path() / "dom.html", log_path = dir.path() / "log.txt";
+  const testing::CommandResult dump =
+      testing::RunCommand(chromium + "--enable-logging=stderr --v=0 --dump-dom " + url + " >\"" +
+                          dom_path.string() + "\" 2>\"" + log_path.string() + "\"");
+  ASSERT_EQ(dump.exit_code, 0) << testing::ReadTextFile(log_path);
+  const std::string dom = testing::ReadTextFile(dom_path);
+  // Page messages are logged as "...:INFO:CONSOLE:<line>] "message", source: ...".
+  EXPECT_THAT(testing::ReadTextFile(log_path), Not(HasSubstr(":CONSOLE")));
+
+  EXPECT_THAT(dom, HasSubstr("<title>omm report: die &lt;casting&gt; &amp; \"co\"</title>"));
+  EXPECT_THAT(dom, HasSubstr("<tr class=\"beyond\"><td>A_to_B</td>"));
+  EXPECT_THAT(dom, HasSubstr("<tr class=\"failed\"><td>&lt;b&gt;broken&lt;/b&gt;</td>"));
+  EXPECT_THAT(dom, Not(HasSubstr("<b>broken")));
+  // Rows per table as built: the parser closed nothing early.
+  const std::regex table("<table id=\"([a-z-]+)\">([\\s\\S]*?)</table>");
+  std::map<std::string, int> rows;
+  for (std::sregex_iterator it(dom.begin(), dom.end(), table), end; it != end; ++it)
+    rows[(*it)[1]] = Count((*it)[2], "<tr");
+  EXPECT_EQ(rows["measurements-table"], 1 + 3);
+  EXPECT_EQ(rows["features-table"], 1 + 3);
+  EXPECT_EQ(rows["pairs-table"], 1 + 2);
+  EXPECT_EQ(rows["per-image-table"], 1 + 2);
+  EXPECT_EQ(Count(dom, "<g class=\"feature\">"), 2);
+
+  // The preview is a flat gray of 77/255: laid out at least 900 px wide in
+  // a 1300 px window it covers >= 900 x 600 px; nothing else on the page has
+  // that gray over more than a few text pixels.
+  const fs::path shot = dir.path() / "shot.png";
+  const testing::CommandResult screenshot =
+      testing::RunCommand(chromium + "--window-size=1300,3000 --screenshot=\"" + shot.string() +
+                          "\" " + url + " 2>/dev/null");
+  ASSERT_EQ(screenshot.exit_code, 0) << screenshot.output;
+  const GrayImage image = ReadGrayImage(shot);
+  const float gray = std::round(kMosaicGray * 255.f) / 255.f;
+  const auto mosaic_px = ((image.pixels.array() - gray).abs() <= 1.5f / 255.f).count();
+  EXPECT_GT(mosaic_px, 900 * 600);
+}
+
+}  // namespace
+}  // namespace omm
