@@ -137,12 +137,10 @@ class Table {
     align_.resize(header_.size(), 'l');
   }
   void Row(std::vector<std::string> cells, const std::string& css_class = "") {
-    rows_.push_back({std::move(cells), css_class});
+    rows_.emplace_back(std::move(cells), css_class);
   }
-  bool empty() const { return rows_.empty(); }
-  std::string Html(const std::string& id = "") const {
-    std::string out =
-        id.empty() ? "<table>\n<thead><tr>" : "<table id=\"" + id + "\">\n<thead><tr>";
+  std::string Html(const std::string& id) const {
+    std::string out = "<table id=\"" + id + "\">\n<thead><tr>";
     for (size_t i = 0; i < header_.size(); ++i)
       out += (align_[i] == 'r' ? "<th class=\"r\">" : "<th>") + header_[i] + "</th>";
     out += "</tr></thead>\n<tbody>\n";

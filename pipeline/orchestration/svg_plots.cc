@@ -133,7 +133,8 @@ std::string UncertaintyMapSvg(const Eigen::Matrix2Xd& q_px, const Eigen::VectorX
   for (int fj = 0; fj < fine_ny; ++fj) {
     const int j = std::min(fj / kSub, grid_ny - 2);
     const double f = static_cast<double>(fj - j * kSub) / kSub;
-    fine_y[fj] = s * ((1 - f) * q_px(1, j * grid_nx) + f * q_px(1, (j + 1) * grid_nx));
+    const Eigen::Index row_start = static_cast<Eigen::Index>(j) * grid_nx;
+    fine_y[fj] = s * ((1 - f) * q_px(1, row_start) + f * q_px(1, row_start + grid_nx));
   }
   for (int fj = 0; fj < fine_ny; ++fj) {
     const int j = std::min(fj / kSub, grid_ny - 2);
