@@ -288,8 +288,10 @@ std::string MosaicFigure(const Report& report, const ReportHtmlInputs& inputs) {
     return Eigen::Vector2d((part_mm.x() - mosaic.origin_mm.x()) / gsd,
                            (mosaic.origin_mm.y() - part_mm.y()) / gsd);
   };
-  // Sizes in user units that come out at ~1200 px wide as screen pixels.
-  const double unit = w / 1200.0;
+  // User units per screen pixel: the figure is laid out at most 1200 px
+  // wide and 1000 px high (the style sheet's svg.mosaic), so labels keep
+  // their size in tall mosaics too.
+  const double unit = std::max(w / 1200.0, h / 1000.0);
   std::string svg = fmt::format(
       "<svg class=\"mosaic\" xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 {0:g} {1:g}\" "
       "font-family=\"sans-serif\" font-size=\"{2:.2f}\">\n"
