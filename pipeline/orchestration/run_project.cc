@@ -71,7 +71,9 @@ void DropSectionsFrom(Stage first, Report& report) {
   switch (first) {
     case Stage::kCalibrate: report.calibration.reset(); [[fallthrough]];
     case Stage::kMosaic: report.mosaic.reset(); [[fallthrough]];
-    case Stage::kMeasure: report.measurements.reset();
+    case Stage::kMeasure:
+      report.features.reset();
+      report.measurements.reset();
   }
 }
 
