@@ -1,0 +1,707 @@
+#include "pipeline/measure/circle_measure.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <numbers>
+#include <optional>
+#include <sstream>
+#include <vector>
+
+#include <Eigen/Dense>
+
+namespace omm {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return kNaN;
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
+
+bool Covered(const ImageF& image, Eigen::Index row, Eigen::Index col) {
+  return row >= 0 && col >= 0 && row < image.rows() && col < image.cols() &&
+         image(row, col) != 0.0f;
+}
+
+// Bilinear value at (x, y); NaN off the image or next to an uncovered pixel.
+double Bilinear(const ImageF& image, double x, double y) {
+  const double fx = std::floor(x), fy = std::floor(y);
+  const auto c = static_cast<Eigen::Index>(fx), r = static_cast<Eigen::Index>(fy);
+  if (!Covered(image, r, c) || !Covered(image, r, c + 1) || !Covered(image, r + 1, c) ||
+      !Covered(image, r + 1, c + 1)) {
+    return kNaN;
+  }
+  const double ax = x - fx, ay = y - fy;
+  return (1 - ay) * ((1 - ax) * image(r, c) + ax * image(r, c + 1)) +
+         ay * ((1 - ax) * image(r + 1, c) + ax * image(r + 1, c + 1));
+}
+
+struct Circle {
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  double radius = 0.0;
+};
+
+// Step 1 (header): gradient votes for the centre of a dark disc of radius
+// `radius` within `search` px (square) of `expected`.
+Eigen::Vector2d VoteCentre(const ImageF& image, const Eigen::Vector2d& expected, double radius,
+                           double search) {
+  const int half = static_cast<int>(std::ceil(search));
+  const int size = 2 * half + 1;
+  Eigen::MatrixXd votes = Eigen::MatrixXd::Zero(size, size);
+  const Eigen::Vector2d origin = expected.array().round() - half;  // votes(0, 0) is here
+  const double reach = radius + search + 2.0;
+  const auto col_lo = static_cast<Eigen::Index>(std::max(1.0, std::floor(expected.x() - reach)));
+  const auto col_hi = static_cast<Eigen::Index>(
+      std::min(static_cast<double>(image.cols() - 2), std::ceil(expected.x() + reach)));
+  const auto row_lo = static_cast<Eigen::Index>(std::max(1.0, std::floor(expected.y() - reach)));
+  const auto row_hi = static_cast<Eigen::Index>(
+      std::min(static_cast<double>(image.rows() - 2), std::ceil(expected.y() + reach)));
+  const double inner2 = std::pow(std::max(0.0, radius - search - 2.0), 2), outer2 = reach * reach;
+  for (Eigen::Index row = row_lo; row <= row_hi; ++row) {
+    for (Eigen::Index col = col_lo; col <= col_hi; ++col) {
+      const double dx0 = col - expected.x(), dy0 = row - expected.y();
+      const double rho2 = dx0 * dx0 + dy0 * dy0;
+      if (rho2 < inner2 || rho2 > outer2) continue;
+      const float l = image(row, col - 1), r = image(row, col + 1);
+      const float u = image(row - 1, col), d = image(row + 1, col);
+      if (l == 0.0f || r == 0.0f || u == 0.0f || d == 0.0f) continue;  // next to uncovered
+      const double gx = 0.5 * (r - l), gy = 0.5 * (d - u);
+      const double g = std::hypot(gx, gy);
+      if (g <= 0.0) continue;
+      const double vx = col - radius * gx / g - origin.x(), vy = row - radius * gy / g - origin.y();
+      const double fx = std::floor(vx), fy = std::floor(vy);
+      const int c = static_cast<int>(fx), rr = static_cast<int>(fy);
+      if (c < 0 || rr < 0 || c + 1 >= size || rr + 1 >= size) continue;
+      const double ax = vx - fx, ay = vy - fy;
+      votes(rr, c) += g * (1 - ax) * (1 - ay);
+      votes(rr, c + 1) += g * ax * (1 - ay);
+      votes(rr + 1, c) += g * (1 - ax) * ay;
+      votes(rr + 1, c + 1) += g * ax * ay;
+    }
+  }
+  // Smooth by a separable [1 2 3 2 1] kernel: a radius off by a px or two
+  // spreads the rim's votes over a small ring.
+  const double k[5] = {1, 2, 3, 2, 1};
+  Eigen::MatrixXd tmp = Eigen::MatrixXd::Zero(size, size),
+                  smooth = Eigen::MatrixXd::Zero(size, size);
+  for (int r = 0; r < size; ++r) {
+    for (int c = 0; c < size; ++c) {
+      for (int i = -2; i <= 2; ++i) {
+        if (c + i >= 0 && c + i < size) tmp(r, c) += k[i + 2] * votes(r, c + i);
+      }
+    }
+  }
+  for (int r = 0; r < size; ++r) {
+    for (int c = 0; c < size; ++c) {
+      for (int i = -2; i <= 2; ++i) {
+        if (r + i >= 0 && r + i < size) smooth(r, c) += k[i + 2] * tmp(r + i, c);
+      }
+    }
+  }
+  Eigen::Index best_r = half, best_c = half;
+  smooth.maxCoeff(&best_r, &best_c);
+  return origin + Eigen::Vector2d(static_cast<double>(best_c), static_cast<double>(best_r));
+}
+
+// Standard normal density and distribution.
+double NormalPdf(double z) { return std::exp(-0.5 * z * z) / std::sqrt(2.0 * kPi); }
+double NormalCdf(double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); }
+
+struct StepFit {
+  bool ok = false;
+  double x0 = 0.0;             // rim position, px of d
+  double x1 = 0.0;             // bottom-rim position (the wall's inner edge), px of d
+  double sigma = 0.0;          // blur, px
+  double contrast = 0.0;       // surface minus the level just inside the rim, image units
+  double wall_contrast = 0.0;  // wall minus hole level (c1), image units
+  double rms = 0.0;            // residual RMS, image units
+};
+
+// Which parameters a step fit has.
+enum class Inner {
+  kRamp,   // no wall term; a ramp gi inside the rim
+  kFree,   // wall term with x1 free
+  kFixed,  // wall term with x1 held (from the bottom-rim circle)
+};
+
+// The rim profile of the header fitted to (d, value) samples by
+// Levenberg-damped Gauss-Newton:
+//   f = a + c0 Phi(z0) + go Rout(u0) + [gi Rin(u0)] + [c1 (Phi(z1) - Phi(z0)) if x1 < x0],
+//   u_j = d - x_j, z_j = u_j / s, Rout(u) = u Phi(u/s) + s phi(u/s),
+//   Rin(u) = u Phi(-u/s) - s phi(u/s) (ramps blurred by the same Gaussian);
+// the last term is the bore wall, the band [x1, x0] between the bottom rim
+// and the top rim (absent where the wall is hidden, x1 >= x0).
+StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
+                double sigma, bool fit_sigma, Inner inner) {
+  const int n = static_cast<int>(d.size());
+  const bool wall = inner != Inner::kRamp;
+  const int nl = 4;  // a, c0, go, gi or c1
+  const int nn = 1 + (inner == Inner::kFree ? 1 : 0) + (fit_sigma ? 1 : 0);
+  StepFit fit;
+  if (n < nl + nn + 3) return fit;
+  struct Params {
+    double x0, x1, s;
+    Eigen::Vector4d lin;
+  };
+  auto evaluate = [&](const Params& p, Eigen::VectorXd* res, Eigen::MatrixXd* basis_out,
+                      Eigen::MatrixXd* jac) {
+    const bool band = wall && p.x1 < p.x0;
+    for (int i = 0; i < n; ++i) {
+      const double u0 = d[static_cast<size_t>(i)] - p.x0, z0 = u0 / p.s;
+      const double cdf0 = NormalCdf(z0), pdf0 = NormalPdf(z0);
+      const double z1 = (d[static_cast<size_t>(i)] - p.x1) / p.s;
+      const double cdf1 = band ? NormalCdf(z1) : 0.0, pdf1 = band ? NormalPdf(z1) : 0.0;
+      Eigen::Vector4d basis;
+      basis(0) = 1.0;
+      basis(1) = cdf0;
+      basis(2) = u0 * cdf0 + p.s * pdf0;
+      basis(3) = wall ? (band ? cdf1 - cdf0 : 0.0) : u0 * (1.0 - cdf0) - p.s * pdf0;
+      if (res != nullptr) (*res)(i) = basis.dot(p.lin) - v[static_cast<size_t>(i)];
+      if (basis_out != nullptr) basis_out->row(i) = basis.transpose();
+      if (jac == nullptr) continue;
+      const double c0 = p.lin(1), go = p.lin(2), l3 = p.lin(3);
+      int col = 0;
+      if (wall) {
+        (*jac)(i, col++) = -(c0 * pdf0 / p.s + go * cdf0) + (band ? l3 * pdf0 / p.s : 0.0);
+        if (inner == Inner::kFree) (*jac)(i, col++) = band ? -l3 * pdf1 / p.s : 0.0;
+        if (fit_sigma) {
+          (*jac)(i, col++) =
+              -c0 * z0 * pdf0 / p.s + go * pdf0 + (band ? l3 * (z0 * pdf0 - z1 * pdf1) / p.s : 0.0);
+        }
+      } else {
+        (*jac)(i, col++) = -(c0 * pdf0 / p.s + go * cdf0 + l3 * (1.0 - cdf0));
+        if (fit_sigma) (*jac)(i, col++) = -c0 * z0 * pdf0 / p.s + (go - l3) * pdf0;
+      }
+      jac->row(i).segment(col, nl) = basis.transpose();
+    }
+  };
+  Params p{x0, x1, sigma, Eigen::Vector4d::Zero()};
+  const Eigen::VectorXd values = Eigen::Map<const Eigen::VectorXd>(v.data(), n);
+  {
+    Eigen::MatrixXd basis(n, nl);
+    evaluate(p, nullptr, &basis, nullptr);
+    p.lin = basis.colPivHouseholderQr().solve(values);
+  }
+  Eigen::VectorXd res(n);
+  Eigen::MatrixXd jac(n, nn + nl);
+  evaluate(p, &res, nullptr, nullptr);
+  double current = res.squaredNorm();
+  double lambda = 1e-3;
+  for (int iteration = 0; iteration < 40; ++iteration) {
+    evaluate(p, &res, nullptr, &jac);
+    const Eigen::MatrixXd jtj = jac.transpose() * jac;
+    const Eigen::VectorXd jtr = jac.transpose() * res;
+    bool improved = false, converged = false;
+    for (int attempt = 0; attempt < 10 && !improved; ++attempt) {
+      Eigen::MatrixXd damped = jtj;
+      damped.diagonal() += lambda * jtj.diagonal() + Eigen::VectorXd::Constant(nn + nl, 1e-12);
+      const Eigen::VectorXd step = damped.ldlt().solve(-jtr);
+      Params next = p;
+      int col = 0;
+      next.x0 += step(col++);
+      if (inner == Inner::kFree) next.x1 += step(col++);
+      if (fit_sigma) next.s += step(col++);
+      next.lin += step.tail(nl);
+      if (!(next.s > 0.2)) {
+        lambda *= 10;
+        continue;
+      }
+      evaluate(next, &res, nullptr, nullptr);
+      const double cost = res.squaredNorm();
+      if (cost < current) {
+        converged = step.head(nn).cwiseAbs().maxCoeff() < 1e-6;
+        p = next;
+        current = cost;
+        lambda = std::max(1e-7, lambda * 0.3);
+        improved = true;
+      } else {
+        lambda *= 10;
+      }
+    }
+    if (!improved || converged) break;
+  }
+  fit.ok = std::isfinite(p.x0) && std::isfinite(current);
+  fit.x0 = p.x0;
+  fit.x1 = p.x1;
+  fit.sigma = p.s;
+  const bool band = wall && p.x1 < p.x0;
+  fit.wall_contrast = band ? p.lin(3) : 0.0;
+  fit.contrast = p.lin(1) - fit.wall_contrast;
+  fit.rms = std::sqrt(current / n);
+  return fit;
+}
+
+// One wedge's edges (step 2).
+struct WedgeEdge {
+  double angle = 0.0;      // of the wedge's centre ray, rad
+  bool uncovered = false;  // touches uncovered or off-image pixels
+  bool ok = false;         // a clean rim step
+  bool inner_ok = false;   // ... and a resolved bottom-rim step inside it
+  StepFit step;
+};
+
+struct EdgePass {
+  std::vector<WedgeEdge> wedges;
+  double sigma = kNaN;  // median fitted blur
+};
+
+// Where the ray from `centre` at direction n leaves `bottom`, as d (distance
+// from centre minus radius); NaN if it misses.
+double BottomRimOffset(const Circle& circle, const Circle& bottom, const Eigen::Vector2d& n) {
+  const Eigen::Vector2d q = bottom.centre - circle.centre;
+  const double b = n.dot(q), disc = b * b - q.squaredNorm() + bottom.radius * bottom.radius;
+  if (disc < 0.0) return kNaN;
+  return b + std::sqrt(disc) - circle.radius;
+}
+
+// One pass of step 2 about `circle`. `inner`: kRamp fits each rim alone
+// with the blur free (the first pass); kFree looks for the bottom rim on
+// each ray and fits both steps with the blur held; kFixed takes the bottom
+// rim from `bottom` and fits the blur.
+EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, double sigma,
+                   Inner inner, const std::optional<Circle>& bottom,
+                   const CircleMeasureOptions& options) {
+  const double hw = options.profile_half_width_px;
+  const int num =
+      std::max(options.min_wedges,
+               static_cast<int>(std::lround(2 * kPi * circle.radius / options.wedge_arc_px)));
+  EdgePass pass;
+  pass.wedges.resize(static_cast<size_t>(num));
+  // The bore wall can be wide (a thick part far from the camera's axis):
+  // the bottom rim is looked for down to `reach` inside the rim.
+  const double reach =
+      std::clamp(0.5 * circle.radius, band + 2.0 * hw, std::max(band + 2.0 * hw, 30.0));
+  const double d_lo = -band - (inner == Inner::kRamp ? hw + 1.0 : reach), d_hi = band + hw + 1.0;
+  // Each wedge's pixels (radial distance d, value).
+  std::vector<std::vector<double>> wd(static_cast<size_t>(num)), wv(static_cast<size_t>(num));
+  const double rmax = circle.radius + d_hi, rmin = std::max(0.0, circle.radius + d_lo);
+  const auto col_lo = static_cast<Eigen::Index>(std::floor(circle.centre.x() - rmax));
+  const auto col_hi = static_cast<Eigen::Index>(std::ceil(circle.centre.x() + rmax));
+  const auto row_lo = static_cast<Eigen::Index>(std::floor(circle.centre.y() - rmax));
+  const auto row_hi = static_cast<Eigen::Index>(std::ceil(circle.centre.y() + rmax));
+  const double rcover = circle.radius - band - hw - 1.0;  // uncovered pixels matter outside this
+  for (Eigen::Index row = row_lo; row <= row_hi; ++row) {
+    for (Eigen::Index col = col_lo; col <= col_hi; ++col) {
+      const double dx = col - circle.centre.x(), dy = row - circle.centre.y();
+      const double rho = std::hypot(dx, dy);
+      if (rho < rmin || rho > rmax) continue;
+      double t = std::atan2(dy, dx);
+      if (t < 0) t += 2 * kPi;
+      const auto k = static_cast<size_t>(std::min(num - 1, static_cast<int>(t / (2 * kPi) * num)));
+      if (!Covered(image, row, col)) {
+        if (rho >= rcover) pass.wedges[k].uncovered = true;
+        continue;
+      }
+      wd[k].push_back(rho - circle.radius);
+      wv[k].push_back(image(row, col));
+    }
+  }
+  constexpr double kStep = 0.25;
+  const int samples = static_cast<int>(std::lround((d_hi - d_lo) / kStep)) + 1;
+  std::vector<double> profile(static_cast<size_t>(samples)),
+      deriv(static_cast<size_t>(samples), 0.0);
+  const int h = static_cast<int>(std::lround(0.5 / kStep));
+  for (int k = 0; k < num; ++k) {
+    WedgeEdge& wedge = pass.wedges[static_cast<size_t>(k)];
+    wedge.angle = 2 * kPi * (k + 0.5) / num;
+    if (wedge.uncovered) continue;
+    const Eigen::Vector2d n(std::cos(wedge.angle), std::sin(wedge.angle));
+    int first = samples;  // profile samples [first, samples) are valid
+    for (int i = samples - 1; i >= 0; --i) {
+      const Eigen::Vector2d p = circle.centre + (circle.radius + d_lo + i * kStep) * n;
+      profile[static_cast<size_t>(i)] = Bilinear(image, p.x(), p.y());
+      if (std::isnan(profile[static_cast<size_t>(i)])) break;
+      first = i;
+    }
+    const int i_lo = static_cast<int>(std::lround((-band - d_lo) / kStep));
+    const int i_hi = static_cast<int>(std::lround((band - d_lo) / kStep));
+    const int i_fit = static_cast<int>(std::lround((-band - hw - d_lo) / kStep));
+    if (first > i_fit - h) {
+      wedge.uncovered = true;
+      continue;
+    }
+    for (int i = first + h; i + h < samples; ++i) {
+      deriv[static_cast<size_t>(i)] =
+          profile[static_cast<size_t>(i + h)] - profile[static_cast<size_t>(i - h)];
+    }
+    // The outermost strong dark-to-bright step within the band is the rim.
+    double largest = 0.0;
+    for (int i = i_lo; i <= i_hi; ++i) largest = std::max(largest, deriv[static_cast<size_t>(i)]);
+    if (!(largest > 0.0)) continue;
+    int peak = -1;
+    for (int i = i_hi; i >= i_lo; --i) {
+      const double g = deriv[static_cast<size_t>(i)];
+      if (g >= 0.5 * largest && g >= deriv[static_cast<size_t>(i - 1)] &&
+          g >= deriv[static_cast<size_t>(i + 1)]) {
+        peak = i;
+        break;
+      }
+    }
+    if (peak < 0) continue;
+    const double x_rim = d_lo + peak * kStep;
+    double x_lo = x_rim - hw, x1 = x_rim - hw;
+    Inner mode = inner;
+    if (inner == Inner::kFree) {
+      // The bottom rim: the strongest rise inside the rim, past a dip.
+      const double g_peak = deriv[static_cast<size_t>(peak)];
+      const int stop =
+          std::max(first + h, static_cast<int>(std::lround((x_rim - reach + band - d_lo) / kStep)));
+      double dip = g_peak, best = 0.0;
+      int inner_peak = -1;
+      for (int i = peak - 1; i >= stop; --i) {
+        const double g = deriv[static_cast<size_t>(i)];
+        dip = std::min(dip, g);
+        if (g > best && g > 2.0 * std::max(dip, 0.0) && i + 1 < peak &&
+            g >= deriv[static_cast<size_t>(i - 1)] && g >= deriv[static_cast<size_t>(i + 1)]) {
+          best = g;
+          inner_peak = i;
+        }
+      }
+      if (inner_peak >= 0 && best >= 0.5 * options.min_contrast * kStep * 2 * h / 2.5) {
+        x1 = d_lo + inner_peak * kStep;
+        x_lo = std::min(x_lo, x1 - hw);
+      } else {
+        mode = Inner::kRamp;  // none: fit the rim alone
+      }
+    } else if (inner == Inner::kFixed) {
+      x1 = bottom ? BottomRimOffset(circle, *bottom, n) : kNaN;
+      if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;  // wall hidden or wide
+    }
+    std::vector<double> d, v;
+    const auto& all_d = wd[static_cast<size_t>(k)];
+    const auto& all_v = wv[static_cast<size_t>(k)];
+    for (size_t i = 0; i < all_d.size(); ++i) {
+      if (all_d[i] >= x_lo && all_d[i] <= x_rim + hw) {
+        d.push_back(all_d[i]);
+        v.push_back(all_v[i]);
+      }
+    }
+    const bool fit_sigma = inner != Inner::kFree;
+    wedge.step = FitStep(d, v, x_rim, x1, sigma, fit_sigma, mode);
+    wedge.ok = wedge.step.ok && std::abs(wedge.step.x0 - x_rim) <= 1.0 &&
+               wedge.step.contrast >= options.min_contrast && wedge.step.sigma < hw;
+    wedge.inner_ok = wedge.ok && mode == Inner::kFree &&
+                     wedge.step.x1 < wedge.step.x0 - 2.0 * wedge.step.sigma &&
+                     wedge.step.x1 > x_lo + wedge.step.sigma &&
+                     wedge.step.wall_contrast >= 0.5 * options.min_contrast;
+  }
+  std::vector<double> rms, sigmas;
+  for (const WedgeEdge& w : pass.wedges) {
+    if (!w.ok) continue;
+    rms.push_back(w.step.rms);
+    sigmas.push_back(w.step.sigma);
+  }
+  const double rms_limit = options.max_profile_rms_ratio * Median(rms);
+  for (WedgeEdge& w : pass.wedges) {
+    if (w.ok && w.step.rms > rms_limit) w.ok = w.inner_ok = false;
+  }
+  pass.sigma = Median(sigmas);
+  return pass;
+}
+
+struct CircleFit {
+  Circle circle;
+  std::vector<int> index;        // wedge of each point
+  Eigen::Matrix2Xd points;       // edge points
+  Eigen::VectorXd residual;      // radial, px
+  Eigen::VectorXd weight;        // final IRLS weight
+  double scale = 0.0;            // robust sigma of the residuals
+  Eigen::Matrix3Xd sensitivity;  // d (cx, cy, r) / d (radial move of point i)
+};
+
+// Step 3: IRLS circle fit, Huber then Tukey, starting from `start`.
+CircleFit FitCircleRobust(const Eigen::Matrix2Xd& points, const Circle& start, double tukey) {
+  const Eigen::Index n = points.cols();
+  CircleFit fit;
+  fit.circle = start;
+  fit.points = points;
+  fit.weight = Eigen::VectorXd::Ones(n);
+  fit.residual.resize(n);
+  Eigen::MatrixXd jac(n, 3);
+  auto linearise = [&]() {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const Eigen::Vector2d u = points.col(i) - fit.circle.centre;
+      const double norm = u.norm();
+      fit.residual(i) = norm - fit.circle.radius;
+      jac.row(i) << -u.x() / norm, -u.y() / norm, -1.0;
+    }
+  };
+  auto robust_scale = [&]() {
+    std::vector<double> abs_res(static_cast<size_t>(n));
+    for (Eigen::Index i = 0; i < n; ++i)
+      abs_res[static_cast<size_t>(i)] = std::abs(fit.residual(i));
+    return std::max(1.4826 * Median(abs_res), 1e-6);
+  };
+  auto solve = [&]() {
+    const Eigen::MatrixXd jw = fit.weight.asDiagonal() * jac;
+    const Eigen::Vector3d step =
+        (jac.transpose() * jw).ldlt().solve(-jw.transpose() * fit.residual);
+    fit.circle.centre += step.head<2>();
+    fit.circle.radius += step(2);
+    return step.norm();
+  };
+  linearise();
+  // Huber (k = 1.345 sigma) with the scale re-estimated, then Tukey with it held.
+  for (int iteration = 0; iteration < 10; ++iteration) {
+    fit.scale = robust_scale();
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double a = std::abs(fit.residual(i)) / (1.345 * fit.scale);
+      fit.weight(i) = a <= 1.0 ? 1.0 : 1.0 / a;
+    }
+    const double moved = solve();
+    linearise();
+    if (moved < 1e-7) break;
+  }
+  fit.scale = robust_scale();
+  for (int iteration = 0; iteration < 30; ++iteration) {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double a = fit.residual(i) / (tukey * fit.scale);
+      fit.weight(i) = std::abs(a) < 1.0 ? std::pow(1.0 - a * a, 2) : 0.0;
+    }
+    const double moved = solve();
+    linearise();
+    if (moved < 1e-9) break;
+  }
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double a = fit.residual(i) / (tukey * fit.scale);
+    fit.weight(i) = std::abs(a) < 1.0 ? std::pow(1.0 - a * a, 2) : 0.0;
+  }
+  // delta = -(J'WJ)^-1 J'W delta_residual; a point moving out by e raises its residual by e.
+  const Eigen::MatrixXd jw = fit.weight.asDiagonal() * jac;
+  fit.sensitivity = -(jac.transpose() * jw).ldlt().solve(jw.transpose());
+  return fit;
+}
+
+// The edge errors' spectral density at the circle's frequencies (0 and 1
+// per turn), per wedge: f = sum over all lags l of gamma(l), gamma the
+// autocovariance of the errors along the arc, lag in wedges. Then the fit's
+// covariance is f S S' (S the sensitivity): S's rows lie in the span of
+// 1, cos, sin, where a stationary sequence's covariance acts as f when the
+// spectrum is flat over the lowest frequencies.
+// Estimate: the pooled autocovariance of the inlier residuals, gamma_res(l),
+// summed over |l| < L, L the first lag where it is <= 0 (the correlation
+// has died out). The fit removed three components from the n residuals, so
+// E gamma_res(l) = gamma(l) - 3 f / n for l << n: the sum is divided by
+// 1 - 3 (2L - 1) / n. Floors: the white estimate (f = gamma(0)) and the
+// correlation the image's resampling implies (`min_samples` wedges per
+// independent error).
+struct EdgeErrorSpectrum {
+  double density = 0.0;                  // f, px^2
+  double samples_per_independent = 1.0;  // f / gamma(0)
+};
+
+EdgeErrorSpectrum EstimateEdgeErrorSpectrum(const CircleFit& fit, int num_wedges,
+                                            double min_samples) {
+  std::vector<double> by_wedge(static_cast<size_t>(num_wedges), kNaN);
+  int n = 0;
+  for (Eigen::Index i = 0; i < fit.weight.size(); ++i) {
+    if (fit.weight(i) <= 0.0) continue;
+    by_wedge[static_cast<size_t>(fit.index[static_cast<size_t>(i)])] = fit.residual(i);
+    ++n;
+  }
+  auto autocovariance = [&](int lag) {
+    double sum = 0.0;
+    int count = 0;
+    for (int k = 0; k < num_wedges; ++k) {
+      const double a = by_wedge[static_cast<size_t>(k)];
+      const double b = by_wedge[static_cast<size_t>((k + lag) % num_wedges)];
+      if (std::isnan(a) || std::isnan(b)) continue;
+      sum += a * b;
+      ++count;
+    }
+    return count > 0 ? sum / count : 0.0;
+  };
+  const double gamma0 = autocovariance(0);
+  EdgeErrorSpectrum spectrum;
+  spectrum.density = gamma0 * n / std::max(1, n - 3);
+  if (!(gamma0 > 0.0)) return spectrum;
+  // Lags while the bias correction stays moderate: 3 (2L - 1) / n <= 1/2.
+  const int max_lag = std::max(1, static_cast<int>((n / 6.0 + 1.0) / 2.0));
+  double sum = gamma0;
+  int lag = 1;
+  for (; lag <= max_lag; ++lag) {
+    const double g = autocovariance(lag);
+    if (g <= 0.0) break;
+    sum += 2.0 * g;
+  }
+  const double corrected = sum / (1.0 - 3.0 * (2.0 * lag - 1.0) / n);
+  spectrum.density = std::max({spectrum.density, corrected, gamma0 * min_samples});
+  spectrum.samples_per_independent = spectrum.density / gamma0;
+  return spectrum;
+}
+
+}  // namespace
+
+std::string CircleMeasureOptions::Check() const {
+  std::ostringstream why;
+  if (!(search_fraction >= 0.0 && search_fraction <= 1.0))
+    why << "search_fraction must be in [0, 1]; ";
+  if (!(search_margin_px >= 0.0)) why << "search_margin_px must be >= 0; ";
+  if (!(rim_band_px >= 1.0)) why << "rim_band_px must be >= 1; ";
+  if (!(profile_half_width_px >= 1.5)) why << "profile_half_width_px must be >= 1.5; ";
+  if (!(wedge_arc_px > 0.0)) why << "wedge_arc_px must be > 0; ";
+  if (min_wedges < 16) why << "min_wedges must be >= 16; ";
+  if (!(min_contrast > 0.0)) why << "min_contrast must be > 0; ";
+  if (!(max_profile_rms_ratio > 1.0)) why << "max_profile_rms_ratio must be > 1; ";
+  if (!(tukey_sigmas > 1.0)) why << "tukey_sigmas must be > 1; ";
+  if (!(max_uncovered_fraction >= 0.0 && max_uncovered_fraction < 1.0)) {
+    why << "max_uncovered_fraction must be in [0, 1); ";
+  }
+  if (!(min_found_fraction > 0.0 && min_found_fraction <= min_inlier_fraction &&
+        min_inlier_fraction <= 1.0)) {
+    why << "need 0 < min_found_fraction <= min_inlier_fraction <= 1; ";
+  }
+  if (!(max_radius_deviation > 0.0)) why << "max_radius_deviation must be > 0; ";
+  if (!(max_rms_px > 0.0)) why << "max_rms_px must be > 0; ";
+  if (!(source_px > 0.0)) why << "source_px must be > 0; ";
+  if (max_passes < 1) why << "max_passes must be >= 1; ";
+  if (!(converged_px > 0.0)) why << "converged_px must be > 0; ";
+  std::string text = why.str();
+  if (!text.empty()) text.resize(text.size() - 2);
+  return text;
+}
+
+std::string CircleMeasurement::Brief() const {
+  char line[256];
+  if (!ok) return error;
+  std::snprintf(line, sizeof(line),
+                "centre (%.3f, %.3f) px, r %.3f px, sigma (%.4f, %.4f, %.4f) px; %d/%d edges, %d "
+                "inliers, rms %.3f px, blur %.2f px, correlation %.1f px",
+                centre_px.x(), centre_px.y(), radius_px, std::sqrt(covariance_px2(0, 0)),
+                std::sqrt(covariance_px2(1, 1)), std::sqrt(covariance_px2(2, 2)), num_edge_points,
+                num_wedges, num_inliers, rms_px, edge_sigma_px, correlation_px);
+  return line;
+}
+
+CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
+                                double nominal_radius_px, const CircleMeasureOptions& options) {
+  CircleMeasurement result;
+  const double search =
+      options.search_fraction * 2.0 * nominal_radius_px + options.search_margin_px;
+  result.coarse_centre_px = VoteCentre(image, expected_centre_px, nominal_radius_px, search);
+  Circle circle{result.coarse_centre_px, nominal_radius_px};
+  double band = options.rim_band_px;
+  double sigma = 1.0;
+  std::optional<Circle> bottom;
+  CircleFit fit;
+  EdgePass pass;
+  for (int p = 0; p < options.max_passes; ++p) {
+    result.passes = p + 1;
+    // Passes: rims alone (the blur), then with the bottom rim looked for on
+    // each ray (its circle), then with the bottom rim from that circle.
+    const Inner inner = p == 0   ? Inner::kRamp
+                        : p == 1 ? Inner::kFree
+                        : bottom ? Inner::kFixed
+                                 : Inner::kRamp;
+    pass = FindEdges(image, circle, band, sigma, inner, bottom, options);
+    if (inner != Inner::kFree && std::isfinite(pass.sigma)) sigma = pass.sigma;
+    const int num = static_cast<int>(pass.wedges.size());
+    result.num_wedges = num;
+    result.num_uncovered = 0;
+    std::vector<int> index, inner_index;
+    for (int k = 0; k < num; ++k) {
+      const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
+      if (w.uncovered) ++result.num_uncovered;
+      if (w.ok) index.push_back(k);
+      if (w.inner_ok) inner_index.push_back(k);
+    }
+    result.num_edge_points = static_cast<int>(index.size());
+    if (result.num_uncovered > options.max_uncovered_fraction * num) {
+      char text[128];
+      std::snprintf(text, sizeof(text), "cut by the mosaic border (%.0f%% of the rim not covered)",
+                    100.0 * result.num_uncovered / num);
+      result.error = text;
+      return result;
+    }
+    if (result.num_edge_points < options.min_found_fraction * num) {
+      result.error = "not found near the expected position (clean edges on " +
+                     std::to_string(result.num_edge_points) + " of " + std::to_string(num) +
+                     " wedges)";
+      return result;
+    }
+    auto points_at = [&](const std::vector<int>& which, bool inner_rim) {
+      Eigen::Matrix2Xd points(2, static_cast<Eigen::Index>(which.size()));
+      for (size_t i = 0; i < which.size(); ++i) {
+        const WedgeEdge& w = pass.wedges[static_cast<size_t>(which[i])];
+        const double offset = inner_rim ? w.step.x1 : w.step.x0;
+        points.col(static_cast<Eigen::Index>(i)) =
+            circle.centre +
+            (circle.radius + offset) * Eigen::Vector2d(std::cos(w.angle), std::sin(w.angle));
+      }
+      return points;
+    };
+    if (inner == Inner::kFree && static_cast<int>(inner_index.size()) >= std::max(12, num / 10)) {
+      const Eigen::Matrix2Xd inner_points = points_at(inner_index, true);
+      std::vector<double> offsets;
+      for (int k : inner_index) offsets.push_back(pass.wedges[static_cast<size_t>(k)].step.x1);
+      const CircleFit bottom_fit =
+          FitCircleRobust(inner_points, Circle{circle.centre, circle.radius + Median(offsets)},
+                          options.tukey_sigmas);
+      if (std::isfinite(bottom_fit.circle.radius) && bottom_fit.circle.radius > 0.0)
+        bottom = bottom_fit.circle;
+    }
+    fit = FitCircleRobust(points_at(index, false), circle, options.tukey_sigmas);
+    fit.index = index;
+    const double moved = std::max((fit.circle.centre - circle.centre).norm(),
+                                  std::abs(fit.circle.radius - circle.radius));
+    circle = fit.circle;
+    band = std::clamp(4.0 * fit.scale, 1.0, options.rim_band_px);
+    if (p >= 2 && moved < options.converged_px) break;
+  }
+  // Inliers and their statistics.
+  result.num_inliers = 0;
+  double sum2 = 0.0;
+  std::vector<double> contrasts;
+  for (Eigen::Index i = 0; i < fit.weight.size(); ++i) {
+    if (fit.weight(i) <= 0.0) continue;
+    ++result.num_inliers;
+    sum2 += fit.residual(i) * fit.residual(i);
+    contrasts.push_back(
+        pass.wedges[static_cast<size_t>(fit.index[static_cast<size_t>(i)])].step.contrast);
+  }
+  result.rms_px = std::sqrt(sum2 / std::max(1, result.num_inliers));
+  result.contrast = Median(contrasts);
+  result.edge_sigma_px = sigma;
+  result.centre_px = circle.centre;
+  result.radius_px = circle.radius + sigma * sigma / (2.0 * circle.radius);
+  const double num = static_cast<double>(result.num_wedges);
+  if (result.num_inliers < options.min_found_fraction * num) {
+    result.error = "not found near the expected position (" + std::to_string(result.num_inliers) +
+                   " of " + std::to_string(result.num_wedges) + " wedges fit one circle)";
+    return result;
+  }
+  if (std::abs(result.radius_px / nominal_radius_px - 1.0) > options.max_radius_deviation) {
+    char text[160];
+    std::snprintf(text, sizeof(text),
+                  "not found near the expected position (the circle found has radius %.1f px, "
+                  "nominal %.1f px)",
+                  result.radius_px, nominal_radius_px);
+    result.error = text;
+    return result;
+  }
+  if (result.num_inliers < options.min_inlier_fraction * num ||
+      result.rms_px > options.max_rms_px) {
+    char text[160];
+    std::snprintf(text, sizeof(text), "poor fit: %d of %d wedges fit the circle, rms %.3f px",
+                  result.num_inliers, result.num_wedges, result.rms_px);
+    result.error = text;
+    return result;
+  }
+
+  // Covariance (header; EdgeErrorSpectrum).
+  const EdgeErrorSpectrum spectrum = EstimateEdgeErrorSpectrum(
+      fit, result.num_wedges, options.source_px / (2 * kPi * circle.radius / result.num_wedges));
+  result.covariance_px2 = spectrum.density * fit.sensitivity * fit.sensitivity.transpose();
+  result.correlation_px =
+      spectrum.samples_per_independent * 2 * kPi * circle.radius / result.num_wedges;
+  result.ok = true;
+  return result;
+}
+
+}  // namespace omm

@@ -1,0 +1,88 @@
+#include "pipeline/measure/synthetic_hole.h"
+
+#include <cmath>
+#include <random>
+
+#include "pipeline/simulate/texture.h"
+
+namespace omm::testing {
+
+ImageF RenderSyntheticHole(const SyntheticHole& hole) {
+  std::optional<SurfaceTexture> texture;
+  if (hole.texture_seed) texture.emplace(TextureStyle::kRich, *hole.texture_seed);
+  const Eigen::Vector2d bottom_centre = hole.centre_px + hole.bottom_shift_px;
+  auto scene = [&](double x, double y) -> float {
+    const Eigen::Vector2d p(x, y);
+    if ((p - hole.centre_px).squaredNorm() <= hole.radius_px * hole.radius_px) {
+      return (p - bottom_centre).squaredNorm() <= hole.bottom_radius_px * hole.bottom_radius_px
+                 ? hole.table
+                 : hole.wall;
+    }
+    for (const SyntheticHole::Blob& blob : hole.blobs) {
+      if ((p - blob.centre_px).squaredNorm() <= blob.radius_px * blob.radius_px) return blob.level;
+    }
+    if (!texture) return hole.surface;
+    return texture->Reflectance(hole.texture_offset_mm.x() + x * hole.gsd_mm,
+                                hole.texture_offset_mm.y() + y * hole.gsd_mm);
+  };
+  // Pixels within a px of a boundary are integrated finely.
+  auto near = [](const Eigen::Vector2d& p, const Eigen::Vector2d& c, double r) {
+    return std::abs((p - c).norm() - r) < 1.0;
+  };
+  ImageF area(hole.height_px, hole.width_px);
+  for (int row = 0; row < hole.height_px; ++row) {
+    for (int col = 0; col < hole.width_px; ++col) {
+      const Eigen::Vector2d p(col, row);
+      bool edge =
+          near(p, hole.centre_px, hole.radius_px) || near(p, bottom_centre, hole.bottom_radius_px);
+      for (const SyntheticHole::Blob& blob : hole.blobs)
+        edge = edge || near(p, blob.centre_px, blob.radius_px);
+      const int n = edge ? hole.supersampling : 3;
+      double sum = 0.0;
+      for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < n; ++j) {
+          sum += scene(col - 0.5 + (j + 0.5) / n, row - 0.5 + (i + 0.5) / n);
+        }
+      }
+      area(row, col) = static_cast<float>(sum / (n * n));
+    }
+  }
+  // Separable Gaussian PSF, borders clamped.
+  const int half = static_cast<int>(std::ceil(4.0 * hole.psf_sigma_px));
+  std::vector<double> kernel(static_cast<size_t>(2 * half + 1));
+  double total = 0.0;
+  for (int i = -half; i <= half; ++i) {
+    kernel[static_cast<size_t>(i + half)] =
+        std::exp(-0.5 * i * i / (hole.psf_sigma_px * hole.psf_sigma_px));
+    total += kernel[static_cast<size_t>(i + half)];
+  }
+  for (double& k : kernel) k /= total;
+  auto clamp = [](int i, int size) { return std::min(std::max(i, 0), size - 1); };
+  ImageF rows_blurred(hole.height_px, hole.width_px), image(hole.height_px, hole.width_px);
+  for (int row = 0; row < hole.height_px; ++row) {
+    for (int col = 0; col < hole.width_px; ++col) {
+      double sum = 0.0;
+      for (int i = -half; i <= half; ++i)
+        sum += kernel[static_cast<size_t>(i + half)] * area(row, clamp(col + i, hole.width_px));
+      rows_blurred(row, col) = static_cast<float>(sum);
+    }
+  }
+  std::mt19937_64 rng(hole.noise_seed);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  for (int row = 0; row < hole.height_px; ++row) {
+    for (int col = 0; col < hole.width_px; ++col) {
+      double sum = 0.0;
+      for (int i = -half; i <= half; ++i)
+        sum += kernel[static_cast<size_t>(i + half)] *
+               rows_blurred(clamp(row + i, hole.height_px), col);
+      const Eigen::Vector2d p(col, row);
+      if (hole.seam_normal.dot(p) > hole.seam_offset_px) sum *= hole.seam_gain;
+      sum += hole.noise_sigma * noise(rng);
+      if (hole.uncovered_normal.dot(p) > hole.uncovered_offset_px) sum = 0.0;
+      image(row, col) = static_cast<float>(sum);
+    }
+  }
+  return image;
+}
+
+}  // namespace omm::testing
