@@ -19,7 +19,7 @@ namespace omm {
 
 std::string RegisterTilesOptions::Check() const {
   for (const std::string& e :
-       {harris.Check(), translation.Check(), patch.Check(), tags.Check(), bundle.Check()}) {
+       {harris.Check(), motion.Check(), patch.Check(), tags.Check(), bundle.Check()}) {
     if (!e.empty()) return e;
   }
   if (!(matching_blur_sigma_px >= 0)) return "matching_blur_sigma_px must be >= 0";
@@ -178,38 +178,6 @@ struct Match {
 long long CornerKey(int tile, int corner) { return static_cast<long long>(tile) * 1000000 + corner; }
 long long TagKey(int id, int k) { return -(static_cast<long long>(id) * 4 + k + 1); }
 
-// The image moves by A dT per table displacement dT; A from the neighbour
-// pairs' coarse translations (LMedS-like consensus of 2-pair solutions).
-bool FitImageMotion(const std::vector<Eigen::Vector2d>& dt_mm,
-                    const std::vector<Eigen::Vector2d>& shift_px, double tolerance_fraction,
-                    Eigen::Matrix2d* a) {
-  const int n = static_cast<int>(dt_mm.size());
-  std::vector<int> best_inliers;
-  for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j < n; ++j) {
-      Eigen::Matrix2d t, s;
-      t << dt_mm[i], dt_mm[j];
-      s << shift_px[i], shift_px[j];
-      if (std::abs(t.determinant()) < 0.1 * dt_mm[i].norm() * dt_mm[j].norm()) continue;
-      const Eigen::Matrix2d candidate = s * t.inverse();
-      std::vector<int> inliers;
-      for (int k = 0; k < n; ++k) {
-        const double e = (candidate * dt_mm[k] - shift_px[k]).norm();
-        if (e <= tolerance_fraction * shift_px[k].norm() + 4.0) inliers.push_back(k);
-      }
-      if (inliers.size() > best_inliers.size()) best_inliers = inliers;
-    }
-  }
-  if (best_inliers.size() < 2) return false;
-  Eigen::MatrixXd t(2, best_inliers.size()), s(2, best_inliers.size());
-  for (size_t k = 0; k < best_inliers.size(); ++k)
-    t.col(k) = dt_mm[best_inliers[k]], s.col(k) = shift_px[best_inliers[k]];
-  const Eigen::Matrix2d tt = t * t.transpose();
-  if (std::abs(tt.determinant()) < 1e-9 * tt.squaredNorm()) return false;
-  *a = s * t.transpose() * tt.inverse();
-  return true;
-}
-
 }  // namespace
 
 TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
@@ -242,9 +210,10 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   std::vector<std::vector<TagDetection>> tags(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
     normalized[i] = NormalizeTileIntensity(tiles[i]);
-    corners[i] = DetectHarrisCorners(normalized[i], options.harris);
     if (options.matching_blur_sigma_px > 0)
       normalized[i] = GaussianBlur(normalized[i], options.matching_blur_sigma_px);
+    // On the matching image, so that the texture test sees the templates.
+    corners[i] = DetectHarrisCorners(normalized[i], options.harris);
     spline[i] = BSplineCoefficients(normalized[i]);
     coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
     if (options.use_apriltags) tags[i] = DetectAprilTags36h11(tiles[i], options.tags);
@@ -281,27 +250,17 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   std::sort(neighbour_pairs.begin(), neighbour_pairs.end());
   neighbour_pairs.erase(std::unique(neighbour_pairs.begin(), neighbour_pairs.end()),
                         neighbour_pairs.end());
-  std::vector<TranslationEstimate> coarse(neighbour_pairs.size());
-  ParallelFor(static_cast<int>(neighbour_pairs.size()), options.num_threads, [&](int k) {
-    coarse[k] = EstimateTranslation(normalized[neighbour_pairs[k].first],
-                                    normalized[neighbour_pairs[k].second], options.translation);
-  });
-  std::vector<Eigen::Vector2d> dt_mm, shift_px;
-  for (size_t k = 0; k < coarse.size(); ++k) {
-    if (!coarse[k].ok) continue;
-    dt_mm.push_back(commanded_table_pos_mm[neighbour_pairs[k].second] -
-                    commanded_table_pos_mm[neighbour_pairs[k].first]);
-    shift_px.push_back(coarse[k].shift_px);
-  }
-  if (!FitImageMotion(dt_mm, shift_px, 0.05, &result.image_px_per_table_mm)) {
+  const ImageMotionEstimate motion =
+      EstimateImageMotion(normalized, commanded_table_pos_mm, neighbour_pairs, options.motion);
+  result.motion_brief = motion.brief;
+  if (!motion.ok) {
     result.matching_seconds = Seconds(t0);
     result.tiles_held_by_prior.resize(num_tiles);
     for (int i = 0; i < num_tiles; ++i) result.tiles_held_by_prior[i] = i;
-    result.brief = "registration UNUSABLE: no consistent translation between neighbouring tiles (" +
-                   std::to_string(shift_px.size()) + " of " +
-                   std::to_string(neighbour_pairs.size()) + " pairs found one)";
+    result.brief = "registration UNUSABLE: " + motion.brief;
     return result;
   }
+  result.image_px_per_table_mm = motion.px_per_table_mm;
   const Eigen::Matrix2d& a_px_per_mm = result.image_px_per_table_mm;
 
   // 3. Pairs predicted to overlap, matched.

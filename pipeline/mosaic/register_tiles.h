@@ -7,9 +7,10 @@
 //    found (grid-bucketed); AprilTag 36h11 markers are detected if enabled.
 // 2. The image motion per table millimetre, A (2 x 2, px/mm: it holds the
 //    camera's unknown rotation about its axis, a possible mirror and the
-//    scale), from the coarse translations between tiles that are nearest
-//    neighbours on the table (EstimateTranslation), fitted robustly:
-//    shift_ij ~ A (T_j - T_i), the consensus of all neighbour pairs.
+//    scale), from the tiles that are nearest neighbours on the table
+//    (EstimateImageMotion): the similarity on which the coarse NCC peaks of
+//    all neighbour pairs agree best, then shift_ij ~ A (T_j - T_i) fitted to
+//    the pairs' refined shifts.
 // 3. Every pair (i < j) that A and the commanded positions predict to
 //    overlap, diagonals too: a few strong corners of i are found in j with a
 //    wide NCC search (on downsampled images, then refined at full
@@ -52,7 +53,7 @@ namespace omm {
 
 struct RegisterTilesOptions {
   HarrisOptions harris;
-  TranslationSearchOptions translation;
+  ImageMotionOptions motion;
   PatchMatchOptions patch;
   bool use_apriltags = true;  // match AprilTag 36h11 corners by id where tags are seen
   TagDetectorOptions tags;
@@ -126,6 +127,7 @@ struct TileRegistration {
   std::vector<PairRegistration> pairs;
   std::vector<int> tiles_held_by_prior;  // no observation kept: table prior only
   Eigen::Matrix2d image_px_per_table_mm = Eigen::Matrix2d::Zero();  // A
+  std::string motion_brief;  // how A was found (EstimateImageMotion's brief)
   int num_tags_detected = 0;      // tag detections over all tiles
   int num_dropped_observations = 0;  // by the outlier passes
   double rms_px = 0.0;               // final RMS reprojection error of used observations

@@ -79,7 +79,7 @@ TEST(RegisterTilesReal, LscmSpeckleOffsetsAgreeWithPublishedRegistration) {
   camera.intrinsics = Eigen::Vector4d(1000, 1000, 511.5, 511.5);
   camera.width_px = camera.height_px = 1024;
   RegisterTilesOptions options;
-  options.translation.min_overlap_fraction = 0.05;  // the neighbours overlap by 10 %
+  options.motion.min_overlap_fraction = 0.05;  // the neighbours overlap by 10 %
   options.probe_search_radius_px = 12;
   options.use_apriltags = false;
   options.bundle.max_usable_rms_px = 2.0;  // the microscope's distortion is not modelled

@@ -15,32 +15,28 @@
 #include <Eigen/Dense>
 
 #include "adapters/mrcal/lens.h"
-#include "pipeline/simulate/simulation.h"
+#include "adapters/opencv/image_io.h"
+#include "tests/sim_cache.h"
 
 namespace omm {
 namespace {
 
 struct Rendered {
-  SimulationPlan plan;
+  SimulationTruth truth;
   std::vector<ImageF> tiles;
   std::vector<Eigen::Vector2d> commanded_mm;
 };
 
-Rendered Render(const std::string& preset, std::uint64_t seed) {
-  SimulationOptions options;
-  options.preset = preset;
-  options.seed = seed;
+// "preset-seed", e.g. "low-texture-2": the cached render (tests/sim_cache.h).
+Rendered Render(const std::string& name) {
+  const size_t dash = name.rfind('-');
+  const omm::testing::CachedProject project =
+      omm::testing::SimulatedProject(name.substr(0, dash), std::stoull(name.substr(dash + 1)));
   Rendered r;
-  r.plan = PlanSimulation(options);
-  const CameraModel& camera = r.plan.truth.camera.model;
-  RayTableSummary summary;
-  const RayTable rays = ComputeRayTable(camera, {0, 0, camera.width_px, camera.height_px},
-                                        RayOptionsFor(options), &summary);
-  EXPECT_TRUE(summary.ok);
-  const ProjectRenderer renderer(r.plan);
-  for (size_t i = 0; i < r.plan.truth.tiles.size(); ++i) {
-    r.tiles.push_back(renderer.RenderTile(static_cast<int>(i), rays));
-    r.commanded_mm.push_back(r.plan.truth.tiles[i].commanded_mm);
+  r.truth = project.truth;
+  for (const TileTruth& tile : r.truth.tiles) {
+    r.tiles.push_back(ReadGrayImage(project.project_dir / "tiles" / tile.image).pixels);
+    r.commanded_mm.push_back(tile.commanded_mm);
   }
   return r;
 }
@@ -164,16 +160,17 @@ struct Scores {
 
 Scores Score(const Rendered& r, const TileRegistration& reg) {
   Scores s;
-  const std::vector<Eigen::Vector2d> errors = MatchErrorsPx(r.plan.truth, reg, false);
+  const std::vector<Eigen::Vector2d> errors = MatchErrorsPx(r.truth, reg, false);
   s.match_rms_px = Rms(errors) / std::sqrt(2.0);
   s.num_matches = static_cast<int>(errors.size());
-  s.hole_rms_px = HoleRmsRawPx(r.plan.truth, reg, &s.num_hole_sightings);
-  s.table_rms_mm = TableRmsMm(r.plan.truth, reg.scene.table_pos_mm);
-  s.commanded_rms_mm = TableRmsMm(r.plan.truth, r.commanded_mm);
-  std::printf("%s: %s\n  features %.2f s, matching %.2f s, adjustment %.2f s\n"
+  s.hole_rms_px = HoleRmsRawPx(r.truth, reg, &s.num_hole_sightings);
+  s.table_rms_mm = TableRmsMm(r.truth, reg.scene.table_pos_mm);
+  s.commanded_rms_mm = TableRmsMm(r.truth, r.commanded_mm);
+  std::printf("%s seed %llu: %s\n  motion: %s\n  features %.2f s, matching %.2f s, adjustment %.2f s\n"
               "  match RMS %.4f px/axis over %d, hole RMS %.4f raw px over %d sightings, "
               "table RMS %.4f mm/axis (commanded %.4f), tilt %.2f deg\n",
-              r.plan.truth.preset.c_str(), reg.brief.c_str(), reg.features_seconds,
+              r.truth.preset.c_str(), static_cast<unsigned long long>(r.truth.seed),
+              reg.brief.c_str(), reg.motion_brief.c_str(), reg.features_seconds,
               reg.matching_seconds, reg.adjustment_seconds, s.match_rms_px, s.num_matches,
               s.hole_rms_px, s.num_hole_sightings, s.table_rms_mm, s.commanded_rms_mm,
               reg.plane_tilt_deg);
@@ -186,8 +183,8 @@ Scores Score(const Rendered& r, const TileRegistration& reg) {
 }
 
 TileRegistration Register(const Rendered& r) {
-  return RegisterTiles(r.tiles, r.commanded_mm, r.plan.truth.table_sigma_mm,
-                       r.plan.truth.camera.model, RegisterTilesOptions());
+  return RegisterTiles(r.tiles, r.commanded_mm, r.truth.table_sigma_mm,
+                       r.truth.camera.model, RegisterTilesOptions());
 }
 
 // Bounds per preset. The goals: matches unbiased to 0.03 px, the mosaic good
@@ -209,11 +206,11 @@ Bounds BoundsFor(const std::string& preset) {
   return {2000, 0.03, 0.05};
 }
 
-class RegisterTilesPreset : public testing::TestWithParam<std::string> {};
+class RegisterTilesPreset : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(RegisterTilesPreset, MatchesTableAndHolesAgreeWithTruth) {
-  const Rendered r = Render(GetParam(), 1);
-  const Bounds bounds = BoundsFor(GetParam());
+  const Rendered r = Render(GetParam());
+  const Bounds bounds = BoundsFor(r.truth.preset);
   const TileRegistration reg = Register(r);
   ASSERT_TRUE(reg.usable) << reg.brief;
   EXPECT_TRUE(reg.tiles_held_by_prior.empty()) << reg.brief;
@@ -223,15 +220,15 @@ TEST_P(RegisterTilesPreset, MatchesTableAndHolesAgreeWithTruth) {
   EXPECT_LT(s.match_rms_px, bounds.match_rms_px);
   // (b) The adjusted table positions are better than commanded: below the
   // declared sigma (commanded - actual scatters with exactly that sigma).
-  EXPECT_LT(s.table_rms_mm, r.plan.truth.table_sigma_mm);
+  EXPECT_LT(s.table_rms_mm, r.truth.table_sigma_mm);
   // (c) The mosaic's geometry at the holes, raw px.
   EXPECT_GT(s.num_hole_sightings, 10);
   EXPECT_LT(s.hole_rms_px, bounds.hole_rms_px);
   // (d) AprilTag corners matched by id: every pair of sightings of a tag
   // gives 4 corner matches, as accurate as the corners' matches.
-  if (GetParam() == "markers") {
+  if (r.truth.preset == "markers") {
     EXPECT_GT(reg.num_tags_detected, 0);
-    const std::vector<Eigen::Vector2d> tag_errors = MatchErrorsPx(r.plan.truth, reg, true);
+    const std::vector<Eigen::Vector2d> tag_errors = MatchErrorsPx(r.truth, reg, true);
     std::printf("  %d tag detections, %zu tag-corner matches kept, RMS %.4f px/axis\n",
                 reg.num_tags_detected, tag_errors.size(), Rms(tag_errors) / std::sqrt(2.0));
     EXPECT_GE(tag_errors.size(), 8u);
@@ -240,8 +237,8 @@ TEST_P(RegisterTilesPreset, MatchesTableAndHolesAgreeWithTruth) {
 }
 
 // Two binaries (each renders two projects, < 90 s): OMM_TEST_PRESETS names the pair.
-INSTANTIATE_TEST_SUITE_P(Presets, RegisterTilesPreset, testing::Values(OMM_TEST_PRESETS),
-                         [](const testing::TestParamInfo<std::string>& param) {
+INSTANTIATE_TEST_SUITE_P(Presets, RegisterTilesPreset, ::testing::Values(OMM_TEST_PRESETS),
+                         [](const ::testing::TestParamInfo<std::string>& param) {
                            std::string name = param.param;
                            std::erase(name, '-');
                            return name;

@@ -18,6 +18,21 @@ float NthValue(std::vector<float>* v, double fraction) {
 
 }  // namespace
 
+WindowMoments::WindowMoments(const ImageF& image)
+    : stride_(static_cast<int>(image.cols()) + 1),
+      sum_(static_cast<size_t>(stride_) * (image.rows() + 1), 0.0),
+      sum_sq_(sum_.size(), 0.0) {
+  for (int r = 0; r < image.rows(); ++r) {
+    double acc = 0, acc_sq = 0;
+    for (int c = 0; c < image.cols(); ++c) {
+      const double v = image(r, c);
+      acc += v, acc_sq += v * v;
+      sum_[(r + 1) * stride_ + c + 1] = sum_[r * stride_ + c + 1] + acc;
+      sum_sq_[(r + 1) * stride_ + c + 1] = sum_sq_[r * stride_ + c + 1] + acc_sq;
+    }
+  }
+}
+
 ImageF NormalizeTileIntensity(const ImageF& image) {
   std::vector<float> sample;
   sample.reserve(image.size() / 7 + 1);
@@ -96,6 +111,8 @@ std::string HarrisOptions::Check() const {
   if (nms_radius_px < 1) return "harris.nms_radius_px must be >= 1";
   if (!(min_response_fraction >= 0)) return "harris.min_response_fraction must be >= 0";
   if (border_px < 2) return "harris.border_px must be >= 2";
+  if (texture_half_size_px < 1) return "harris.texture_half_size_px must be >= 1";
+  if (!(min_texture_std >= 0)) return "harris.min_texture_std must be >= 0";
   return {};
 }
 
@@ -122,6 +139,17 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
 
   // Local maxima inside the border.
   const int b = std::max(options.border_px, options.nms_radius_px + 1), n = options.nms_radius_px;
+  const int t = options.texture_half_size_px;
+  const double min_texture_var = options.min_texture_std * options.min_texture_std;
+  const WindowMoments moments(options.min_texture_std > 0 ? image : ImageF());
+  const auto textured = [&](int r, int c) {
+    if (options.min_texture_std <= 0) return true;
+    const int r0 = std::max(0, r - t), r1 = std::min(rows, r + t + 1);
+    const int c0 = std::max(0, c - t), c1 = std::min(cols, c + t + 1);
+    const double count = static_cast<double>(r1 - r0) * (c1 - c0);
+    const double mean = moments.Sum(r0, r1, c0, c1) / count;
+    return moments.SumSq(r0, r1, c0, c1) / count - mean * mean >= min_texture_var;
+  };
   std::vector<Corner> maxima;
   for (int r = b; r < rows - b; ++r) {
     for (int c = b; c < cols - b; ++c) {
@@ -141,7 +169,7 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
           }
         }
       }
-      if (!is_max) continue;
+      if (!is_max || !textured(r, c)) continue;
       Corner corner;
       corner.pixel << c, r;
       corner.response = v;

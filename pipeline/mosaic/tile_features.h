@@ -28,6 +28,23 @@ ImageF DownsampleBox(const ImageF& image, int factor);
 // Separable Gaussian blur (kernel radius ceil(3 sigma), borders clamped).
 ImageF GaussianBlur(const ImageF& image, double sigma_px);
 
+// Summed-area tables of an image's values and squares (double): the sum and
+// the sum of squares over any rectangle in O(1).
+class WindowMoments {
+ public:
+  explicit WindowMoments(const ImageF& image);
+  // Over rows [r0, r1), columns [c0, c1).
+  double Sum(int r0, int r1, int c0, int c1) const { return Box(sum_, r0, r1, c0, c1); }
+  double SumSq(int r0, int r1, int c0, int c1) const { return Box(sum_sq_, r0, r1, c0, c1); }
+
+ private:
+  double Box(const std::vector<double>& t, int r0, int r1, int c0, int c1) const {
+    return t[r1 * stride_ + c1] - t[r0 * stride_ + c1] - t[r1 * stride_ + c0] + t[r0 * stride_ + c0];
+  }
+  int stride_;
+  std::vector<double> sum_, sum_sq_;
+};
+
 struct HarrisOptions {
   double window_sigma_px = 1.5;  // Gaussian integration window of the structure tensor, px
   double k = 0.04;               // R = det(M) - k trace(M)^2
@@ -38,6 +55,14 @@ struct HarrisOptions {
   // local maxima's R (drops flat areas and noise).
   double min_response_fraction = 0.02;
   int border_px = 12;  // corners keep at least this distance from the image border, px
+  // Texture test: the intensity standard deviation over the
+  // (2 texture_half_size_px + 1)^2 window around a corner must reach
+  // min_texture_std (units of the image), else the corner is noise on a
+  // flat area (weak texture) and would take a bucket's place from a
+  // matchable one. RegisterTiles' defaults equal its template's
+  // (PatchMatchOptions half_size_px, min_template_std); 0 keeps all.
+  int texture_half_size_px = 15;
+  double min_texture_std = 0.15;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
@@ -53,7 +78,8 @@ struct Corner {
 // central differences, structure tensor M integrated with a Gaussian window,
 // R = det M - k tr(M)^2, local maxima above the threshold, at most
 // max_per_cell per grid cell (well distributed), sub-pixel peak by a 3 x 3
-// quadratic fit. Sorted by response, strongest first.
+// quadratic fit; corners whose window fails the texture test are dropped
+// before the bucketing. Sorted by response, strongest first.
 // Precondition: options.Check() is empty.
 std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options);
 

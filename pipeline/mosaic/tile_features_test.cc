@@ -4,6 +4,7 @@
 // box downsampling.
 #include "pipeline/mosaic/tile_features.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -28,6 +29,7 @@ TEST(DetectHarrisCorners, BlobAtItsCentre) {
   const Eigen::Vector2d centre(99.3, 100.2);
   const ImageF image = Blob(200, 200, centre.x(), centre.y());
   HarrisOptions options;
+  options.min_texture_std = 0;  // a lone blob in a flat image: the geometry only
   const std::vector<Corner> corners = DetectHarrisCorners(image, options);
   ASSERT_FALSE(corners.empty());
   const Corner& best = corners.front();
@@ -57,6 +59,33 @@ TEST(DetectHarrisCorners, BucketingKeepsAtMostMaxPerCell) {
   }
   for (int n : count) EXPECT_LE(n, options.max_per_cell);
   EXPECT_GE(corners.size(), 16u * 2);
+}
+
+TEST(DetectHarrisCorners, TextureTestDropsNoiseOnFlatAreas) {
+  // Noise of std 0.05 everywhere (the sensor's), on a flat left half and a
+  // smooth texture on the right (window std ~0.25, weak gradients): Harris
+  // responds to the noise alike on both, so without the texture test the
+  // flat half fills its cells with corners, with it (0.15) none are left there.
+  std::mt19937 rng(5);
+  std::normal_distribution<float> noise(0.0f, 0.05f);
+  ImageF image(256, 256);
+  for (int r = 0; r < 256; ++r)
+    for (int c = 0; c < 256; ++c)
+      image(r, c) = noise(rng) + (c < 128 ? 0.0f
+                                          : static_cast<float>(0.7 * std::sin(0.1 * c) *
+                                                               std::sin(0.1 * r)));
+  HarrisOptions options;
+  const auto leftmost = [](const std::vector<Corner>& corners) {
+    int x = 1 << 30;
+    for (const Corner& c : corners) x = std::min(x, c.pixel.x());
+    return x;
+  };
+  const std::vector<Corner> tested = DetectHarrisCorners(image, options);
+  ASSERT_FALSE(tested.empty());
+  // A window reaching into the texture (half size 15 px) may hold a corner.
+  EXPECT_GE(leftmost(tested), 128 - options.texture_half_size_px);
+  options.min_texture_std = 0;
+  EXPECT_LT(leftmost(DetectHarrisCorners(image, options)), 64);
 }
 
 TEST(BSpline, InterpolatesThePixelsExactly) {

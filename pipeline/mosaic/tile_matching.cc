@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
+#include <sstream>
 #include <limits>
 #include <vector>
 
@@ -11,11 +13,15 @@
 
 namespace omm {
 
-std::string TranslationSearchOptions::Check() const {
-  if (coarse_max_size_px < 16) return "translation.coarse_max_size_px must be >= 16";
+std::string ImageMotionOptions::Check() const {
+  if (coarse_max_size_px < 16) return "motion.coarse_max_size_px must be >= 16";
   if (!(min_overlap_fraction > 0 && min_overlap_fraction < 1))
-    return "translation.min_overlap_fraction must be in (0, 1)";
-  if (finest_factor < 1) return "translation.finest_factor must be >= 1";
+    return "motion.min_overlap_fraction must be in (0, 1)";
+  if (finest_factor < 1) return "motion.finest_factor must be >= 1";
+  if (peaks_per_pair < 1) return "motion.peaks_per_pair must be >= 1";
+  if (!(tolerance_fraction >= 0)) return "motion.tolerance_fraction must be >= 0";
+  if (!(tolerance_px > 0)) return "motion.tolerance_px must be > 0";
+  if (!(min_margin >= 1)) return "motion.min_margin must be >= 1";
   return {};
 }
 
@@ -31,39 +37,9 @@ std::string PatchMatchOptions::Check() const {
 
 namespace {
 
-// Summed-area tables of an image's values and squares: any rectangle's
-// moments in O(1), so that the exhaustive shift search sums only products.
-class Moments {
- public:
-  explicit Moments(const ImageF& image)
-      : stride_(static_cast<int>(image.cols()) + 1),
-        sum_(static_cast<size_t>(stride_) * (image.rows() + 1), 0.0),
-        sum_sq_(sum_.size(), 0.0) {
-    for (int r = 0; r < image.rows(); ++r) {
-      double acc = 0, acc_sq = 0;
-      for (int c = 0; c < image.cols(); ++c) {
-        const double v = image(r, c);
-        acc += v, acc_sq += v * v;
-        sum_[(r + 1) * stride_ + c + 1] = sum_[r * stride_ + c + 1] + acc;
-        sum_sq_[(r + 1) * stride_ + c + 1] = sum_sq_[r * stride_ + c + 1] + acc_sq;
-      }
-    }
-  }
-  // Sums over rows [r0, r1), columns [c0, c1).
-  double Sum(int r0, int r1, int c0, int c1) const { return Box(sum_, r0, r1, c0, c1); }
-  double SumSq(int r0, int r1, int c0, int c1) const { return Box(sum_sq_, r0, r1, c0, c1); }
-
- private:
-  double Box(const std::vector<double>& t, int r0, int r1, int c0, int c1) const {
-    return t[r1 * stride_ + c1] - t[r0 * stride_ + c1] - t[r1 * stride_ + c0] + t[r0 * stride_ + c0];
-  }
-  int stride_;
-  std::vector<double> sum_, sum_sq_;
-};
-
 // NCC of a and b over their overlap when b is shifted by (dx, dy): a(r, c)
 // against b(r + dy, c + dx). -2 if the overlap is smaller than min_pixels.
-double OverlapNcc(const ImageF& a, const ImageF& b, const Moments& ma, const Moments& mb, int dx,
+double OverlapNcc(const ImageF& a, const ImageF& b, const WindowMoments& ma, const WindowMoments& mb, int dx,
                   int dy, Eigen::Index min_pixels, double* overlap_fraction = nullptr) {
   const int c0 = std::max(0, -dx), c1 = std::min<int>(a.cols(), b.cols() - dx);
   const int r0 = std::max(0, -dy), r1 = std::min<int>(a.rows(), b.rows() - dy);
@@ -88,47 +64,281 @@ double OverlapNcc(const ImageF& a, const ImageF& b, const Moments& ma, const Mom
   return (sab - sa * sb * inv_n) / std::sqrt(var_a * var_b);
 }
 
-}  // namespace
+// One level of a tile's pyramid: box-downsampled by `factor`, with moments.
+struct Level {
+  Level(ImageF downsampled, int f) : factor(f), image(std::move(downsampled)), moments(image) {}
+  int factor;
+  ImageF image;
+  WindowMoments moments;
+};
 
-TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
-                                        const TranslationSearchOptions& options) {
-  TranslationEstimate estimate;
-  const int largest = static_cast<int>(std::max(a.rows(), a.cols()));
-  int factor = std::max(1, (largest + options.coarse_max_size_px - 1) / options.coarse_max_size_px);
-  ImageF la = DownsampleBox(a, factor), lb = DownsampleBox(b, factor);
-  Moments ma(la), mb(lb);
-  const auto min_pixels = static_cast<Eigen::Index>(options.min_overlap_fraction * la.size());
-  double best = -2.0;
-  int best_dx = 0, best_dy = 0;
-  for (int dy = -static_cast<int>(la.rows()) + 1; dy < la.rows(); ++dy) {
-    for (int dx = -static_cast<int>(la.cols()) + 1; dx < la.cols(); ++dx) {
-      const double ncc = OverlapNcc(la, lb, ma, mb, dx, dy, min_pixels);
-      if (ncc > best) best = ncc, best_dx = dx, best_dy = dy;
-    }
-  }
-  if (best <= -1.0) return estimate;
-  while (factor > options.finest_factor) {
-    const int next = std::max(options.finest_factor, factor / 2);
-    const int cx = best_dx * factor / next, cy = best_dy * factor / next;
-    const int radius = factor / next + 1;
-    la = DownsampleBox(a, next);
-    lb = DownsampleBox(b, next);
-    ma = Moments(la);
-    mb = Moments(lb);
-    const auto min_level = static_cast<Eigen::Index>(options.min_overlap_fraction * la.size());
-    best = -2.0;
-    for (int dy = cy - radius; dy <= cy + radius; ++dy) {
-      for (int dx = cx - radius; dx <= cx + radius; ++dx) {
-        const double ncc = OverlapNcc(la, lb, ma, mb, dx, dy, min_level);
-        if (ncc > best) best = ncc, best_dx = dx, best_dy = dy;
+// Levels from the coarsest (larger side <= coarse_max_size_px) down to
+// finest_factor, each factor half the previous (rounded down).
+std::vector<Level> Pyramid(const ImageF& tile, const ImageMotionOptions& options) {
+  const int largest = static_cast<int>(std::max(tile.rows(), tile.cols()));
+  const int coarse_factor =
+      std::max(1, (largest + options.coarse_max_size_px - 1) / options.coarse_max_size_px);
+  // Every level high-passed by the coarsest level's blur (bilinearly
+  // upsampled to the finer ones, which is cheap): vignetting and shading
+  // would otherwise correlate at any shift that overlaps two bright centres,
+  // and pull the refined shifts.
+  const ImageF coarsest = DownsampleBox(tile, coarse_factor);
+  const ImageF low = options.coarse_highpass_sigma_px > 0
+                         ? GaussianBlur(coarsest, options.coarse_highpass_sigma_px)
+                         : ImageF::Zero(coarsest.rows(), coarsest.cols());
+  std::vector<Level> levels;
+  for (int factor = coarse_factor;; factor = std::max(options.finest_factor, factor / 2)) {
+    ImageF image = DownsampleBox(tile, factor);
+    // A level pixel's centre in coarsest pixels (centres at integers),
+    // clamped: the two neighbours and the weight of the second.
+    const auto locate = [&](int i, Eigen::Index n, int* i0, int* i1, double* w) {
+      const double v = std::clamp(
+          (factor * i + 0.5 * (factor - 1) - 0.5 * (coarse_factor - 1)) / coarse_factor, 0.0,
+          static_cast<double>(n - 1));
+      *i0 = static_cast<int>(v);
+      *i1 = std::min<int>(*i0 + 1, static_cast<int>(n) - 1);
+      *w = v - *i0;
+    };
+    for (int r = 0; r < image.rows(); ++r) {
+      int y0, y1;
+      double fy;
+      locate(r, low.rows(), &y0, &y1, &fy);
+      for (int c = 0; c < image.cols(); ++c) {
+        int x0, x1;
+        double fx;
+        locate(c, low.cols(), &x0, &x1, &fx);
+        image(r, c) -= static_cast<float>((1 - fy) * ((1 - fx) * low(y0, x0) + fx * low(y0, x1)) +
+                                          fy * ((1 - fx) * low(y1, x0) + fx * low(y1, x1)));
       }
     }
-    factor = next;
-    if (best <= -1.0) return estimate;
+    levels.emplace_back(std::move(image), factor);
+    if (factor <= options.finest_factor) break;
+  }
+  return levels;
+}
+
+// The best NCC of two levels over the integer shifts within +-radius of
+// `center` (level px); ncc -2 if no shift overlaps enough.
+struct LocalBest {
+  Eigen::Vector2i shift = Eigen::Vector2i::Zero();
+  double ncc = -2.0;
+};
+LocalBest SearchShift(const Level& a, const Level& b, const Eigen::Vector2i& center, int radius,
+                      double min_overlap_fraction) {
+  const auto min_pixels = static_cast<Eigen::Index>(min_overlap_fraction * a.image.size());
+  LocalBest best;
+  for (int dy = center.y() - radius; dy <= center.y() + radius; ++dy) {
+    for (int dx = center.x() - radius; dx <= center.x() + radius; ++dx) {
+      const double ncc = OverlapNcc(a.image, b.image, a.moments, b.moments, dx, dy, min_pixels);
+      if (ncc > best.ncc) best.ncc = ncc, best.shift << dx, dy;
+    }
+  }
+  return best;
+}
+
+// A similarity with handedness m (+-1) taking the table displacement dt_mm
+// to the image shift shift_px: A = [[a, -b], [b, a]] diag(1, m).
+Eigen::Matrix2d SimilarityThrough(const Eigen::Vector2d& dt_mm, const Eigen::Vector2d& shift_px,
+                                  int m) {
+  const std::complex<double> z = std::complex<double>(shift_px.x(), shift_px.y()) /
+                                 std::complex<double>(dt_mm.x(), m * dt_mm.y());
+  Eigen::Matrix2d a;
+  a << z.real(), -m * z.imag(), z.imag(), m * z.real();
+  return a;
+}
+
+// A pair's evidence for a motion from its NCC there: Fisher's z = atanh(ncc)
+// (correlations add as z, not as r: 0.99 against 0.9 is a large difference),
+// 0 for negative NCC, capped at atanh(0.99) so that a near-perfect match of
+// a dark region does not outweigh the other pairs.
+double Evidence(double ncc) { return std::atanh(std::clamp(ncc, 0.0, 0.99)); }
+
+}  // namespace
+
+ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
+                                        const std::vector<Eigen::Vector2d>& table_mm,
+                                        const std::vector<std::pair<int, int>>& pairs,
+                                        const ImageMotionOptions& options) {
+  ImageMotionEstimate estimate;
+  const int num_pairs = static_cast<int>(pairs.size());
+  estimate.pair_shifts.resize(num_pairs);
+  estimate.pair_agrees.assign(num_pairs, false);
+  if (num_pairs == 0) {
+    estimate.brief = "no neighbouring tiles";
+    return estimate;
+  }
+  std::vector<std::vector<Level>> pyramids;
+  pyramids.reserve(tiles.size());
+  for (const ImageF& tile : tiles) pyramids.push_back(Pyramid(tile, options));
+  const int coarse_factor = pyramids[0][0].factor;
+  std::vector<Eigen::Vector2d> dt_mm(num_pairs);
+  for (int k = 0; k < num_pairs; ++k)
+    dt_mm[k] = table_mm[pairs[k].second] - table_mm[pairs[k].first];
+
+  // 1. Every pair's coarse NCC surface and its strongest local maxima.
+  struct Candidate {
+    Eigen::Matrix2d a;
+    int mirror;
+    double score = 0.0;
+    std::vector<LocalBest> at;  // per pair: the best coarse shift near the prediction
+  };
+  std::vector<Candidate> candidates;
+  for (int k = 0; k < num_pairs; ++k) {
+    if (!(dt_mm[k].norm() > 0)) continue;
+    const Level& a = pyramids[pairs[k].first][0];
+    const Level& b = pyramids[pairs[k].second][0];
+    const auto min_pixels = static_cast<Eigen::Index>(options.min_overlap_fraction * a.image.size());
+    const int rows = static_cast<int>(a.image.rows()), cols = static_cast<int>(a.image.cols());
+    const int grid_w = 2 * cols - 1, grid_h = 2 * rows - 1;
+    std::vector<double> surface(static_cast<size_t>(grid_w) * grid_h, -2.0);
+    for (int dy = -rows + 1; dy < rows; ++dy)
+      for (int dx = -cols + 1; dx < cols; ++dx)
+        surface[(dy + rows - 1) * grid_w + dx + cols - 1] =
+            OverlapNcc(a.image, b.image, a.moments, b.moments, dx, dy, min_pixels);
+    std::vector<std::pair<double, Eigen::Vector2i>> maxima;
+    for (int y = 0; y < grid_h; ++y) {
+      for (int x = 0; x < grid_w; ++x) {
+        const double v = surface[y * grid_w + x];
+        if (v <= -1.0) continue;
+        bool is_max = true;
+        for (int ny = std::max(0, y - 1); ny <= std::min(grid_h - 1, y + 1) && is_max; ++ny)
+          for (int nx = std::max(0, x - 1); nx <= std::min(grid_w - 1, x + 1); ++nx)
+            if (surface[ny * grid_w + nx] > v) is_max = false;
+        if (is_max) maxima.emplace_back(v, Eigen::Vector2i(x - cols + 1, y - rows + 1));
+      }
+    }
+    const size_t keep = std::min<size_t>(options.peaks_per_pair, maxima.size());
+    std::partial_sort(maxima.begin(), maxima.begin() + keep, maxima.end(),
+                      [](const auto& x, const auto& y) { return x.first > y.first; });
+    for (size_t i = 0; i < keep; ++i) {
+      for (const int m : {1, -1}) {
+        Candidate c;
+        c.a = SimilarityThrough(dt_mm[k], coarse_factor * maxima[i].second.cast<double>(), m);
+        c.mirror = m;
+        candidates.push_back(c);
+      }
+    }
+  }
+  if (candidates.empty()) {
+    estimate.brief = "no pair of neighbouring tiles overlaps by more than " +
+                     std::to_string(options.min_overlap_fraction) + " of the image";
+    return estimate;
+  }
+
+  // 2. Each candidate scored over all pairs.
+  const auto radius_of = [&](const Eigen::Vector2d& predicted_px) {
+    return options.tolerance_fraction * predicted_px.norm() + options.tolerance_px;
+  };
+  for (Candidate& c : candidates) {
+    c.at.resize(num_pairs);
+    for (int k = 0; k < num_pairs; ++k) {
+      const Eigen::Vector2d predicted = c.a * dt_mm[k];
+      const Eigen::Vector2d coarse = predicted / coarse_factor;
+      const int radius = static_cast<int>(std::ceil(radius_of(predicted) / coarse_factor));
+      c.at[k] = SearchShift(pyramids[pairs[k].first][0], pyramids[pairs[k].second][0],
+                            {static_cast<int>(std::lround(coarse.x())),
+                             static_cast<int>(std::lround(coarse.y()))},
+                            radius, options.min_overlap_fraction);
+      c.score += Evidence(c.at[k].ncc);
+    }
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& x, const Candidate& y) { return x.score > y.score; });
+  const Candidate& best = candidates.front();
+  // 3. The margin over every clearly different candidate.
+  estimate.score = best.score;
+  estimate.mirrored = best.mirror < 0;
+  estimate.margin = std::numeric_limits<double>::infinity();
+  for (size_t i = 1; i < candidates.size(); ++i) {
+    double best_sum = 0, other_sum = 0;
+    int num_different = 0;
+    for (int k = 0; k < num_pairs; ++k) {
+      const LocalBest& x = best.at[k];
+      const LocalBest& y = candidates[i].at[k];
+      const bool x_valid = x.ncc > -1.0, y_valid = y.ncc > -1.0;
+      const bool same = x_valid == y_valid &&
+                        (!x_valid || coarse_factor * (x.shift - y.shift).cast<double>().norm() <=
+                                         radius_of(best.a * dt_mm[k]));
+      if (same) continue;
+      ++num_different;
+      best_sum += Evidence(x.ncc);
+      other_sum += Evidence(y.ncc);
+    }
+    // Differing on fewer than half the pairs, it is the same motion with a
+    // spurious peak or two, not a competing one.
+    if (2 * num_different >= num_pairs && other_sum > 0)
+      estimate.margin = std::min(estimate.margin, best_sum / other_sum);
+  }
+  if (!(best.score > 0) || estimate.margin < options.min_margin) {
+    std::ostringstream brief;
+    brief << "the image motion per table mm is ambiguous: the best consensus of the "
+          << num_pairs << " neighbour pairs (evidence " << best.score
+          << ") beats a different one only by a factor " << estimate.margin
+          << " on the pairs where they differ";
+    estimate.brief = brief.str();
+    return estimate;
+  }
+
+  // 4. Each pair refined from its best coarse shift near the prediction.
+  std::vector<int> agreeing;
+  for (int k = 0; k < num_pairs; ++k) {
+    TranslationEstimate& t = estimate.pair_shifts[k];
+    if (best.at[k].ncc <= -1.0) continue;
+    const std::vector<Level>& pa = pyramids[pairs[k].first];
+    const std::vector<Level>& pb = pyramids[pairs[k].second];
+    LocalBest level_best = best.at[k];
+    for (size_t l = 1; l < pa.size() && level_best.ncc > -1.0; ++l) {
+      const int ratio = pa[l - 1].factor / pa[l].factor;
+      level_best = SearchShift(pa[l], pb[l], level_best.shift * pa[l - 1].factor / pa[l].factor,
+                               ratio + 1, options.min_overlap_fraction);
+    }
+    if (level_best.ncc <= -1.0) continue;
+    const Level& la = pa.back();
+    const Level& lb = pb.back();
+    t.ok = true;
+    t.shift_px = level_best.shift.cast<double>() * la.factor;
+    t.ncc = OverlapNcc(la.image, lb.image, la.moments, lb.moments, level_best.shift.x(),
+                       level_best.shift.y(), 1, &t.overlap_fraction);
+    const Eigen::Vector2d predicted = best.a * dt_mm[k];
+    if ((t.shift_px - predicted).norm() <= radius_of(predicted)) {
+      estimate.pair_agrees[k] = true;
+      agreeing.push_back(k);
+    }
+  }
+  estimate.num_agreeing = static_cast<int>(agreeing.size());
+  if (agreeing.empty()) {
+    estimate.brief = "no neighbour pair's refined shift agrees with the consensus motion";
+    return estimate;
+  }
+  // Least squares: affine when the agreeing displacements span the plane.
+  Eigen::Matrix2d tt = Eigen::Matrix2d::Zero(), st = Eigen::Matrix2d::Zero();
+  for (int k : agreeing) {
+    tt += dt_mm[k] * dt_mm[k].transpose();
+    st += estimate.pair_shifts[k].shift_px * dt_mm[k].transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> spread(tt);
+  if (spread.eigenvalues()(0) > 0.05 * spread.eigenvalues()(1)) {
+    estimate.px_per_table_mm = st * tt.inverse();
+  } else {
+    // Similarity: shift = [[a, -b], [b, a]] v, v = diag(1, m) dt, linear in (a, b).
+    Eigen::Matrix2d n = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
+    for (int k : agreeing) {
+      const Eigen::Vector2d v(dt_mm[k].x(), best.mirror * dt_mm[k].y());
+      Eigen::Matrix2d j;
+      j << v.x(), -v.y(), v.y(), v.x();
+      n += j.transpose() * j;
+      rhs += j.transpose() * estimate.pair_shifts[k].shift_px;
+    }
+    const Eigen::Vector2d ab = n.ldlt().solve(rhs);
+    estimate.px_per_table_mm << ab(0), -best.mirror * ab(1), ab(1), best.mirror * ab(0);
   }
   estimate.ok = true;
-  estimate.shift_px = Eigen::Vector2d(best_dx, best_dy) * factor;
-  estimate.ncc = OverlapNcc(la, lb, ma, mb, best_dx, best_dy, 1, &estimate.overlap_fraction);
+  std::ostringstream brief;
+  brief << estimate.num_agreeing << " of " << num_pairs
+        << " neighbour pairs agree on the image motion (evidence " << best.score
+        << ", margin " << estimate.margin << ")";
+  estimate.brief = brief.str();
   return estimate;
 }
 

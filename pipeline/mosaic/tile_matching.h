@@ -5,6 +5,8 @@
 #pragma once
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -12,30 +14,78 @@
 
 namespace omm {
 
-struct TranslationSearchOptions {
-  int coarse_max_size_px = 96;   // the exhaustive search runs on images downsampled to this
-  double min_overlap_fraction = 0.08;  // shifts overlapping less of the image are not tried
+struct ImageMotionOptions {
+  int coarse_max_size_px = 96;   // the exhaustive search runs on tiles downsampled to this
+  double min_overlap_fraction = 0.08;  // shifts overlapping less of the image are not scored
   int finest_factor = 2;         // refinement stops at this downsampling factor
+  // Every level minus the Gaussian blur of the coarsest by this sigma
+  // (coarsest px; 0: off), so that shading and vignetting do not correlate.
+  double coarse_highpass_sigma_px = 4.0;
+  int peaks_per_pair = 4;        // candidate shifts per pair: its strongest local NCC maxima
+  // A pair agrees with a motion when its shift is within this fraction of
+  // the predicted shift's length plus tolerance_px of the prediction (the
+  // lens distortion and the tilt make the motion vary over the image).
+  double tolerance_fraction = 0.05;
+  double tolerance_px = 8.0;
+  // The best candidate's evidence over a clearly different one's (step 3
+  // below) must reach this factor, else the motion is ambiguous (not ok).
+  // Measured 3.1-8.7 on the simulator's presets.
+  double min_margin = 1.5;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
 };
 
+// The translation between two tiles at the final level.
 struct TranslationEstimate {
   bool ok = false;
-  // Image content at q in `a` is at q + shift_px in `b`, px (to ~finest_factor).
+  // Image content at q in tile a is at q + shift_px in tile b, px (to ~finest_factor).
   Eigen::Vector2d shift_px = Eigen::Vector2d::Zero();
   double ncc = 0.0;          // NCC of the overlap at the final level
   double overlap_fraction = 0.0;
 };
 
-// The translation between two tiles of the same size by an exhaustive NCC
-// search over all shifts of the coarsest level (box-downsampled, so that the
-// larger side is <= coarse_max_size_px), refined by a +-2 search at each finer
-// level (factors divided by 2) down to finest_factor. Normalised images
-// (NormalizeTileIntensity) keep a bright background from dominating.
-TranslationEstimate EstimateTranslation(const ImageF& a, const ImageF& b,
-                                        const TranslationSearchOptions& options);
+struct ImageMotionEstimate {
+  bool ok = false;
+  // A: the image motion per table millimetre (shift_ij ~ A (T_j - T_i)).
+  Eigen::Matrix2d px_per_table_mm = Eigen::Matrix2d::Zero();
+  bool mirrored = false;  // the consensus similarity's handedness (det A < 0)
+  double score = 0.0;   // the best candidate's evidence (sum of z over all pairs)
+  double margin = 0.0;  // the smallest ratio of step 3 (infinity: no different candidate)
+  std::vector<TranslationEstimate> pair_shifts;  // per input pair, refined around A's prediction
+  std::vector<bool> pair_agrees;                 // its shift agrees with A
+  int num_agreeing = 0;
+  std::string brief;  // one line: what was found, or why not
+};
+
+// The image motion per table millimetre, A (2 x 2, px/mm), from the tiles
+// (normalised: NormalizeTileIntensity) taken at table positions table_mm and
+// the pairs of them that are neighbours on the table (each expected to
+// overlap by a good part of the image).
+// 1. Every pair's NCC over all shifts of the coarsest level (tiles
+//    box-downsampled so that the larger side is <= coarse_max_size_px; all
+//    levels high-passed) and its peaks_per_pair strongest local maxima.
+// 2. Each peak with each handedness is a candidate similarity A = s R(theta)
+//    diag(1, +-1) (the camera's unknown scale, rotation about its axis and
+//    mirror; the table's axes orthogonal). A candidate's evidence is the sum
+//    over all pairs of Fisher's z = atanh(NCC) (clamped to [0, atanh 0.99])
+//    at the shift it predicts (the best within the tolerance). Weak texture,
+//    or one dark region lined up in a small overlap, gives single pairs
+//    spurious peaks; only the true motion lines up the peaks of all pairs.
+// 3. Against every clearly different candidate (half the pairs' shifts or
+//    more found elsewhere), the best one's evidence on the pairs where they
+//    differ must be min_margin times the other's: a mirrored motion, say,
+//    agrees on the pairs along one table axis and differs on the others.
+// 4. Each pair's shift refined coarse-to-fine (a +-(ratio + 1) search per
+//    level) from the best candidate's down to finest_factor; A is the
+//    least-squares fit to the pairs that agree with the candidate (within
+//    the tolerance): affine when their table displacements span both axes,
+//    else the similarity.
+// Precondition: options.Check() is empty; tiles of one size; pairs index tiles.
+ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
+                                        const std::vector<Eigen::Vector2d>& table_mm,
+                                        const std::vector<std::pair<int, int>>& pairs,
+                                        const ImageMotionOptions& options);
 
 // The integer position of best normalised cross-correlation of a template
 // from `reference` ((2 half_size_px + 1)^2 pixels centred at the integer

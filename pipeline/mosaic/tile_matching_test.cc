@@ -1,12 +1,16 @@
-// The matching kernels on images with a known motion: EstimateTranslation on
-// two crops of one texture, and SearchNcc / MatchPatch on a band-limited
+// The matching kernels on images with a known motion: EstimateImageMotion on
+// a grid of crops of one texture, and SearchNcc / MatchPatch on a band-limited
 // texture sampled at a known sub-pixel shift (so the truth is exact).
 #include "pipeline/mosaic/tile_matching.h"
 
 #include <cmath>
 #include <random>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
+
+#include <Eigen/Dense>
 
 #include "pipeline/mosaic/tile_features.h"
 
@@ -21,19 +25,76 @@ ImageF RandomTexture(int rows, int cols, double blur_px, unsigned seed) {
   return NormalizeTileIntensity(GaussianBlur(image, blur_px));
 }
 
-TEST(EstimateTranslation, FindsAKnownShiftOfTwoCrops) {
-  const ImageF big = RandomTexture(520, 700, 3.0, 5);
-  // a = big at (x0, y0), b = big at (x1, y1): content at q in a is at
-  // q + (x0 - x1, y0 - y1) in b. Even shifts: exact at finest_factor 2.
-  for (const Eigen::Vector2i& p : {Eigen::Vector2i(240, 10), Eigen::Vector2i(20, 200),
-                                   Eigen::Vector2i(150, 150)}) {
-    const int x0 = 100, y0 = 100;
-    const ImageF a = big.block(y0, x0, 300, 400);
-    const ImageF b = big.block(p.y(), p.x(), 300, 400);
-    const TranslationEstimate e = EstimateTranslation(a, b, TranslationSearchOptions());
-    ASSERT_TRUE(e.ok);
-    EXPECT_EQ(e.shift_px, Eigen::Vector2d(x0 - p.x(), y0 - p.y()));
-    EXPECT_GT(e.ncc, 0.99);  // the same pixels at the final level
+// A 3 x 3 grid of tiles cropped from one weak, smooth texture with dark
+// discs (holes) and noise, each tile then vignetted alike: the tile at table
+// position T shows the scene offset by -A T, so the content at q in tile i
+// is at q + A (T_j - T_i) in tile j, exactly.
+struct GridTiles {
+  std::vector<ImageF> tiles;
+  std::vector<Eigen::Vector2d> table_mm;
+  std::vector<std::pair<int, int>> neighbours;
+};
+
+GridTiles CropGrid(const Eigen::Matrix2d& a_px_per_mm, unsigned seed) {
+  const int rows = 240, cols = 320;
+  const Eigen::Vector2d step_mm(20, 15);
+  ImageF scene = RandomTexture(rows + 400, cols + 400, 12.0, seed);
+  std::mt19937 rng(seed + 1);
+  std::uniform_real_distribution<float> where(0.0f, 1.0f);
+  for (int d = 0; d < 12; ++d) {
+    const float cx = where(rng) * scene.cols(), cy = where(rng) * scene.rows();
+    for (int r = 0; r < scene.rows(); ++r)
+      for (int c = 0; c < scene.cols(); ++c)
+        if ((c - cx) * (c - cx) + (r - cy) * (r - cy) < 15 * 15) scene(r, c) = -6.0f;
+  }
+  std::normal_distribution<float> noise(0.0f, 0.3f);
+  GridTiles g;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector2d t(c * step_mm.x(), r * step_mm.y());
+      const Eigen::Vector2d origin = Eigen::Vector2d(200, 200) - a_px_per_mm * t;
+      ImageF tile = scene.block(std::lround(origin.y()), std::lround(origin.x()), rows, cols);
+      for (int y = 0; y < rows; ++y) {
+        for (int x = 0; x < cols; ++x) {
+          const double u = (x - 0.5 * cols) / cols, v = (y - 0.5 * rows) / cols;
+          tile(y, x) = static_cast<float>((tile(y, x) + 8.0) * (1.0 - 1.2 * (u * u + v * v))) +
+                       noise(rng);
+        }
+      }
+      g.tiles.push_back(NormalizeTileIntensity(tile));
+      g.table_mm.push_back(t);
+    }
+  }
+  for (int i = 0; i < 9; ++i) {
+    if (i % 3 < 2) g.neighbours.emplace_back(i, i + 1);
+    if (i < 6) g.neighbours.emplace_back(i, i + 3);
+  }
+  return g;
+}
+
+TEST(EstimateImageMotion, FindsAMirroredOrRotatedMotionOnWeakTexture) {
+  // A mirror (det < 0: table X -> image -y, Y -> image -x) and a rotation by
+  // 180 deg, 6 px/mm: shifts of 120 and 90 px, even (exact at finest_factor 2).
+  for (const Eigen::Matrix2d& truth :
+       {(Eigen::Matrix2d() << 0, -6, -6, 0).finished(),
+        (Eigen::Matrix2d() << -6, 0, 0, -6).finished()}) {
+    const GridTiles g = CropGrid(truth, 3);
+    const ImageMotionOptions options;
+    const ImageMotionEstimate e = EstimateImageMotion(g.tiles, g.table_mm, g.neighbours, options);
+    ASSERT_TRUE(e.ok) << e.brief;
+    EXPECT_EQ(e.mirrored, truth.determinant() < 0);
+    EXPECT_EQ(e.num_agreeing, 12) << e.brief;
+    EXPECT_GE(e.margin, options.min_margin);
+    for (size_t k = 0; k < g.neighbours.size(); ++k) {
+      const auto [i, j] = g.neighbours[k];
+      const Eigen::Vector2d shift = truth * (g.table_mm[j] - g.table_mm[i]);
+      ASSERT_TRUE(e.pair_shifts[k].ok);
+      // The finest level's pixel is 2 px: one of its steps at most.
+      EXPECT_LE((e.pair_shifts[k].shift_px - shift).cwiseAbs().maxCoeff(), 2.0)
+          << i << "-" << j << ": " << e.pair_shifts[k].shift_px.transpose();
+    }
+    // A from 12 shifts each within 2 px over 90-120 px.
+    EXPECT_LT((e.px_per_table_mm - truth).cwiseAbs().maxCoeff(), 0.05) << e.px_per_table_mm;
   }
 }
 
