@@ -1,0 +1,252 @@
+// The final adjustment's pure parts on synthetic planes (synthetic_plane.h):
+// the intrinsics prior from a covariance, the scale sigma from the scene
+// covariance, and AdjustWithPlateAndPrior's plate (scale error against the
+// truth vs its reported sigma, the scale check) and intrinsics prior (joint
+// covariance). The plate's detection in rendered tiles: plate_on_part_sim_test.cc.
+#include "pipeline/mosaic/plate_on_part.h"
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+
+#include "pipeline/mosaic/plane_adjustment.h"
+#include "pipeline/mosaic/synthetic_plane.h"
+
+namespace omm {
+namespace {
+
+// Scale of the least-squares similarity fit of `adjusted` to `actual` table
+// positions, minus 1, ppm.
+double ScaleErrorPpm(const std::vector<Eigen::Vector2d>& adjusted,
+                     const std::vector<Eigen::Vector2d>& actual) {
+  const int n = static_cast<int>(actual.size());
+  Eigen::Vector2d mean_a = Eigen::Vector2d::Zero(), mean_t = Eigen::Vector2d::Zero();
+  for (int i = 0; i < n; ++i) mean_a += adjusted[i] / n, mean_t += actual[i] / n;
+  // Similarity adjusted ~ s Rot actual + d: s = |sum conj(t) a| / sum |t|^2 in complex form.
+  double dot = 0, cross = 0, norm = 0;
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d a = adjusted[i] - mean_a, t = actual[i] - mean_t;
+    dot += t.dot(a);
+    cross += t.x() * a.y() - t.y() * a.x();
+    norm += t.squaredNorm();
+  }
+  return (std::hypot(dot, cross) / norm - 1) * 1e6;
+}
+
+// The registration before the final adjustment: the synthetic input without
+// its plate, adjusted with the intrinsics held.
+struct Registered {
+  SyntheticPlane s;
+  PlaneBundleInput input;
+  PlaneScene scene;
+};
+
+Registered Register(const SyntheticPlaneOptions& options) {
+  Registered r;
+  r.s = MakeSyntheticPlane(options);
+  r.input = r.s.input;
+  r.input.plates.clear();
+  r.input.plate_observations.clear();
+  PlaneBundleConfig config;
+  config.compute_covariance = false;
+  const PlaneAdjustment a = AdjustPlaneScene(r.s.camera, r.input, config, PlaneBundleOptions{});
+  EXPECT_TRUE(a.summary.usable) << a.summary.brief;
+  r.scene = a.scene;
+  return r;
+}
+
+// The synthetic plate as FindPlateOnPart would hand it over (height unknown).
+PlateOnPart PlateOf(const SyntheticPlane& s) {
+  PlateOnPart plate;
+  plate.found = true;
+  plate.marks = s.input.plates[0];
+  plate.observations = s.input.plate_observations;
+  plate.initial_pose = s.truth.plates[0];
+  plate.initial_pose.x_mm += 0.3;  // a seed, not the truth
+  plate.initial_pose.theta_rad -= 1e-3;
+  plate.initial_pose.height_mm = 0;
+  return plate;
+}
+
+TEST(IntrinsicsPrior, InformationIsTheInverseCovariance) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> normal;
+  Eigen::MatrixXd a(12, 30);
+  for (Eigen::Index k = 0; k < a.size(); ++k) a.data()[k] = normal(rng);
+  Eigen::VectorXd scale(12);
+  scale << 0.5, 0.5, 0.4, 0.4, 2e-4, 5e-4, 2e-5, 2e-5, 1e-3, 1e-3, 1e-3, 1e-3;
+  const Eigen::MatrixXd covariance =
+      scale.asDiagonal() * (a * a.transpose() / 30) * scale.asDiagonal();
+  const IntrinsicsPrior prior = IntrinsicsPriorFromCovariance(covariance);
+  ASSERT_TRUE(prior.why_held.empty()) << prior.why_held;
+  // In the parameters' own scale the product is the identity to rounding.
+  const Eigen::MatrixXd product =
+      scale.asDiagonal() * prior.information * covariance * scale.cwiseInverse().asDiagonal();
+  EXPECT_LT((product - Eigen::MatrixXd::Identity(12, 12)).cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_EQ(prior.information, prior.information.transpose());
+}
+
+// A rational model's near-redundant combinations (correlation eigenvalues
+// below 1e-6 of the largest) are capped at a 1e6 conditioning: still far
+// sharper than any other direction, and the prior stays positive definite;
+// the other directions are exact.
+TEST(IntrinsicsPrior, NearlyRedundantCombinationIsCapped) {
+  const int n = 6;
+  const Eigen::MatrixXd v =
+      Eigen::HouseholderQR<Eigen::MatrixXd>(Eigen::MatrixXd::Random(n, n)).householderQ();
+  Eigen::VectorXd lambda(n);
+  lambda << 1e-16, 1e-8, 0.1, 1, 2, 2.9;
+  Eigen::VectorXd sigma(n);
+  sigma << 2.0, 1e-4, 3e-6, 0.5, 1e-2, 7e-5;
+  const Eigen::MatrixXd covariance =
+      sigma.asDiagonal() * v * lambda.asDiagonal() * v.transpose() * sigma.asDiagonal();
+  const IntrinsicsPrior prior = IntrinsicsPriorFromCovariance(covariance);
+  ASSERT_TRUE(prior.why_held.empty()) << prior.why_held;
+  EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(prior.information).info(), Eigen::Success);
+  // In correlation units (the marginal sigmas divided out) along each
+  // eigenvector of the correlation: the inverse eigenvalue, capped.
+  const Eigen::VectorXd marginal = covariance.diagonal().cwiseSqrt();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(
+      marginal.cwiseInverse().asDiagonal() * covariance * marginal.cwiseInverse().asDiagonal());
+  const Eigen::MatrixXd info = marginal.asDiagonal() * prior.information * marginal.asDiagonal();
+  const Eigen::VectorXd mu = eigen.eigenvalues();
+  ASSERT_LT(mu[1], 1e-6 * mu[n - 1]);  // two directions capped, the others not
+  ASSERT_GT(mu[2], 1e-6 * mu[n - 1]);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::VectorXd w = eigen.eigenvectors().col(k);
+    const double expected = mu[k] < 1e-6 * mu[n - 1] ? 1e6 / mu[n - 1] : 1 / mu[k];
+    EXPECT_NEAR(w.dot(info * w), expected, 1e-9 * expected) << k;
+  }
+}
+
+TEST(IntrinsicsPrior, HeldParameterOrNoCovarianceGivesNoPrior) {
+  Eigen::MatrixXd covariance = Eigen::MatrixXd::Identity(4, 4);
+  covariance(2, 2) = 0;  // held by the calibration
+  IntrinsicsPrior prior = IntrinsicsPriorFromCovariance(covariance);
+  EXPECT_EQ(prior.information.size(), 0);
+  EXPECT_NE(prior.why_held.find("held"), std::string::npos) << prior.why_held;
+  prior = IntrinsicsPriorFromCovariance(Eigen::MatrixXd());
+  EXPECT_EQ(prior.information.size(), 0);
+  EXPECT_FALSE(prior.why_held.empty());
+}
+
+// Independent table positions of sigma s per axis: the similarity scale's
+// sigma is s / sqrt(sum |C_i - mean|^2).
+TEST(TableScaleSigma, IsotropicTablesGiveTheTextbookValue) {
+  const std::vector<Eigen::Vector2d> commanded = {{0, 0}, {140, 0}, {0, 105}, {140, 105}};
+  const int n = PlaneSceneCovarianceSize(4, 0, 0);
+  Eigen::MatrixXd covariance = Eigen::MatrixXd::Identity(n, n);  // pose entries: ignored
+  covariance.block(6, 6, 8, 8) = 0.02 * 0.02 * Eigen::MatrixXd::Identity(8, 8);
+  const double spread = 4 * (70.0 * 70.0 + 52.5 * 52.5);
+  EXPECT_NEAR(TableScaleSigmaPpm(commanded, covariance), 0.02 / std::sqrt(spread) * 1e6, 1e-9);
+  EXPECT_EQ(TableScaleSigmaPpm(commanded, Eigen::MatrixXd()), 0.0);
+}
+
+// With the plate, the adjusted table positions' scale error against the truth
+// is ~N(0, scale_sigma_ppm) (the table errors are random here, as in the
+// simulator); without it the table alone sets the scale, less sharply.
+// 6 noise draws: each |z| < 3, and the RMS of z within the chi^2(6) 99 %
+// interval [0.35, 1.72]. The scale check's s - 1 is the table-only scale
+// error seen against the plate: they agree within 3 of the check's sigma
+// minus the table-only sigma in quadrature (the two solves share the table
+// error; what differs is the plate's own noise).
+TEST(FinalAdjustment, PlateScaleErrorMatchesItsSigma) {
+  double sum_z2 = 0;
+  const int draws = 6;
+  for (int seed = 0; seed < draws; ++seed) {
+    SyntheticPlaneOptions options;
+    options.with_plate = true;
+    options.num_tracks = 600;
+    options.noise_seed = 100 + seed;
+    const Registered r = Register(options);
+    const FinalAdjustment with = AdjustWithPlateAndPrior(
+        r.s.camera, r.input, r.scene, PlateOf(r.s), IntrinsicsPrior{}, FinalAdjustmentOptions{});
+    const FinalAdjustment without = AdjustWithPlateAndPrior(
+        r.s.camera, r.input, r.scene, PlateOnPart{}, IntrinsicsPrior{}, FinalAdjustmentOptions{});
+    ASSERT_TRUE(with.summary.usable) << with.summary.brief;
+    ASSERT_TRUE(without.summary.usable) << without.summary.brief;
+    ASSERT_TRUE(with.scale_check.ok);
+    const double error_with = ScaleErrorPpm(with.scene.table_pos_mm, r.s.truth.table_pos_mm);
+    const double error_without = ScaleErrorPpm(without.scene.table_pos_mm, r.s.truth.table_pos_mm);
+    std::printf(
+        "seed %d: scale error with plate %.1f +- %.1f ppm, without %.1f +- %.1f ppm; "
+        "check s-1 %.1f +- %.1f ppm; height %.4f +- %.4f mm (truth %.1f)\n",
+        seed, error_with, with.scale_sigma_ppm, error_without, without.scale_sigma_ppm,
+        with.scale_check.scale_minus_1_ppm, with.scale_check.sigma_ppm, with.plate_height_mm,
+        with.plate_height_sigma_mm, options.plate_height_mm);
+    const double z = error_with / with.scale_sigma_ppm;
+    EXPECT_LT(std::abs(z), 3.0);
+    sum_z2 += z * z;
+    // The synthetic marks are as noisy as the features (0.07 px): the plate
+    // alone is worth ~26 ppm here, a few ppm on the renders.
+    EXPECT_LT(with.scale_sigma_ppm, 0.6 * without.scale_sigma_ppm);
+    EXPECT_NEAR(with.plate_height_mm, options.plate_height_mm, 3 * with.plate_height_sigma_mm);
+    const double check_noise = std::sqrt(std::max(
+        0.0, std::pow(with.scale_check.sigma_ppm, 2) - std::pow(without.scale_sigma_ppm, 2)));
+    EXPECT_NEAR(with.scale_check.scale_minus_1_ppm, error_without, 3 * check_noise + 1.0);
+  }
+  const double rms_z = std::sqrt(sum_z2 / draws);
+  EXPECT_GT(rms_z, 0.35);
+  EXPECT_LT(rms_z, 1.72);
+}
+
+// A systematic table scale error is what the check is for: s - 1 finds it.
+TEST(FinalAdjustment, ScaleCheckFindsATableScaleError) {
+  SyntheticPlaneOptions options;
+  options.with_plate = true;
+  options.num_tracks = 600;
+  options.table_scale_error = 3e-4;
+  const Registered r = Register(options);
+  const FinalAdjustment a = AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOf(r.s),
+                                                    IntrinsicsPrior{}, FinalAdjustmentOptions{});
+  ASSERT_TRUE(a.scale_check.ok);
+  std::printf("table scale error 300 ppm: check s-1 %.1f +- %.1f ppm\n",
+              a.scale_check.scale_minus_1_ppm, a.scale_check.sigma_ppm);
+  // The truth's realised table scale: the commanded positions against the actual ones.
+  const double realised = ScaleErrorPpm(r.s.input.commanded_table_pos_mm, r.s.truth.table_pos_mm);
+  EXPECT_NEAR(a.scale_check.scale_minus_1_ppm, realised, 3 * a.scale_check.sigma_ppm);
+  EXPECT_GT(a.scale_check.scale_minus_1_ppm / a.scale_check.sigma_ppm, 4.0);
+}
+
+// The intrinsics prior makes the covariance joint: an intrinsics block no
+// larger than the prior, correlated with the pose and the table positions;
+// without it the intrinsics come back bit-identical with a zero block.
+TEST(FinalAdjustment, IntrinsicsPriorGivesAJointCovariance) {
+  SyntheticPlaneOptions options;
+  options.with_plate = true;
+  options.num_tracks = 600;
+  const Registered r = Register(options);
+  Eigen::VectorXd sigma(12);
+  sigma << 0.5, 0.5, 0.4, 0.4, 2e-4, 5e-4, 2e-5, 2e-5, 1e-3, 1e-3, 1e-3, 1e-3;
+  IntrinsicsPrior prior;
+  prior.information = sigma.array().square().inverse().matrix().asDiagonal();
+  const FinalAdjustment refined =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOf(r.s), prior, {});
+  ASSERT_TRUE(refined.summary.usable) << refined.summary.brief;
+  EXPECT_TRUE(refined.intrinsics_refined);
+  const int k0 = PlaneSceneCovarianceSize(9, 1, 0);
+  ASSERT_EQ(refined.scene.covariance.rows(), k0 + 12);
+  const Eigen::MatrixXd& c = refined.scene.covariance;
+  for (int k = 0; k < 12; ++k) {
+    EXPECT_GT(c(k0 + k, k0 + k), 0.0);
+    EXPECT_LE(c(k0 + k, k0 + k), sigma[k] * sigma[k] * (1 + 1e-9));
+  }
+  EXPECT_GT(c.block(0, k0, k0, 12).cwiseAbs().maxCoeff(), 0.0);
+  // The truth is the prior's mean here: the change stays within ~3 sigma.
+  EXPECT_LT(
+      (refined.scene.intrinsics - r.s.camera.intrinsics).cwiseQuotient(sigma).cwiseAbs().maxCoeff(),
+      3.0);
+
+  const FinalAdjustment held =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOf(r.s), IntrinsicsPrior{}, {});
+  EXPECT_FALSE(held.intrinsics_refined);
+  EXPECT_EQ(held.scene.intrinsics, r.s.camera.intrinsics);
+  EXPECT_EQ(held.scene.covariance.bottomRightCorner(12, 12).cwiseAbs().maxCoeff(), 0.0);
+}
+
+}  // namespace
+}  // namespace omm
