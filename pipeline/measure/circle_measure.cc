@@ -72,7 +72,7 @@ Eigen::Vector2d VoteCentre(const ImageF& image, const Eigen::Vector2d& expected,
       const float u = image(row - 1, col), d = image(row + 1, col);
       if (l == 0.0f || r == 0.0f || u == 0.0f || d == 0.0f) continue;  // next to uncovered
       const double gx = 0.5 * (r - l), gy = 0.5 * (d - u);
-      const double g = std::hypot(gx, gy);
+      const double g = std::sqrt(gx * gx + gy * gy);
       if (g <= 0.0) continue;
       const double vx = col - radius * gx / g - origin.x(), vy = row - radius * gy / g - origin.y();
       const double fx = std::floor(vx), fy = std::floor(vy);
@@ -110,8 +110,22 @@ Eigen::Vector2d VoteCentre(const ImageF& image, const Eigen::Vector2d& expected,
 }
 
 // Standard normal density and distribution.
-double NormalPdf(double z) { return std::exp(-0.5 * z * z) / std::sqrt(2.0 * kPi); }
-double NormalCdf(double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); }
+// Standard normal density and distribution at z from one exponential: the
+// distribution by Abramowitz & Stegun 7.1.26 (|error| < 1e-7, far below the
+// pixel noise), which shares exp(-z^2 / 2) with the density.
+struct Normal01 {
+  double pdf, cdf;
+};
+Normal01 NormalAt(double z) {
+  const double e = std::exp(-0.5 * z * z);
+  const double t = 1.0 / (1.0 + 0.3275911 * std::abs(z) / std::numbers::sqrt2);
+  const double tail =
+      0.5 * t *
+      (0.254829592 +
+       t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429)))) *
+      e;
+  return {e / std::sqrt(2.0 * kPi), z >= 0.0 ? 1.0 - tail : tail};
+}
 
 struct StepFit {
   bool ok = false;
@@ -141,81 +155,92 @@ StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, doub
                 double sigma, bool fit_sigma, Inner inner) {
   const int n = static_cast<int>(d.size());
   const bool wall = inner != Inner::kRamp;
-  const int nl = 4;  // a, c0, go, gi or c1
+  constexpr int kLinear = 4;  // a, c0, go, and gi or c1
   const int nn = 1 + (inner == Inner::kFree ? 1 : 0) + (fit_sigma ? 1 : 0);
+  const int np = nn + kLinear;
   StepFit fit;
-  if (n < nl + nn + 3) return fit;
+  if (n < np + 3) return fit;
   struct Params {
     double x0, x1, s;
     Eigen::Vector4d lin;
   };
-  auto evaluate = [&](const Params& p, Eigen::VectorXd* res, Eigen::MatrixXd* basis_out,
-                      Eigen::MatrixXd* jac) {
+  using Normal = Eigen::Matrix<double, 7, 7>;
+  using Vector7 = Eigen::Matrix<double, 7, 1>;
+  // Sum of squared residuals; with `jtj`, also the normal equations (the
+  // Jacobian's rows: nonlinear parameters first, then the linear ones); with
+  // `basis_only`, the linear least-squares system of the linear parameters.
+  auto evaluate = [&](const Params& p, Normal* jtj, Vector7* jtr, bool basis_only) {
     const bool band = wall && p.x1 < p.x0;
+    double cost = 0.0;
+    if (jtj != nullptr) jtj->setZero(), jtr->setZero();
     for (int i = 0; i < n; ++i) {
-      const double u0 = d[static_cast<size_t>(i)] - p.x0, z0 = u0 / p.s;
-      const double cdf0 = NormalCdf(z0), pdf0 = NormalPdf(z0);
-      const double z1 = (d[static_cast<size_t>(i)] - p.x1) / p.s;
-      const double cdf1 = band ? NormalCdf(z1) : 0.0, pdf1 = band ? NormalPdf(z1) : 0.0;
-      Eigen::Vector4d basis;
-      basis(0) = 1.0;
-      basis(1) = cdf0;
-      basis(2) = u0 * cdf0 + p.s * pdf0;
-      basis(3) = wall ? (band ? cdf1 - cdf0 : 0.0) : u0 * (1.0 - cdf0) - p.s * pdf0;
-      if (res != nullptr) (*res)(i) = basis.dot(p.lin) - v[static_cast<size_t>(i)];
-      if (basis_out != nullptr) basis_out->row(i) = basis.transpose();
-      if (jac == nullptr) continue;
-      const double c0 = p.lin(1), go = p.lin(2), l3 = p.lin(3);
+      const double di = d[static_cast<size_t>(i)];
+      const double u0 = di - p.x0, z0 = u0 / p.s;
+      const Normal01 n0 = NormalAt(z0);
+      const double cdf0 = n0.cdf, pdf0 = n0.pdf;
+      const double z1 = (di - p.x1) / p.s;
+      const Normal01 n1 = band ? NormalAt(z1) : Normal01{0.0, 0.0};
+      const double cdf1 = n1.cdf, pdf1 = n1.pdf;
+      const Eigen::Vector4d basis(
+          1.0, cdf0, u0 * cdf0 + p.s * pdf0,
+          wall ? (band ? cdf1 - cdf0 : 0.0) : u0 * (1.0 - cdf0) - p.s * pdf0);
+      const double r = basis.dot(p.lin) - v[static_cast<size_t>(i)];
+      cost += r * r;
+      if (jtj == nullptr) continue;
+      Vector7 row = Vector7::Zero();
       int col = 0;
-      if (wall) {
-        (*jac)(i, col++) = -(c0 * pdf0 / p.s + go * cdf0) + (band ? l3 * pdf0 / p.s : 0.0);
-        if (inner == Inner::kFree) (*jac)(i, col++) = band ? -l3 * pdf1 / p.s : 0.0;
-        if (fit_sigma) {
-          (*jac)(i, col++) =
-              -c0 * z0 * pdf0 / p.s + go * pdf0 + (band ? l3 * (z0 * pdf0 - z1 * pdf1) / p.s : 0.0);
+      if (!basis_only) {
+        const double c0 = p.lin(1), go = p.lin(2), l3 = p.lin(3);
+        if (wall) {
+          row(col++) = -(c0 * pdf0 / p.s + go * cdf0) + (band ? l3 * pdf0 / p.s : 0.0);
+          if (inner == Inner::kFree) row(col++) = band ? -l3 * pdf1 / p.s : 0.0;
+          if (fit_sigma) {
+            row(col++) = -c0 * z0 * pdf0 / p.s + go * pdf0 +
+                         (band ? l3 * (z0 * pdf0 - z1 * pdf1) / p.s : 0.0);
+          }
+        } else {
+          row(col++) = -(c0 * pdf0 / p.s + go * cdf0 + l3 * (1.0 - cdf0));
+          if (fit_sigma) row(col++) = -c0 * z0 * pdf0 / p.s + (go - l3) * pdf0;
         }
-      } else {
-        (*jac)(i, col++) = -(c0 * pdf0 / p.s + go * cdf0 + l3 * (1.0 - cdf0));
-        if (fit_sigma) (*jac)(i, col++) = -c0 * z0 * pdf0 / p.s + (go - l3) * pdf0;
       }
-      jac->row(i).segment(col, nl) = basis.transpose();
+      row.segment<kLinear>(col) = basis;
+      jtj->noalias() += row * row.transpose();
+      *jtr += row * (basis_only ? -v[static_cast<size_t>(i)] : r);
     }
+    return cost;
   };
   Params p{x0, x1, sigma, Eigen::Vector4d::Zero()};
-  const Eigen::VectorXd values = Eigen::Map<const Eigen::VectorXd>(v.data(), n);
-  {
-    Eigen::MatrixXd basis(n, nl);
-    evaluate(p, nullptr, &basis, nullptr);
-    p.lin = basis.colPivHouseholderQr().solve(values);
-  }
-  Eigen::VectorXd res(n);
-  Eigen::MatrixXd jac(n, nn + nl);
-  evaluate(p, &res, nullptr, nullptr);
-  double current = res.squaredNorm();
+  Normal jtj;
+  Vector7 jtr;
+  // The linear parameters at the start: least squares (tiny ridge: the wall
+  // column is zero where the wall is hidden).
+  evaluate(p, &jtj, &jtr, true);
+  p.lin = (jtj.topLeftCorner<4, 4>() + 1e-12 * Eigen::Matrix4d::Identity())
+              .ldlt()
+              .solve(-jtr.head<4>());
+  double current = evaluate(p, nullptr, nullptr, false);
   double lambda = 1e-3;
-  for (int iteration = 0; iteration < 40; ++iteration) {
-    evaluate(p, &res, nullptr, &jac);
-    const Eigen::MatrixXd jtj = jac.transpose() * jac;
-    const Eigen::VectorXd jtr = jac.transpose() * res;
+  for (int iteration = 0; iteration < 30; ++iteration) {
+    evaluate(p, &jtj, &jtr, false);
     bool improved = false, converged = false;
     for (int attempt = 0; attempt < 10 && !improved; ++attempt) {
-      Eigen::MatrixXd damped = jtj;
-      damped.diagonal() += lambda * jtj.diagonal() + Eigen::VectorXd::Constant(nn + nl, 1e-12);
-      const Eigen::VectorXd step = damped.ldlt().solve(-jtr);
+      Normal damped = jtj;
+      damped.diagonal() += lambda * damped.diagonal() + Vector7::Constant(1e-12);
+      for (int i = np; i < 7; ++i) damped(i, i) = 1.0;  // unused slots
+      const Vector7 step = damped.ldlt().solve(-jtr);
       Params next = p;
       int col = 0;
       next.x0 += step(col++);
       if (inner == Inner::kFree) next.x1 += step(col++);
       if (fit_sigma) next.s += step(col++);
-      next.lin += step.tail(nl);
+      next.lin += step.segment<kLinear>(nn);
       if (!(next.s > 0.2)) {
         lambda *= 10;
         continue;
       }
-      evaluate(next, &res, nullptr, nullptr);
-      const double cost = res.squaredNorm();
+      const double cost = evaluate(next, nullptr, nullptr, false);
       if (cost < current) {
-        converged = step.head(nn).cwiseAbs().maxCoeff() < 1e-6;
+        converged = step.head(nn).cwiseAbs().maxCoeff() < 1e-4;
         p = next;
         current = cost;
         lambda = std::max(1e-7, lambda * 0.3);
@@ -277,7 +302,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
   // the bottom rim is looked for down to `reach` inside the rim.
   const double reach =
       std::clamp(0.5 * circle.radius, band + 2.0 * hw, std::max(band + 2.0 * hw, 30.0));
-  const double d_lo = -band - (inner == Inner::kRamp ? hw + 1.0 : reach), d_hi = band + hw + 1.0;
+  const double d_lo = -band - (inner == Inner::kFree ? reach : hw + 1.0), d_hi = band + hw + 1.0;
   // Each wedge's pixels (radial distance d, value).
   std::vector<std::vector<double>> wd(static_cast<size_t>(num)), wv(static_cast<size_t>(num));
   const double rmax = circle.radius + d_hi, rmin = std::max(0.0, circle.radius + d_lo);
@@ -289,7 +314,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
   for (Eigen::Index row = row_lo; row <= row_hi; ++row) {
     for (Eigen::Index col = col_lo; col <= col_hi; ++col) {
       const double dx = col - circle.centre.x(), dy = row - circle.centre.y();
-      const double rho = std::hypot(dx, dy);
+      const double rho = std::sqrt(dx * dx + dy * dy);
       if (rho < rmin || rho > rmax) continue;
       double t = std::atan2(dy, dx);
       if (t < 0) t += 2 * kPi;

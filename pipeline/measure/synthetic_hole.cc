@@ -11,7 +11,9 @@ ImageF RenderSyntheticHole(const SyntheticHole& hole) {
   std::optional<SurfaceTexture> texture;
   if (hole.texture_seed) texture.emplace(TextureStyle::kRich, *hole.texture_seed);
   const Eigen::Vector2d bottom_centre = hole.centre_px + hole.bottom_shift_px;
-  auto scene = [&](double x, double y) -> float {
+  // The scene at (x, y); the texture varies little within a pixel, so it is
+  // taken at the pixel's centre (`surface_here`), the boundaries exactly.
+  auto scene = [&](double x, double y, float surface_here) -> float {
     const Eigen::Vector2d p(x, y);
     if ((p - hole.centre_px).squaredNorm() <= hole.radius_px * hole.radius_px) {
       return (p - bottom_centre).squaredNorm() <= hole.bottom_radius_px * hole.bottom_radius_px
@@ -21,9 +23,7 @@ ImageF RenderSyntheticHole(const SyntheticHole& hole) {
     for (const SyntheticHole::Blob& blob : hole.blobs) {
       if ((p - blob.centre_px).squaredNorm() <= blob.radius_px * blob.radius_px) return blob.level;
     }
-    if (!texture) return hole.surface;
-    return texture->Reflectance(hole.texture_offset_mm.x() + x * hole.gsd_mm,
-                                hole.texture_offset_mm.y() + y * hole.gsd_mm);
+    return surface_here;
   };
   // Pixels within a px of a boundary are integrated finely.
   auto near = [](const Eigen::Vector2d& p, const Eigen::Vector2d& c, double r) {
@@ -33,15 +33,19 @@ ImageF RenderSyntheticHole(const SyntheticHole& hole) {
   for (int row = 0; row < hole.height_px; ++row) {
     for (int col = 0; col < hole.width_px; ++col) {
       const Eigen::Vector2d p(col, row);
+      const float surface_here =
+          texture ? texture->Reflectance(hole.texture_offset_mm.x() + col * hole.gsd_mm,
+                                         hole.texture_offset_mm.y() + row * hole.gsd_mm)
+                  : hole.surface;
       bool edge =
           near(p, hole.centre_px, hole.radius_px) || near(p, bottom_centre, hole.bottom_radius_px);
       for (const SyntheticHole::Blob& blob : hole.blobs)
         edge = edge || near(p, blob.centre_px, blob.radius_px);
-      const int n = edge ? hole.supersampling : 3;
+      const int n = edge ? hole.supersampling : 1;
       double sum = 0.0;
       for (int i = 0; i < n; ++i) {
         for (int j = 0; j < n; ++j) {
-          sum += scene(col - 0.5 + (j + 0.5) / n, row - 0.5 + (i + 0.5) / n);
+          sum += scene(col - 0.5 + (j + 0.5) / n, row - 0.5 + (i + 0.5) / n, surface_here);
         }
       }
       area(row, col) = static_cast<float>(sum / (n * n));

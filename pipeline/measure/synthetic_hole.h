@@ -13,7 +13,8 @@
 // exposure), and uncovered pixels (exactly 0) on one side of another line.
 //
 // Pixels are integrated over their area (supersampled near the rims and
-// blobs), blurred by a Gaussian PSF, then given Gaussian noise.
+// blobs; the texture, smooth at the pixel scale, taken at the pixel's
+// centre), blurred by a Gaussian PSF, then given Gaussian noise.
 #pragma once
 
 #include <cstdint>
