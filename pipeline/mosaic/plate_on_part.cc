@@ -376,6 +376,10 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
       result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
     }
   }
+  // Ceres' diagonal blocks are symmetric to rounding only; the saved matrix
+  // is exactly.
+  result.scene.covariance =
+      (0.5 * (result.scene.covariance + result.scene.covariance.transpose())).eval();
   if (plate.found) {
     double sum_sq = 0;
     const Eigen::Matrix2Xd& res = result.scene.plate_residual_px;

@@ -1,0 +1,179 @@
+// The mosaic stage's final adjustment end to end (RunProject) on a rendered
+// demo project (the caltab lying on the part, tests/sim_cache.h):
+// - calibrate + mosaic: the intrinsics refined under the calibration's
+//   covariance, report.mosaic's plate_scale_check against its own sigmas, and
+//   mosaic/scene.json holding the joint covariance (plane pose, table
+//   positions, plate, intrinsics) that round-trips exactly;
+// - calibration.from a .cameramodel and the tile with the whole plate
+//   removed: the intrinsics held and the report saying so, and "no plate on
+//   the part" with the table-only scale sigma.
+// The numbers against the truth are plate_on_part_sim_test.cc's.
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+
+#include "adapters/mrcal/cameramodel_io.h"
+#include "adapters/project_io/project_reader.h"
+#include "adapters/project_io/scene_json.h"
+#include "pipeline/orchestration/run_project.h"
+#include "tests/sim_cache.h"
+#include "tests/test_util.h"
+
+namespace fs = std::filesystem;
+
+namespace omm {
+namespace {
+
+// Not the seed the mosaic stage test uses (3): another plate placement.
+constexpr std::uint64_t kSeed = 1;
+
+const ReportValue& Member(const ReportObject& object, const std::string& name) {
+  for (const auto& [key, value] : object) {
+    if (key == name) return value;
+  }
+  ADD_FAILURE() << "no member " << name;
+  static const ReportValue none;
+  return none;
+}
+double Number(const ReportObject& object, const std::string& name) {
+  return std::get<double>(Member(object, name).data());
+}
+std::string Text(const ReportObject& object, const std::string& name) {
+  const ReportValue& v = Member(object, name);
+  return std::holds_alternative<std::string>(v.data()) ? std::get<std::string>(v.data()) : "";
+}
+
+class MosaicPlateStageTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    sim_ = new testing::CachedProject(testing::SimulatedProject("demo", kSeed));
+    testing::CopyProject(sim_->project_dir, dir_->path() / "demo");
+    RunOptions options;
+    options.stages = {Stage::kCalibrate, Stage::kMosaic};
+    try {
+      summary_ = new RunSummary(RunProject(LoadProject(dir_->path() / "demo"), options));
+    } catch (const std::exception& e) {
+      error_ = new std::string(e.what());
+    }
+  }
+  static void TearDownTestSuite() {
+    delete summary_;
+    delete error_;
+    delete sim_;
+    delete dir_;
+  }
+  void SetUp() override {
+    ASSERT_EQ(error_, nullptr) << *error_;
+    ASSERT_TRUE(summary_->report.mosaic.has_value());
+  }
+  static const ReportObject& Mosaic() { return summary_->report.mosaic->extra; }
+  static fs::path Out() { return dir_->path() / "demo" / "out"; }
+
+  static testing::TempDir* dir_;
+  static testing::CachedProject* sim_;
+  static RunSummary* summary_;
+  static std::string* error_;
+};
+testing::TempDir* MosaicPlateStageTest::dir_ = nullptr;
+testing::CachedProject* MosaicPlateStageTest::sim_ = nullptr;
+RunSummary* MosaicPlateStageTest::summary_ = nullptr;
+std::string* MosaicPlateStageTest::error_ = nullptr;
+
+TEST_F(MosaicPlateStageTest, ReportHasThePlateScaleCheckAndTheRefinedIntrinsics) {
+  EXPECT_EQ(Text(Mosaic(), "intrinsics"), "refined with the calibration covariance as prior");
+  EXPECT_GT(Number(Mosaic(), "intrinsics_max_change_sigmas"), 0.0);
+  EXPECT_LT(Number(Mosaic(), "intrinsics_max_change_sigmas"), 3.0);
+  // The plate makes the scale a few ppm sharp (the table alone: ~46 ppm).
+  EXPECT_LT(Number(Mosaic(), "scale_sigma_ppm"), 10.0);
+  const ReportValue& check_value = Member(Mosaic(), "plate_scale_check");
+  ASSERT_TRUE(std::holds_alternative<ReportObject>(check_value.data()));
+  const ReportObject& check = std::get<ReportObject>(check_value.data());
+  const auto& whole = std::get<ReportValue::Array>(Member(check, "whole_in_tiles").data());
+  const auto& seen = std::get<ReportValue::Array>(Member(check, "seen_in_tiles").data());
+  ASSERT_EQ(whole.size(), 1u);
+  EXPECT_GE(seen.size(), 2u);  // seed 1: cut in 3 more tiles
+  EXPECT_NE(std::find(seen.begin(), seen.end(), whole[0]), seen.end());
+  EXPECT_EQ(Text(check, "height"), "estimated (seen in " + std::to_string(seen.size()) + " tiles)");
+  // Truth: printed flat (0 mm), and a table without a scale error.
+  EXPECT_LT(std::abs(Number(check, "height_mm")), 3 * Number(check, "height_sigma_mm"));
+  EXPECT_LT(std::abs(Number(check, "scale_minus_1_ppm")), 3 * Number(check, "sigma_ppm"));
+  EXPECT_GT(Number(check, "sigma_ppm"), Number(Mosaic(), "scale_sigma_ppm"));
+  EXPECT_LT(Number(check, "rms_px"), 0.02);
+}
+
+TEST_F(MosaicPlateStageTest, SceneJsonHoldsTheJointCovariance) {
+  const fs::path path = Out() / "mosaic" / "scene.json";
+  const SavedScene scene = ReadSceneJson(path);
+  const CameraModel calibrated = ReadCameraModel(Out() / "camera.cameramodel");
+  EXPECT_TRUE(scene.intrinsics_refined);
+  EXPECT_EQ(scene.lens_model, calibrated.lens_model);
+  ASSERT_EQ(scene.scene.intrinsics.size(), calibrated.intrinsics.size());
+  ASSERT_EQ(scene.scene.plates.size(), 1u);
+  const int num_tiles = static_cast<int>(scene.scene.table_pos_mm.size());
+  const int k0 = PlaneSceneCovarianceSize(num_tiles, 1, 0);
+  const int n = static_cast<int>(scene.scene.intrinsics.size());
+  const Eigen::MatrixXd& c = scene.scene.covariance;
+  ASSERT_EQ(c.rows(), k0 + n);
+  EXPECT_EQ(c, c.transpose());
+  // Joint: the intrinsics block and its correlation with the pose and tables.
+  EXPECT_GT(c.diagonal().tail(n).minCoeff(), 0.0);
+  EXPECT_GT(c.block(0, k0, 6 + 2 * num_tiles, n).cwiseAbs().maxCoeff(), 0.0);
+  // Positive semi-definite (t_x, t_y are the gauge: zero rows).
+  const Eigen::VectorXd scale = c.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+  const Eigen::MatrixXd correlation = scale.asDiagonal() * c * scale.asDiagonal();
+  EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(correlation).eigenvalues().minCoeff(),
+            -1e-9);
+  // Written and read back bit for bit.
+  const SavedScene again = SceneFromJson(SceneToJson(scene), "again");
+  EXPECT_EQ(again.scene.covariance, c);
+  EXPECT_EQ(again.scene.intrinsics, scene.scene.intrinsics);
+}
+
+// calibration.from a .cameramodel (no covariance) and the tile with the
+// whole plate gone: intrinsics held, no plate, and the report says both.
+TEST_F(MosaicPlateStageTest, HeldIntrinsicsAndNoPlateAreSaid) {
+  const ReportObject& check = std::get<ReportObject>(Member(Mosaic(), "plate_scale_check").data());
+  const std::string plate_tile = std::get<std::string>(
+      std::get<ReportValue::Array>(Member(check, "whole_in_tiles").data())[0].data());
+  const fs::path dir = dir_->path() / "held";
+  testing::CopyProject(sim_->project_dir, dir);
+  const fs::path model = dir_->path() / "elsewhere" / "calibrated.cameramodel";
+  fs::create_directories(model.parent_path());
+  fs::copy_file(Out() / "camera.cameramodel", model);
+  std::string reuse = "\ncalibration:\n  from: ";
+  reuse.append(model.string()).append("\nboard:");
+  testing::ReplaceInFile(dir / "project.yaml", "\nboard:", reuse);
+  fs::remove(dir / "tiles" / plate_tile);
+  std::string table;
+  for (const TileTruth& tile : sim_->truth.tiles) {
+    if (tile.image == plate_tile) continue;
+    table += tile.image + "," + std::to_string(tile.commanded_mm.x()) + "," +
+             std::to_string(tile.commanded_mm.y()) + "\n";
+  }
+  testing::WriteTextFile(dir / "table.csv", "image,x_mm,y_mm\n" + table);
+  // The features may name the removed tile: drop them, their measurements
+  // and the CMM values of those.
+  const std::string yaml = testing::ReadTextFile(dir / "project.yaml");
+  testing::WriteTextFile(dir / "project.yaml", yaml.substr(0, yaml.find("\nfeatures:") + 1));
+  fs::remove(dir / "cmm.csv");
+  RunOptions options;
+  options.stages = {Stage::kMosaic};
+  const RunSummary summary = RunProject(LoadProject(dir), options);
+  ASSERT_TRUE(summary.report.mosaic.has_value());
+  const ReportObject& mosaic = summary.report.mosaic->extra;
+  EXPECT_EQ(Text(mosaic, "intrinsics"), "held: calibration from a .cameramodel without covariance");
+  const std::string plate = Text(mosaic, "plate_scale_check");
+  EXPECT_EQ(plate.rfind("no plate on the part: ", 0), 0u) << plate;
+  EXPECT_NE(plate.find("scale from the table positions alone (sigma "), std::string::npos) << plate;
+  EXPECT_GT(Number(mosaic, "scale_sigma_ppm"), 30.0);  // 8 tiles, 0.02 mm: ~50 ppm
+  const SavedScene scene = ReadSceneJson(dir / "out" / "mosaic" / "scene.json");
+  EXPECT_FALSE(scene.intrinsics_refined);
+  EXPECT_TRUE(scene.scene.plates.empty());
+  const int n = static_cast<int>(scene.scene.intrinsics.size());
+  EXPECT_EQ(scene.scene.covariance.bottomRightCorner(n, n).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(scene.scene.intrinsics, ReadCameraModel(model).intrinsics);
+}
+
+}  // namespace
+}  // namespace omm
