@@ -438,6 +438,34 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   }
   result.matching_seconds = Seconds(t0);
 
+  // A tile without a usable pair is placed by nothing but table.csv: only
+  // acceptable when its overlaps hold no texture to check it with.
+  std::vector<int> num_usable(num_tiles, 0), num_predicted(num_tiles, 0),
+      num_textured(num_tiles, 0);
+  for (const PairRegistration& pair : result.pairs) {
+    for (int t : {pair.tile_a, pair.tile_b}) {
+      num_usable[t] += pair.usable;
+      ++num_predicted[t];
+      num_textured[t] += pair.num_candidates;
+    }
+  }
+  std::ostringstream unplaced;
+  for (int i = 0; i < num_tiles; ++i) {
+    if (num_usable[i] > 0) continue;
+    if (num_predicted[i] == 0) {
+      unplaced << "; tile " << i << " overlaps no other tile at its table position";
+    } else if (num_textured[i] >= options.min_pair_matches) {
+      unplaced << "; tile " << i << " matches none of its " << num_predicted[i]
+               << " predicted neighbours, though their overlaps hold " << num_textured[i]
+               << " textured corners: the image does not show what its table position says "
+                  "(or its texture is too weak to check)";
+    }
+  }
+  if (!unplaced.str().empty()) {
+    result.brief = "registration UNUSABLE: not placed by the images" + unplaced.str();
+    return result;
+  }
+
   // 4.-5. Tracks and adjustment, with outlier passes and relocation.
   t0 = Clock::now();
   PlaneBundleConfig config;

@@ -32,8 +32,14 @@
 //    and the scene re-solved; then (rematch_passes) every match is relocated
 //    with the affine the adjusted plane model predicts between the two tiles
 //    and the scene solved again (each from its first position, refined).
-// A tile without any kept observation is held by its table prior alone; the
-// summary lists it (tiles_held_by_prior) and its brief says so.
+// A tile without a usable pair fails the registration (unusable, the brief
+// names it) if it overlaps no other tile or if its predicted overlaps hold
+// at least min_pair_matches textured corners: its image does not show what
+// table.csv says (or too weakly to check), and placing it by table.csv
+// would put a wrong or unverified tile in the mosaic. Otherwise (a blank
+// tile) and for a tile whose observations the outlier passes all dropped, the
+// tile is held by its table prior alone; the summary lists it
+// (tiles_held_by_prior) and its brief says so.
 #pragma once
 
 #include <string>
