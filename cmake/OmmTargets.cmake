@@ -13,6 +13,15 @@ if(OMM_SANITIZE)
   add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
                       -Wno-maybe-uninitialized)
   add_link_options(-fsanitize=address,undefined)
+  # Eigen 3.4 drops its "glibc malloc is 16-byte aligned" shortcut when
+  # __SANITIZE_ADDRESS__ is defined and switches to its handmade allocator,
+  # which stores the real block pointer in the 8 bytes before the data. Debian's
+  # libceres.a is built without ASan and allocates Eigen matrices with plain
+  # malloc, so a matrix allocated in Ceres and freed in our code (or back) reads
+  # or frees a wrong pointer (ASan: heap-buffer-overflow in
+  # handmade_aligned_free). Keep the uninstrumented allocation scheme: ASan's
+  # malloc is 16-byte aligned on x86-64 like glibc's.
+  add_compile_definitions(EIGEN_MALLOC_ALREADY_ALIGNED=1)
 endif()
 
 # omm_library(NAME SOURCES ... LINKS ...): a static library whose include root is
