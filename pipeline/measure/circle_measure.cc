@@ -370,51 +370,84 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
     }
     if (peak < 0) continue;
     const double x_rim = d_lo + peak * kStep;
-    double x_lo = x_rim - hw, x1 = x_rim - hw;
-    Inner mode = inner;
+    const auto& all_d = wd[static_cast<size_t>(k)];
+    const auto& all_v = wv[static_cast<size_t>(k)];
+    // The wedge's pixels with d in [lo, hi].
+    auto samples_in = [&](double lo, double hi, std::vector<double>* d, std::vector<double>* v) {
+      d->clear();
+      v->clear();
+      for (size_t i = 0; i < all_d.size(); ++i) {
+        if (all_d[i] >= lo && all_d[i] <= hi) {
+          d->push_back(all_d[i]);
+          v->push_back(all_v[i]);
+        }
+      }
+    };
+    auto accept = [&](const StepFit& step) {
+      return step.ok && std::abs(step.x0 - x_rim) <= 1.0 && step.contrast >= options.min_contrast &&
+             step.sigma < hw;
+    };
+    std::vector<double> d, v;
     if (inner == Inner::kFree) {
-      // The bottom rim: the strongest rise inside the rim, past a dip.
-      const double g_peak = deriv[static_cast<size_t>(peak)];
+      samples_in(x_rim - hw, x_rim + hw, &d, &v);
+      wedge.step = FitStep(d, v, x_rim, x_rim - hw, sigma, true, Inner::kRamp);
+      wedge.ok = accept(wedge.step);
+      // The bottom rim: the strongest rise inside the rim's flank ...
       const int stop =
           std::max(first + h, static_cast<int>(std::lround((x_rim - reach + band - d_lo) / kStep)));
-      double dip = g_peak, best = 0.0;
+      double best = 0.2 * options.min_contrast;
       int inner_peak = -1;
-      for (int i = peak - 1; i >= stop; --i) {
+      for (int i = peak - static_cast<int>(std::lround(2.0 * sigma / kStep)); i >= stop; --i) {
         const double g = deriv[static_cast<size_t>(i)];
-        dip = std::min(dip, g);
-        if (g > best && g > 2.0 * std::max(dip, 0.0) && i + 1 < peak &&
-            g >= deriv[static_cast<size_t>(i - 1)] && g >= deriv[static_cast<size_t>(i + 1)]) {
+        if (g > best && g >= deriv[static_cast<size_t>(i - 1)] &&
+            g >= deriv[static_cast<size_t>(i + 1)]) {
           best = g;
           inner_peak = i;
         }
       }
-      if (inner_peak >= 0 && best >= 0.5 * options.min_contrast * kStep * 2 * h / 2.5) {
-        x1 = d_lo + inner_peak * kStep;
-        x_lo = std::min(x_lo, x1 - hw);
-      } else {
-        mode = Inner::kRamp;  // none: fit the rim alone
+      const double x_peak = d_lo + inner_peak * kStep;
+      if (wedge.ok && inner_peak >= 0 && x_peak < x_rim - 2.0 * hw) {
+        // ... far inside: a step of its own.
+        samples_in(x_peak - hw, x_peak + hw, &d, &v);
+        const StepFit step = FitStep(d, v, x_peak, x_peak - hw, sigma, true, Inner::kRamp);
+        if (step.ok && std::abs(step.x0 - x_peak) <= 1.0 &&
+            step.contrast >= 0.5 * options.min_contrast) {
+          wedge.step.x1 = step.x0;
+          wedge.step.wall_contrast = step.contrast;
+          wedge.inner_ok = true;
+        }
+        continue;
       }
-    } else if (inner == Inner::kFixed) {
+      // ... or near: both steps in one fit, started there or on two
+      // shoulders of the rim's flank (a narrow wall shows as a shoulder, not
+      // a peak); it must explain the same samples clearly better than the
+      // rim alone.
+      std::vector<double> starts = {x_rim - 2.0 * sigma, x_rim - 3.5 * sigma};
+      if (inner_peak >= 0) starts.push_back(x_peak);
+      const double lo = std::min(x_rim - hw, *std::min_element(starts.begin(), starts.end()) - hw);
+      samples_in(lo, x_rim + hw, &d, &v);
+      const StepFit alone = FitStep(d, v, x_rim, x_rim, sigma, true, Inner::kRamp);
+      for (const double x1 : starts) {
+        const StepFit step = FitStep(d, v, x_rim, x1, sigma, true, Inner::kFree);
+        const bool resolved =
+            accept(step) && step.x1 < step.x0 - 2.0 * step.sigma && step.x1 > lo + step.sigma &&
+            step.wall_contrast >= 0.5 * options.min_contrast && step.rms < 0.7 * alone.rms;
+        if (resolved && (!wedge.inner_ok || step.rms < wedge.step.rms)) {
+          wedge.step = step;
+          wedge.ok = wedge.inner_ok = true;
+        }
+      }
+      continue;
+    }
+    double x1 = kNaN;
+    Inner mode = inner;
+    if (inner == Inner::kFixed) {
       x1 = bottom ? BottomRimOffset(circle, *bottom, n) : kNaN;
       if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;  // wall hidden or wide
     }
-    std::vector<double> d, v;
-    const auto& all_d = wd[static_cast<size_t>(k)];
-    const auto& all_v = wv[static_cast<size_t>(k)];
-    for (size_t i = 0; i < all_d.size(); ++i) {
-      if (all_d[i] >= x_lo && all_d[i] <= x_rim + hw) {
-        d.push_back(all_d[i]);
-        v.push_back(all_v[i]);
-      }
-    }
-    const bool fit_sigma = inner != Inner::kFree;
-    wedge.step = FitStep(d, v, x_rim, x1, sigma, fit_sigma, mode);
-    wedge.ok = wedge.step.ok && std::abs(wedge.step.x0 - x_rim) <= 1.0 &&
-               wedge.step.contrast >= options.min_contrast && wedge.step.sigma < hw;
-    wedge.inner_ok = wedge.ok && mode == Inner::kFree &&
-                     wedge.step.x1 < wedge.step.x0 - 2.0 * wedge.step.sigma &&
-                     wedge.step.x1 > x_lo + wedge.step.sigma &&
-                     wedge.step.wall_contrast >= 0.5 * options.min_contrast;
+    samples_in(x_rim - hw, x_rim + hw, &d, &v);
+    wedge.step = FitStep(d, v, x_rim, x1, sigma, true, mode);
+    wedge.ok = accept(wedge.step);
   }
   std::vector<double> rms, sigmas;
   for (const WedgeEdge& w : pass.wedges) {
@@ -625,7 +658,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
                         : bottom ? Inner::kFixed
                                  : Inner::kRamp;
     pass = FindEdges(image, circle, band, sigma, inner, bottom, options);
-    if (inner != Inner::kFree && std::isfinite(pass.sigma)) sigma = pass.sigma;
+    if (std::isfinite(pass.sigma)) sigma = pass.sigma;
     const int num = static_cast<int>(pass.wedges.size());
     result.num_wedges = num;
     result.num_uncovered = 0;
