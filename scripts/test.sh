@@ -27,10 +27,10 @@ echo "== AddressSanitizer + UBSan build and tests (build-asan/)"
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DOMM_SANITIZE=ON \
   -DOMM_WERROR=$werror -DOMM_BUILD_BENCHMARKS=OFF
 cmake --build build-asan -j "$jobs"
-# Leak detection is off for now: LeakSanitizer reports leaks in the test
-# binaries that run mrcal_optimize and Ceres solves (not yet traced to our code
-# or the libraries). Memory errors and undefined behaviour stay fatal.
-ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=0:abort_on_error=1} \
+# Memory errors, leaks and undefined behaviour are fatal. scripts/lsan.supp
+# lists the leaks inside prebuilt libraries (mrcal), each with its reason.
+ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1} \
+LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$PWD/scripts/lsan.supp:print_suppressions=0} \
 UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1} \
   ctest --test-dir build-asan --output-on-failure -j "$jobs" -LE slow
 
