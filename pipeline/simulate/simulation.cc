@@ -666,7 +666,7 @@ std::string SimulationOptions::Check() const {
   if (num_calib_images < 3 || num_calib_images > 100) {
     return "num_calib_images must be in 3..100 (one partial, one without the plate, the rest full)";
   }
-  if (supersampling < 1 || supersampling > 16) return "supersampling must be in 1..16";
+  if (supersampling < 2 || supersampling > 16) return "supersampling must be in 2..16";
   if (edge_supersampling < 1 || edge_supersampling > 64)
     return "edge_supersampling must be in 1..64";
   if (num_threads < 1) return "num_threads must be >= 1";
