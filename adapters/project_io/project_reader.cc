@@ -399,9 +399,17 @@ void ReadProjectYaml(const fs::path& dir, Project& project, bool& has_table_keys
         yaml.Positive(yaml.Required(root["table"], "table", "sigma_mm"), "table.sigma_mm");
   }
   if (root["mosaic"].IsDefined()) {
-    yaml.CheckKeys(root["mosaic"], "mosaic", {"gsd_mm"});
+    yaml.CheckKeys(root["mosaic"], "mosaic", {"gsd_mm", "plate_height_mm"});
     project.mosaic_gsd_mm =
         yaml.Positive(yaml.Required(root["mosaic"], "mosaic", "gsd_mm"), "mosaic.gsd_mm");
+    if (const YAML::Node height = root["mosaic"]["plate_height_mm"];
+        height.IsDefined() && !height.IsNull()) {
+      project.plate_height_mm = yaml.Double(height, "mosaic.plate_height_mm");
+      if (!(*project.plate_height_mm >= 0.0)) {
+        yaml.Fail(height, "mosaic.plate_height_mm",
+                  fmt::format("expected a number >= 0, got {}", height.Scalar()));
+      }
+    }
   }
 
   std::set<std::string> feature_names;

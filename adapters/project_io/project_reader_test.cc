@@ -99,6 +99,16 @@ TEST_F(ProjectReaderTest, OptionalKeysAndChessboardAreRead) {
   EXPECT_TRUE(read.cmm.empty());
 }
 
+TEST_F(ProjectReaderTest, PlateHeightIsOptionalAndRoundTrips) {
+  EXPECT_FALSE(LoadProject(project_.dir).plate_height_mm.has_value());
+  project_.plate_height_mm = 2.85;
+  WriteProjectFiles(project_);
+  EXPECT_THAT(testing::ReadTextFile(File("project.yaml")), HasSubstr("plate_height_mm: 2.85"));
+  EXPECT_EQ(LoadProject(project_.dir).plate_height_mm, 2.85);
+  Replace("project.yaml", "plate_height_mm: 2.85", "plate_height_mm: -1");
+  ExpectError({"project.yaml", "mosaic.plate_height_mm", "expected a number >= 0, got -1"});
+}
+
 TEST_F(ProjectReaderTest, CaltabGeometryKeysAreRead) {
   Replace("project.yaml", "frame_mm: 100", "frame_mm: 110");
   Replace("project.yaml", "triangle_mm: 12.5", "triangle_mm: 15");

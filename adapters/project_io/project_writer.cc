@@ -70,6 +70,9 @@ std::string ProjectYaml(const Project& project) {
     out << YAML::EndMap;
     out << YAML::Key << "mosaic" << YAML::Value << YAML::BeginMap;
     out << YAML::Key << "gsd_mm" << YAML::Value << Number(project.mosaic_gsd_mm);
+    if (project.plate_height_mm) {
+      out << YAML::Key << "plate_height_mm" << YAML::Value << Number(*project.plate_height_mm);
+    }
     out << YAML::EndMap;
   }
 

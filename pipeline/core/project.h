@@ -64,6 +64,10 @@ struct Project {
   std::optional<BoardSpec> board;  // required unless calibration_from is set
   double table_sigma_mm = 0.0;
   double mosaic_gsd_mm = 0.0;
+  // mosaic.plate_height_mm: height of the marks of the calibration plate lying
+  // on the part above its top surface (the plate's thickness), mm; unset:
+  // estimated when the plate is seen in >= 2 tiles, else assumed 0.
+  std::optional<double> plate_height_mm;
   std::vector<FeatureSpec> features;
   std::vector<MeasurementSpec> measurements;
 

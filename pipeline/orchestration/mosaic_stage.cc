@@ -255,8 +255,10 @@ void RunMosaicStage(StageContext& context) {
   const auto final_start = std::chrono::steady_clock::now();
   PlateOnPart plate;
   if (project.board) {
+    PlateOnPartOptions plate_options;
+    plate_options.height_mm = project.plate_height_mm;
     plate = FindPlateOnPart(tiles, *project.board, camera, registration.input, registration.scene,
-                            PlateOnPartOptions{});
+                            plate_options);
   } else {
     plate.brief = "no plate on the part: project.yaml has no board";
   }
