@@ -1,6 +1,7 @@
 #include "pipeline/measure/circle_measure.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -285,10 +286,10 @@ double BottomRimOffset(const Circle& circle, const Circle& bottom, const Eigen::
   return b + std::sqrt(disc) - circle.radius;
 }
 
-// One pass of step 2 about `circle`. `inner`: kRamp fits each rim alone
-// with the blur free (the first pass); kFree looks for the bottom rim on
-// each ray and fits both steps with the blur held; kFixed takes the bottom
-// rim from `bottom` and fits the blur.
+// One pass of step 2 about `circle` (the header's passes a-c): `inner` is
+// kRamp for the rims alone, kFree to look for the bottom rim on each ray as
+// well, kFixed to take it from `bottom`. The blur is fitted per wedge,
+// `sigma` (the previous pass's median) only places the shoulder starts.
 EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, double sigma,
                    Inner inner, const std::optional<Circle>& bottom,
                    const CircleMeasureOptions& options) {
@@ -443,7 +444,8 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
     Inner mode = inner;
     if (inner == Inner::kFixed) {
       x1 = bottom ? BottomRimOffset(circle, *bottom, n) : kNaN;
-      if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;  // wall hidden or wide
+      // Beyond the window's reach (a wide wall) or no bottom rim: the ramp.
+      if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;
     }
     samples_in(x_rim - hw, x_rim + hw, &d, &v);
     wedge.step = FitStep(d, v, x_rim, x1, sigma, true, mode);
@@ -639,6 +641,7 @@ std::string CircleMeasurement::Brief() const {
 
 CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
                                 double nominal_radius_px, const CircleMeasureOptions& options) {
+  assert(options.Check().empty() && nominal_radius_px > 0.0);
   CircleMeasurement result;
   const double search =
       options.search_fraction * 2.0 * nominal_radius_px + options.search_margin_px;
@@ -701,8 +704,15 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
       const CircleFit bottom_fit =
           FitCircleRobust(inner_points, Circle{circle.centre, circle.radius + Median(offsets)},
                           options.tukey_sigmas);
-      if (std::isfinite(bottom_fit.circle.radius) && bottom_fit.circle.radius > 0.0)
+      // The bottom rim looks smaller than the top one and lies inside it.
+      if (bottom_fit.circle.radius > 0.0 && bottom_fit.circle.radius < circle.radius &&
+          (bottom_fit.circle.centre - circle.centre).norm() < circle.radius) {
         bottom = bottom_fit.circle;
+      }
+    }
+    if (inner == Inner::kFree) {
+      result.num_bottom_rim_points = static_cast<int>(inner_index.size());
+      result.bottom_rim_modelled = bottom.has_value();
     }
     fit = FitCircleRobust(points_at(index, false), circle, options.tukey_sigmas);
     fit.index = index;
@@ -743,8 +753,17 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
     result.error = text;
     return result;
   }
-  if (result.num_inliers < options.min_inlier_fraction * num ||
-      result.rms_px > options.max_rms_px) {
+  if (result.rms_px > options.max_rms_px) {
+    // Edges scattered by px about the best circle: texture, not a rim.
+    char text[160];
+    std::snprintf(text, sizeof(text),
+                  "not found near the expected position (no rim of the nominal radius: edges "
+                  "%.2f px RMS off the best circle)",
+                  result.rms_px);
+    result.error = text;
+    return result;
+  }
+  if (result.num_inliers < options.min_inlier_fraction * num) {
     char text[160];
     std::snprintf(text, sizeof(text), "poor fit: %d of %d wedges fit the circle, rms %.3f px",
                   result.num_inliers, result.num_wedges, result.rms_px);

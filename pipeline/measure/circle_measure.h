@@ -2,58 +2,71 @@
 // mosaic), with the covariance of the edge fit.
 //
 // Scene. A through-hole is a dark disc in a textured, brighter surface. The
-// part is thick, so inside the top rim one side of the hole shows the bore
-// wall (parallax): an intermediate gray crescent between the rim and the
-// darker bottom opening. Only the OUTERMOST dark-to-bright step along a ray
-// from the centre is the top rim.
+// part is thick and seen in perspective, so inside the top rim the bore
+// wall shows as a gray band between the top rim and the bottom rim (which
+// looks smaller and is shifted away from the camera's axis): a ring when the
+// axis passes through the hole, a crescent otherwise. Only the OUTERMOST
+// dark-to-bright step along a ray from the centre is the top rim.
 //
 // Procedure.
 //  1. Coarse centre: every pixel's gradient g in an annulus around the
 //     expected circle votes for a centre at p - R g/|g| (R the nominal
 //     radius; the gradient of a dark disc points outwards), weighted by |g|;
-//     the peak of the smoothed vote map within the search square is the
-//     centre. Texture votes spread out; the bore wall's inner edge (the
-//     bottom rim) shows on part of the circle only and at lower contrast.
-//  2. Edge points in wedges: the annulus r +- (band + half-width) around the
-//     current circle is cut into wedges of `wedge_arc_px` of arc; along each
-//     wedge's centre ray the outermost strong dark-to-bright step within
-//     +- band gives a coarse edge (wedges with a second step just inside it,
-//     the tips of the bore-wall crescent, are dropped). Then a blurred
-//     two-sided ramp step is fitted to the wedge's own pixels (value against
-//     radial distance d, no interpolation):
-//         f(d) = a + gi u  blurred on u < 0,   b + go u  blurred on u > 0,
-//         u = d - x0,  blur a Gaussian of sigma s (PSF, pixel, resampling),
-//     i.e. f = a Phi(-u/s) + gi (u Phi(-u/s) - s phi(u/s))
-//            + b Phi(u/s)  + go (u Phi(u/s)  + s phi(u/s)),
-//     by Gauss-Newton in (x0, [s], a, gi, b, go). The ramps absorb the
-//     surface texture's local slope at the rim, which moves a mid-level or a
-//     gradient-maximum edge by ~ slope s^2 / contrast. The first pass fits s
-//     per wedge; later passes hold it at the first pass's median. A wedge is
-//     dropped when its fit is not a clean step: contrast below
-//     `min_contrast`, residual RMS above `max_profile_rms_ratio` times the
-//     median of the wedges, or x0 off the coarse edge.
+//     the peak of the smoothed vote map within the search square wins.
+//     Texture votes spread out; the bottom rim has less contrast.
+//  2. Edges in wedges: the annulus about the current circle is cut into
+//     wedges of `wedge_arc_px` of arc. Along each wedge's centre ray the
+//     outermost strong rise within +- band is the rim's coarse place; then a
+//     blurred step is fitted to the wedge's own pixels (value against radial
+//     distance d, no interpolation) by Levenberg-damped Gauss-Newton:
+//         f(d) = a + c0 Phi(z0) + go Rout(u0)                 rim and surface
+//                + gi Rin(u0)  or  c1 (Phi(z1) - Phi(z0))      inside: ramp or wall
+//     u_j = d - x_j, z_j = u_j / s, s the blur (PSF, pixel, resampling),
+//     Rout(u) = u Phi(u/s) + s phi(u/s) and Rin(u) = u Phi(-u/s) - s phi(u/s)
+//     the blurred ramps. The ramp go absorbs the surface texture's slope at
+//     the rim, which moves a mid-level or a gradient-maximum edge by
+//     ~ slope s^2 / contrast. The wall term is the band [x1, x0] between the
+//     bottom rim x1 and the top rim x0 (none where x1 >= x0: wall hidden).
+//     Passes: (a) the rim with an inside ramp, s free (the blur); (b) the
+//     same, and where a bottom rim shows (a rise farther in, or a shoulder
+//     on the rim's flank: a narrow wall merges with the rim) a fit of both
+//     steps that must explain the same pixels clearly better (RMS < 0.7x);
+//     the resolved bottom-rim points (x0 - x1 > 2 s) give the bottom rim's
+//     circle by a robust fit; (c) the wall term with x1 from that circle
+//     (else the ramp), until the circle settles. A wedge is dropped when its
+//     fit is not a clean step: contrast below `min_contrast`, RMS above
+//     `max_profile_rms_ratio` x the median, x0 more than 1 px off the coarse
+//     place, or it touches uncovered pixels.
 //  3. Robust circle fit to the edge points c + (r + x0) n(theta): Gauss-Newton
 //     on the radial distances, Huber then Tukey biweight IRLS with the scale
-//     from the median absolute residual. Steps 2-3 repeat about the new
-//     circle (the band shrinking to the fit's scatter) until it settles.
-//  4. The rim of a blurred disc lies sigma^2 / 2r inside the geometric one
-//     (the blur kernel's mass beyond a curved edge), so the radius is
-//     corrected by + s^2 / 2r.
+//     from the median absolute residual.
+//  4. The rim of a blurred disc lies s^2 / 2r inside the geometric one (the
+//     blur kernel's mass beyond a curved edge): the radius gets + s^2 / 2r.
+//
+// Limits. A wall ring narrower than ~2 s merges with the rim and cannot be
+// told from a wider blur. With the demo's 12 mm part seen from 410 mm at
+// 0.15 mm per px (ring 2.9 % of the radius, s ~0.8 px) that is a hole under
+// ~16 mm diameter with the camera's axis within ~2 radii of its centre:
+// measured on synthetic holes, radius up to 0.17 px small (8 mm hole, axis
+// through it) and centre up to 0.07 px off, which the covariance does not
+// cover.
 //
 // Covariance of (cx, cy, r). The fit is linear in the edge points' radial
-// moves e: delta = S e, S = (J'WJ)^-1 J'W (3 x n, W the final IRLS weights).
-// Edge errors are correlated along the arc: the mosaic resamples raw pixels
-// (`source_px`), and the surface texture next to the rim moves neighbouring
-// edge points together. They are modelled as a stationary sequence along the
-// arc; its autocovariance gamma(l) at arc lag l is estimated from the
-// residuals, and Cov = S Gamma S'. Two biases of the plain estimate are
-// corrected: the residuals lack the three components the fit removed (their
-// sum over all lags is zero), and the lag sum must stop where gamma becomes
-// noise. See CircleEdgeCovariance in the .cc for the estimator.
+// moves e: delta = S e, S = -(J'WJ)^-1 J'W (3 x n, W the final IRLS
+// weights). Edge errors are correlated along the arc: the mosaic resamples
+// raw pixels (`source_px`), and the surface texture next to the rim moves
+// neighbouring edge points together. Modelled as a stationary sequence along
+// the arc, Cov = f S S', f the errors' spectral density at the circle's
+// frequencies (0 and 1 per turn), estimated from the residuals' pooled
+// autocovariance with the bias of the three fitted components removed
+// (EstimateEdgeErrorSpectrum in the .cc). Checked against the scatter over
+// seeded texture and noise draws (circle_measure_test.cc).
 //
 // Pixel convention: (0, 0) is the centre of the top-left pixel; image(row,
 // col) is the value at (x = col, y = row). Pixels equal to 0 are "no tile
-// sees this" and invalidate the wedges that touch them.
+// sees this": a wedge whose rim band touches one (or leaves the image) is
+// uncovered, and too many uncovered wedges make the hole "cut by the mosaic
+// border".
 #pragma once
 
 #include <string>
@@ -78,7 +91,7 @@ struct CircleMeasureOptions {
   double min_found_fraction = 0.3;       // inliers below this fraction of the wedges: not found
   double min_inlier_fraction = 0.6;      // ... below this: poor fit
   double max_radius_deviation = 0.05;    // |r / nominal - 1| above this: not the expected hole
-  double max_rms_px = 0.5;               // inlier RMS above this: poor fit, px
+  double max_rms_px = 0.5;               // inlier RMS above this: not a rim (not found), px
   double source_px = 1.0;      // size of a source (raw) pixel in image px: noise correlation floor
   int max_passes = 8;          // edge + fit passes at most
   double converged_px = 1e-3;  // stop when a pass moves centre and radius less, px
@@ -96,15 +109,17 @@ struct CircleMeasurement {
   // Covariance of (cx, cy, r), px^2, from the edge points' scatter and its
   // correlation along the arc (header comment).
   Eigen::Matrix3d covariance_px2 = Eigen::Matrix3d::Zero();
-  int num_wedges = 0;           // wedges cast in the last pass
-  int num_uncovered = 0;        // ... touching uncovered or off-image pixels
-  int num_edge_points = 0;      // ... giving a clean step
-  int num_inliers = 0;          // edge points kept by the robust fit
-  double rms_px = 0.0;          // RMS radial residual of the inliers
-  double edge_sigma_px = 0.0;   // blur of the rim (median fitted s)
-  double contrast = 0.0;        // median step height at the rim, image units
-  double correlation_px = 0.0;  // arc length per independent edge error, px
-  int passes = 0;               // edge + fit passes run
+  int num_wedges = 0;                // wedges cast in the last pass
+  int num_uncovered = 0;             // ... touching uncovered or off-image pixels
+  int num_edge_points = 0;           // ... giving a clean step
+  int num_inliers = 0;               // edge points kept by the robust fit
+  double rms_px = 0.0;               // RMS radial residual of the inliers
+  double edge_sigma_px = 0.0;        // blur of the rim (median fitted s)
+  double contrast = 0.0;             // median step height at the rim, image units
+  double correlation_px = 0.0;       // arc length per independent edge error, px
+  int num_bottom_rim_points = 0;     // wedges where the bore wall's bottom rim was resolved
+  bool bottom_rim_modelled = false;  // ... enough for its circle, used in the later passes
+  int passes = 0;                    // edge + fit passes run
   Eigen::Vector2d coarse_centre_px = Eigen::Vector2d::Zero();  // step 1's centre
 
   std::string Brief() const;  // one line for a log or a report

@@ -138,5 +138,102 @@ TEST(CircleMeasure, CovarianceMatchesTheScatter) {
   EXPECT_LT(radius_rms, 0.02);
 }
 
+// The bore wall inside the rim, as a ring (the camera's axis through the
+// hole) or a crescent (the axis farther away), does not bias the radius or
+// the centre: only the outermost step is the rim, and where the wall is
+// narrow its inner edge is modelled. Flat surface and noise, so what is
+// left is the wall's effect. Walls more than 2 blur sigmas wide are
+// resolved (the ring of this radius is 2.3 px = 2.9 sigma); narrower rings
+// are not (header).
+TEST(CircleMeasure, BoreWallDoesNotBiasTheFit) {
+  double worst_centre = 0.0, worst_radius = 0.0;
+  for (const double axis : {0.0, 80.0, 200.0, 800.0}) {
+    for (int k = 0; k < 3; ++k) {
+      SyntheticHole hole = DemoHole(80.0, axis, 2.1 * k + 0.4, 5 + k);
+      hole.texture_seed.reset();
+      hole.centre_px += Eigen::Vector2d(0.37 * k, -0.21 * k);
+      const ImageF image = RenderSyntheticHole(hole);
+      const CircleMeasurement m =
+          MeasureCircle(image, hole.centre_px + Eigen::Vector2d(4.0, 2.0), 80.0);
+      ASSERT_TRUE(m.ok) << m.error;
+      // The noise alone scatters each coordinate by sigma ~0.0035 px: 0.015
+      // px is the 1e-4 quantile of the centre's 2-D error, 0.01 px 4 sigma of
+      // the radius (sigma ~0.0025 px).
+      EXPECT_LT((m.centre_px - hole.centre_px).norm(), 0.015) << axis << " " << k;
+      EXPECT_NEAR(m.radius_px, hole.radius_px, 0.01) << axis << " " << k;
+      worst_centre = std::max(worst_centre, (m.centre_px - hole.centre_px).norm());
+      worst_radius = std::max(worst_radius, std::abs(m.radius_px - hole.radius_px));
+    }
+  }
+  std::printf("worst: centre %.4f px, radius %.4f px\n", worst_centre, worst_radius);
+}
+
+// Dark specks and bright burrs touching the rim, and a brightness step
+// across the hole (a seam between tiles of different exposure): their
+// wedges are outliers of the circle fit.
+TEST(CircleMeasure, BurrsSpecksAndSeamsAreOutliers) {
+  SyntheticHole hole = DemoHole(50.0, 900.0, 0.7, 31);
+  const Eigen::Vector2d c = hole.centre_px;
+  auto at = [&](double angle, double out) -> Eigen::Vector2d {
+    return c + (50.0 + out) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
+  };
+  hole.blobs = {{at(0.3, 2.0), 3.0, 0.08f},
+                {at(1.9, 1.5), 2.0, 0.9f},
+                {at(3.4, 2.5), 4.0, 0.1f},
+                {at(5.0, 1.0), 1.5, 0.95f}};
+  hole.seam_normal = Eigen::Vector2d(1.0, 0.3).normalized();
+  hole.seam_offset_px = hole.seam_normal.dot(c) + 10.0;
+  hole.seam_gain = 0.85;
+  const ImageF image = RenderSyntheticHole(hole);
+  const CircleMeasurement m = MeasureCircle(image, c + Eigen::Vector2d(-5.0, 6.0), 50.0);
+  ASSERT_TRUE(m.ok) << m.error;
+  std::printf("%s\n", m.Brief().c_str());
+  // The same hole without them: within 3 sigma of it.
+  hole.blobs.clear();
+  hole.seam_gain = 1.0;
+  const CircleMeasurement plain = MeasureCircle(RenderSyntheticHole(hole), c, 50.0);
+  ASSERT_TRUE(plain.ok) << plain.error;
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_NEAR(m.centre_px(i), hole.centre_px(i), 3.0 * Sigma(m, i)) << i;
+  }
+  EXPECT_NEAR(m.radius_px, hole.radius_px, 3.0 * Sigma(m, 2));
+  EXPECT_LT(m.num_inliers, plain.num_inliers);
+}
+
+// A hole reaching into the mosaic's uncovered area (pixels exactly 0) is
+// reported as cut, not fitted to the rest of its rim; uncovered pixels
+// farther out do not matter.
+TEST(CircleMeasure, CutByTheBorderIsAnError) {
+  SyntheticHole hole = DemoHole(40.0, 300.0, 1.0, 41);
+  hole.uncovered_normal = Eigen::Vector2d(0.6, 0.8);
+  hole.uncovered_offset_px = hole.uncovered_normal.dot(hole.centre_px) + 30.0;
+  CircleMeasurement m = MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, 40.0);
+  EXPECT_FALSE(m.ok);
+  EXPECT_NE(m.error.find("cut by the mosaic border"), std::string::npos) << m.error;
+
+  hole.uncovered_offset_px = hole.uncovered_normal.dot(hole.centre_px) + 52.0;
+  m = MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, 40.0);
+  EXPECT_TRUE(m.ok) << m.error;
+}
+
+// No hole where one is expected: textured surface only, or a hole of
+// another size.
+TEST(CircleMeasure, MissingHoleIsNotFound) {
+  SyntheticHole hole = DemoHole(40.0, 300.0, 1.0, 51);
+  hole.width_px = hole.height_px = 200;
+  hole.centre_px = {100.0, 100.0};
+  hole.radius_px = hole.bottom_radius_px = 0.0;
+  CircleMeasurement m = MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, 40.0);
+  EXPECT_FALSE(m.ok);
+  EXPECT_NE(m.error.find("not found"), std::string::npos) << m.error;
+
+  hole = DemoHole(30.0, 300.0, 1.0, 52);
+  hole.width_px = hole.height_px = 200;
+  hole.centre_px = {100.0, 100.0};
+  m = MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, 40.0);
+  EXPECT_FALSE(m.ok);
+  EXPECT_NE(m.error.find("not found"), std::string::npos) << m.error;
+}
+
 }  // namespace
 }  // namespace omm
