@@ -164,8 +164,9 @@ void RefineNodeRows(const CameraModel& camera, const RayGrid& coarse, int refine
   }
 }
 
-// Interpolates the supersamples of rect rows [row_begin, row_end) in the fine
-// grid, and checks every check_every_rows-th row by projecting it.
+// Interpolates the supersamples and Gauss points of rect rows [row_begin,
+// row_end) in the fine grid, and checks every check_every_rows-th row by
+// projecting it.
 void FillRows(const CameraModel& camera, const RayGrid& fine, int check_every_rows, int row_begin,
               int row_end, RayTable* table, RowsResult* result) {
   const PixelRect& rect = table->rect;
@@ -192,15 +193,33 @@ void FillRows(const CameraModel& camera, const RayGrid& fine, int check_every_ro
         }
       }
     }
+    for (int j = 0; j < 2; ++j) {
+      fine_row.Set(RayTable::GaussPixel(0, row, 2 * j).y());
+      for (int c = 0; c < rect.width; ++c) {
+        const std::size_t pixel = table->PixelIndex(r, c);
+        for (int i = 0; i < 2; ++i) {
+          const Eigen::Vector2d ray = fine_row.At(RayTable::GaussPixel(rect.x0 + c, row, i).x());
+          table->gauss_offset_xy[8 * pixel + 2 * (2 * j + i)] =
+              static_cast<float>(ray.x() - base[c].x());
+          table->gauss_offset_xy[8 * pixel + 2 * (2 * j + i) + 1] =
+              static_cast<float>(ray.y() - base[c].y());
+        }
+      }
+    }
     if (r % check_every_rows != 0) continue;
     // Check the rays as stored, offsets rounded to float.
-    const int n = rect.width * per_pixel;
+    const int per_check = per_pixel + 4;
+    const int n = rect.width * per_check;
     Eigen::Matrix3Xd p(3, n);
     Eigen::Matrix2Xd q_target(2, n), q;
     for (int c = 0; c < rect.width; ++c) {
       for (int k = 0; k < per_pixel; ++k) {
-        p.col(c * per_pixel + k) << table->Ray(r, c, k), 1.0;
-        q_target.col(c * per_pixel + k) = table->SamplePixel(rect.x0 + c, row, k % s, k / s);
+        p.col(c * per_check + k) << table->Ray(r, c, k), 1.0;
+        q_target.col(c * per_check + k) = table->SamplePixel(rect.x0 + c, row, k % s, k / s);
+      }
+      for (int k = 0; k < 4; ++k) {
+        p.col(c * per_check + per_pixel + k) << table->GaussRay(r, c, k), 1.0;
+        q_target.col(c * per_check + per_pixel + k) = RayTable::GaussPixel(rect.x0 + c, row, k);
       }
     }
     if (!ProjectPoints(camera, p, &q)) {
@@ -256,6 +275,7 @@ RayTable ComputeRayTable(const CameraModel& camera, const PixelRect& rect,
   const std::size_t num_pixels = static_cast<std::size_t>(rect.width) * rect.height;
   table.base_xy.resize(2 * num_pixels);
   table.offset_xy.resize(2 * num_pixels * table.SamplesPerPixel());
+  table.gauss_offset_xy.resize(8 * num_pixels);
   const RowsResult rows =
       InParallel(rect.height, options.num_threads, [&](int begin, int end, RowsResult* result) {
         FillRows(camera, fine, options.check_every_rows, begin, end, &table, result);

@@ -13,7 +13,9 @@
 // per-pixel base in double (the ray of the pixel's first supersample) plus a
 // per-supersample offset in float: the offsets are < 1e-3, so float keeps them
 // to ~1e-10 (~1e-7 px), while the memory stays near that of floats (1600 x
-// 1200 px, S = 4: 277 MB).
+// 1200 px, S = 4: 277 MB). The rays of each pixel's 2 x 2 Gauss-Legendre
+// points, q = (col +- g, row +- g) with g = 1/(2 sqrt 3), are stored the same
+// way (render.h integrates smooth regions with them).
 //
 // Unprojecting every supersample with mrcal_unproject would take ~1 us each,
 // and even one projection each (~0.3 us through a splined model) dominates,
@@ -33,6 +35,7 @@
 #pragma once
 
 #include <cstddef>
+#include <numbers>
 #include <vector>
 
 #include <Eigen/Core>
@@ -77,6 +80,10 @@ struct RayTable {
   // 2 * (((row - y0) * width + (col - x0)) * S * S + sy * S + sx): a pixel's
   // samples are contiguous.
   std::vector<float> offset_xy;
+  // Offset of Gauss point k = 2 j + i, at (col + (i - 1/2) / sqrt 3, row +
+  // (j - 1/2) / sqrt 3), from the base at 2 * (pixel * 4 + k).
+  std::vector<float> gauss_offset_xy;
+  static constexpr double kGaussPx = 0.5 / std::numbers::sqrt3;  // g
 
   int SamplesPerPixel() const { return supersampling * supersampling; }
   std::size_t PixelIndex(int row_in_rect, int col_in_rect) const {
@@ -88,6 +95,12 @@ struct RayTable {
     const std::size_t sample = pixel * SamplesPerPixel() + k;
     return {base_xy[2 * pixel] + offset_xy[2 * sample],
             base_xy[2 * pixel + 1] + offset_xy[2 * sample + 1]};
+  }
+  // The ray of Gauss point k of a pixel of the rect.
+  Eigen::Vector2d GaussRay(int row_in_rect, int col_in_rect, int k) const {
+    const std::size_t pixel = PixelIndex(row_in_rect, col_in_rect);
+    return {base_xy[2 * pixel] + gauss_offset_xy[8 * pixel + 2 * k],
+            base_xy[2 * pixel + 1] + gauss_offset_xy[8 * pixel + 2 * k + 1]};
   }
   // The affine ray map of a pixel of the rect; needs S >= 2. The rays form a
   // symmetric grid, so the fit separates into a mean and two moments.
@@ -117,6 +130,10 @@ struct RayTable {
   Eigen::Vector2d SamplePixel(int col, int row, int sx, int sy) const {
     return {col - 0.5 + (sx + 0.5) / supersampling, row - 0.5 + (sy + 0.5) / supersampling};
   }
+  // Position of Gauss point k of pixel (col, row) in the image, px.
+  static Eigen::Vector2d GaussPixel(int col, int row, int k) {
+    return {col + (k % 2 ? kGaussPx : -kGaussPx), row + (k / 2 ? kGaussPx : -kGaussPx)};
+  }
 };
 
 struct RayTableSummary {
@@ -128,7 +145,8 @@ struct RayTableSummary {
   double max_residual_px = 0.0;
 };
 
-// Rays of every supersample of `rect` (use the whole image for rendering).
+// Rays of every supersample and Gauss point of `rect` (use the whole image
+// for rendering).
 RayTable ComputeRayTable(const CameraModel& camera, const PixelRect& rect,
                          const RayTableOptions& options, RayTableSummary* summary);
 

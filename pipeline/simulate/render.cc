@@ -1,5 +1,6 @@
 #include "pipeline/simulate/render.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace omm {
@@ -15,23 +16,34 @@ ImageF GaussianBlur(const ImageF& image, double sigma_px, int num_threads) {
   }
   const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
   ImageF horizontal(rows, cols), out(rows, cols);
+  // Each output is the sum over the taps in kernel order, starting from 0;
+  // the taps are the outer loop so that the inner one runs along a row.
   internal::ParallelRows(rows, num_threads, [&](int begin, int end) {
     for (int r = begin; r < end; ++r) {
-      for (int c = 0; c < cols; ++c) {
-        float acc = 0.0f;
-        for (int i = -radius; i <= radius; ++i)
-          acc += kernel[i + radius] * image(r, std::clamp(c + i, 0, cols - 1));
-        horizontal(r, c) = acc;
+      const float* in = &image(r, 0);
+      float* acc = &horizontal(r, 0);
+      std::fill(acc, acc + cols, 0.0f);
+      const int lo = std::min(radius, cols), hi = std::max(lo, cols - radius);
+      for (int i = -radius; i <= radius; ++i) {
+        const float w = kernel[i + radius];
+        for (int c = lo; c < hi; ++c) acc[c] += w * in[c + i];
       }
+      auto border = [&](int c) {
+        for (int i = -radius; i <= radius; ++i)
+          acc[c] += kernel[i + radius] * in[std::clamp(c + i, 0, cols - 1)];
+      };
+      for (int c = 0; c < lo; ++c) border(c);
+      for (int c = hi; c < cols; ++c) border(c);
     }
   });
   internal::ParallelRows(rows, num_threads, [&](int begin, int end) {
     for (int r = begin; r < end; ++r) {
-      for (int c = 0; c < cols; ++c) {
-        float acc = 0.0f;
-        for (int i = -radius; i <= radius; ++i)
-          acc += kernel[i + radius] * horizontal(std::clamp(r + i, 0, rows - 1), c);
-        out(r, c) = acc;
+      float* acc = &out(r, 0);
+      std::fill(acc, acc + cols, 0.0f);
+      for (int i = -radius; i <= radius; ++i) {
+        const float w = kernel[i + radius];
+        const float* in = &horizontal(std::clamp(r + i, 0, rows - 1), 0);
+        for (int c = 0; c < cols; ++c) acc[c] += w * in[c];
       }
     }
   });

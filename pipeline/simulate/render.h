@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cassert>
 #include <cstdint>
-#include <numbers>
 #include <thread>
 #include <vector>
 
@@ -54,11 +53,10 @@ void ParallelRows(int height, int num_threads, const Rows& rows) {
 // called concurrently from several threads. Needs S = rays.supersampling >= 2.
 //
 // Every pixel first gets the mean of the scene at its 2 x 2 Gauss-Legendre
-// points, (u, v) = (+-1/(2 sqrt 3), +-1/(2 sqrt 3)) px from its centre through
-// its affine ray map (RayTable::PixelMap). Inside a region the reflectance is
-// smooth (constant, or the texture, whose finest wavelength is ~5 px), and
-// this rule integrates it exactly up to degree 3 in u and v, more closely
-// than S x S midpoint samples do.
+// points, (+-1/(2 sqrt 3), +-1/(2 sqrt 3)) px from its centre (their rays are
+// in the ray table). Inside a region the reflectance is smooth (constant, or
+// the texture, whose finest wavelength is ~5 px), and this rule integrates it
+// exactly up to degree 3 in u and v, more closely than S x S midpoint samples.
 //
 // A pixel is integrated again if the 36 Gauss points of it and its 8
 // neighbours see more than one region. They span a square that holds the
@@ -80,19 +78,17 @@ ImageF IntegratePixels(const RayTable& rays, const Scene& scene,
   ImageF image(rect.height, rect.width);
   const int s = rays.supersampling;
   assert(s >= 2);
-  constexpr double kGauss = 0.5 / std::numbers::sqrt3;
   // Per pixel: the region of its first Gauss point, and whether its points saw others.
   std::vector<Region> region(static_cast<std::size_t>(rect.width) * rect.height);
   std::vector<std::uint8_t> mixed(region.size());
   internal::ParallelRows(rect.height, options.num_threads, [&](int begin, int end) {
     for (int r = begin; r < end; ++r) {
       for (int c = 0; c < rect.width; ++c) {
-        const PixelRayMap map = rays.PixelMap(r, c);
         double sum = 0;
         bool edge = false;
         Region first = Region::kBackground;
         for (int k = 0; k < 4; ++k) {
-          const Eigen::Vector2d ray = map(k % 2 ? kGauss : -kGauss, k / 2 ? kGauss : -kGauss);
+          const Eigen::Vector2d ray = rays.GaussRay(r, c, k);
           const SceneSample sample = scene(ray.x(), ray.y());
           sum += sample.reflectance;
           if (k == 0) first = sample.region;

@@ -12,26 +12,9 @@ CaltabPattern::CaltabPattern(const BoardSpec& board, double plate_size_mm,
       half_frame_(0.5 * board.frame_mm),
       half_inner_(0.5 * board.frame_mm - board.frame_bar_mm),
       dot_r2_(0.25 * board.dot_diameter_mm * board.dot_diameter_mm),
+      inv_pitch_(1.0 / board.pitch_mm),
       white_(materials.plate_white),
       black_(materials.plate_black) {}
-
-SceneSample CaltabPattern::Sample(double x, double y) const {
-  const SceneSample white{white_, Region::kPlateWhite}, black{black_, Region::kPlateBlack};
-  const double ax = std::abs(x), ay = std::abs(y);
-  if (ax > half_frame_ || ay > half_frame_) return white;    // margin
-  if (ax >= half_inner_ || ay >= half_inner_) return black;  // frame bar
-  // Corner triangle in the inner corner next to mark (0, 0), i.e. at -x, -y.
-  const double tx = x + half_inner_, ty = y + half_inner_;
-  if (tx + ty <= board_.triangle_mm) return black;
-  // Nearest mark.
-  const double fc = x / board_.pitch_mm + 0.5 * (board_.cols - 1);
-  const double fr = y / board_.pitch_mm + 0.5 * (board_.rows - 1);
-  const int c = std::clamp(static_cast<int>(std::lround(fc)), 0, board_.cols - 1);
-  const int r = std::clamp(static_cast<int>(std::lround(fr)), 0, board_.rows - 1);
-  const double dx = x - (c - 0.5 * (board_.cols - 1)) * board_.pitch_mm;
-  const double dy = y - (r - 0.5 * (board_.rows - 1)) * board_.pitch_mm;
-  return dx * dx + dy * dy <= dot_r2_ ? black : white;
-}
 
 WorkpieceScene::WorkpieceScene(Layout layout, const SurfaceTexture* texture,
                                const Materials& materials)

@@ -8,6 +8,8 @@
 // for cam_from_plane = (R, t), and the scene gives that point's reflectance.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -58,12 +60,30 @@ class CaltabPattern {
   bool Contains(double x_mm, double y_mm) const {
     return std::abs(x_mm) <= half_plate_ && std::abs(y_mm) <= half_plate_;
   }
-  // What plate point (x, y) looks like; the point must be on the plate (Contains).
-  SceneSample Sample(double x_mm, double y_mm) const;
+  // What plate point (x, y) looks like; the point must be on the plate
+  // (Contains). Inline: the renderer calls it for every ray of a calib image.
+  SceneSample Sample(double x, double y) const {
+    const SceneSample white{white_, Region::kPlateWhite}, black{black_, Region::kPlateBlack};
+    const double ax = std::abs(x), ay = std::abs(y);
+    if (ax > half_frame_ || ay > half_frame_) return white;    // margin
+    if (ax >= half_inner_ || ay >= half_inner_) return black;  // frame bar
+    // Corner triangle in the inner corner next to mark (0, 0), i.e. at -x, -y.
+    const double tx = x + half_inner_, ty = y + half_inner_;
+    if (tx + ty <= board_.triangle_mm) return black;
+    // Nearest mark (+ 1/2 and truncation round every index that survives the
+    // clamp; at a tie the point is far from both dots).
+    const double fc = x * inv_pitch_ + 0.5 * (board_.cols - 1);
+    const double fr = y * inv_pitch_ + 0.5 * (board_.rows - 1);
+    const int c = std::clamp(static_cast<int>(fc + 0.5), 0, board_.cols - 1);
+    const int r = std::clamp(static_cast<int>(fr + 0.5), 0, board_.rows - 1);
+    const double dx = x - (c - 0.5 * (board_.cols - 1)) * board_.pitch_mm;
+    const double dy = y - (r - 0.5 * (board_.rows - 1)) * board_.pitch_mm;
+    return dx * dx + dy * dy <= dot_r2_ ? black : white;
+  }
 
  private:
   BoardSpec board_;
-  double half_plate_, half_frame_, half_inner_, dot_r2_;
+  double half_plate_, half_frame_, half_inner_, dot_r2_, inv_pitch_;
   float white_, black_;
 };
 
