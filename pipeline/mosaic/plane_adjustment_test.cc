@@ -421,7 +421,11 @@ TEST(PlaneAdjustment, AFewThousandTracksSolveWellUnderASecond) {
             << a.summary.solve_seconds << " s, covariance " << a.summary.covariance_seconds
             << " s), " << a.summary.num_observations << " observations\n";
   // 1 s is the budget on 2 cores; the bound leaves room for a loaded machine.
+  // The budget is for optimised code: under AddressSanitizer (scripts/test.sh's
+  // second pass) the solve runs several times slower, so only its result counts.
+#if !defined(__SANITIZE_ADDRESS__)
   EXPECT_LT(seconds, 2.0);
+#endif
 }
 
 }  // namespace
