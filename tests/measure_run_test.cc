@@ -54,8 +54,7 @@ struct Outcome {
 // A raw pixel's size on the part: pitch * distance / focal length, mm.
 double RawPxMm(const SimulationTruth& truth) {
   const Eigen::Isometry3d part_from_cam = truth.cam_from_part.inverse();
-  const double distance_mm =
-      part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();
+  const double distance_mm = part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();
   return truth.camera.pixel_pitch_um * 1e-3 * distance_mm / truth.camera.focal_length_mm;
 }
 

@@ -21,12 +21,9 @@ double Sqrt(double variance) { return std::sqrt(std::max(variance, 0.0)); }
 
 }  // namespace
 
-std::optional<Eigen::MatrixXd> CircleSceneSensitivity(const LensProjection& lens,
-                                                      const PlaneScene& scene,
-                                                      const Eigen::Vector2d& centre_mm,
-                                                      double diameter_mm, int width_px,
-                                                      int height_px, double blend_band_px,
-                                                      int num_rim_points) {
+std::optional<Eigen::MatrixXd> CircleSceneSensitivity(
+    const LensProjection& lens, const PlaneScene& scene, const Eigen::Vector2d& centre_mm,
+    double diameter_mm, int width_px, int height_px, double blend_band_px, int num_rim_points) {
   assert(num_rim_points >= 3);
   const auto centre =
       BlendedSceneSensitivity(lens, scene, centre_mm, width_px, height_px, blend_band_px);
@@ -51,7 +48,8 @@ MeasurementPropagation::MeasurementPropagation(std::vector<CircleFeatureValue> f
       scene_covariance_(std::move(scene_covariance)),
       intrinsics_index_(intrinsics_index) {
   for ([[maybe_unused]] const CircleFeatureValue& f : features_) {
-    assert(f.scene_sensitivity.rows() == 3 && f.scene_sensitivity.cols() == scene_covariance_.rows());
+    assert(f.scene_sensitivity.rows() == 3 &&
+           f.scene_sensitivity.cols() == scene_covariance_.rows());
   }
   assert(intrinsics_index_ >= 0 && intrinsics_index_ <= scene_covariance_.rows());
 }
@@ -67,8 +65,8 @@ SigmaBreakdown MeasurementPropagation::Propagate(const std::vector<FeatureGradie
   }
   const double scene = n > 0 ? double(a * scene_covariance_ * a.transpose()) : 0.0;
   SigmaBreakdown sigma;
-  sigma.calibration_mm = Sqrt(QuadraticForm(a, scene_covariance_, intrinsics_index_,
-                                            n - intrinsics_index_));
+  sigma.calibration_mm =
+      Sqrt(QuadraticForm(a, scene_covariance_, intrinsics_index_, n - intrinsics_index_));
   sigma.registration_mm = Sqrt(QuadraticForm(a, scene_covariance_, 0, intrinsics_index_));
   sigma.edges_mm = Sqrt(edges);
   sigma.total_mm = Sqrt(scene + edges);
@@ -79,10 +77,10 @@ double MeasurementPropagation::Distance(int a, int b, SigmaBreakdown* sigma) con
   const Eigen::Vector2d delta = features_[a].centre_mm - features_[b].centre_mm;
   const double distance = delta.norm();
   if (sigma) {
-    const Eigen::Vector2d u = distance > 0.0 ? Eigen::Vector2d(delta / distance)
-                                             : Eigen::Vector2d::Zero();
-    *sigma = Propagate({{a, Eigen::RowVector3d(u.x(), u.y(), 0.0)},
-                        {b, Eigen::RowVector3d(-u.x(), -u.y(), 0.0)}});
+    const Eigen::Vector2d u =
+        distance > 0.0 ? Eigen::Vector2d(delta / distance) : Eigen::Vector2d::Zero();
+    *sigma = Propagate(
+        {{a, Eigen::RowVector3d(u.x(), u.y(), 0.0)}, {b, Eigen::RowVector3d(-u.x(), -u.y(), 0.0)}});
   }
   return distance;
 }

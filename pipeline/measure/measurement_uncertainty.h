@@ -36,18 +36,15 @@ struct CircleFeatureValue {
   Eigen::Vector2d centre_mm = Eigen::Vector2d::Zero();
   double diameter_mm = 0.0;
   Eigen::Matrix3d edge_covariance = Eigen::Matrix3d::Zero();  // of (cx, cy, D), mm^2
-  Eigen::MatrixXd scene_sensitivity;  // G: 3 x size(theta), rows cx, cy, D
+  Eigen::MatrixXd scene_sensitivity;                          // G: 3 x size(theta), rows cx, cy, D
 };
 
 // G of a circle (header comment) through the blended tiles that draw it
 // (BlendedSceneSensitivity with the given imager size and blend band), with
 // num_rim_points rim directions. nullopt if some point is seen by no tile.
-std::optional<Eigen::MatrixXd> CircleSceneSensitivity(const LensProjection& lens,
-                                                      const PlaneScene& scene,
-                                                      const Eigen::Vector2d& centre_mm,
-                                                      double diameter_mm, int width_px,
-                                                      int height_px, double blend_band_px,
-                                                      int num_rim_points = 8);
+std::optional<Eigen::MatrixXd> CircleSceneSensitivity(
+    const LensProjection& lens, const PlaneScene& scene, const Eigen::Vector2d& centre_mm,
+    double diameter_mm, int width_px, int height_px, double blend_band_px, int num_rim_points = 8);
 
 struct SigmaBreakdown {
   double total_mm = 0.0;
@@ -67,8 +64,8 @@ class MeasurementPropagation {
   // scene_covariance: PlaneScene::covariance (size(theta) square, zero rows
   // for parameters held constant); intrinsics_index: where the intrinsics'
   // block starts in it (PlaneSceneCovarianceIntrinsicsIndex).
-  MeasurementPropagation(std::vector<CircleFeatureValue> features,
-                         Eigen::MatrixXd scene_covariance, int intrinsics_index);
+  MeasurementPropagation(std::vector<CircleFeatureValue> features, Eigen::MatrixXd scene_covariance,
+                         int intrinsics_index);
 
   const std::vector<CircleFeatureValue>& features() const { return features_; }
 

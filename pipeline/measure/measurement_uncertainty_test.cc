@@ -87,9 +87,7 @@ TEST(SceneSensitivity, MatchesNumericDifferentiation) {
     return *PartPointOfTilePixel(lens, p, tile, *q);
   };
   for (int index = 0; index < sensitivity->cols(); ++index) {
-    const double step = index < 3 ? 1e-6 : index < k0 ? 1e-4
-                        : index - k0 < 4           ? 1e-3
-                                                   : 1e-6;
+    const double step = index < 3 ? 1e-6 : index < k0 ? 1e-4 : index - k0 < 4 ? 1e-3 : 1e-6;
     const Eigen::Vector2d numeric =
         (perturbed(index, step) - perturbed(index, -step)) / (2.0 * step);
     const Eigen::Vector2d analytic = sensitivity->col(index);
@@ -160,8 +158,7 @@ TEST(MeasurementPropagation, SigmaMatchesTheScatterOfAdjustments) {
     options.noise_seed = 500 + draw;
     options.num_tracks = 600;
     SyntheticPlane s = MakeSyntheticPlane(options);
-    s.input.intrinsics_information =
-        prior_sigma.array().square().inverse().matrix().asDiagonal();
+    s.input.intrinsics_information = prior_sigma.array().square().inverse().matrix().asDiagonal();
     CameraModel calibrated = s.camera;
     for (int k = 0; k < 12; ++k) calibrated.intrinsics[k] += prior_sigma[k] * normal(random);
     PlaneBundleConfig config;
@@ -196,14 +193,14 @@ TEST(MeasurementPropagation, SigmaMatchesTheScatterOfAdjustments) {
     features[1].centre_mm = m2;
     features[1].diameter_mm = diameter;
     for (CircleFeatureValue& f : features) {
-      const auto g = CircleSceneSensitivity(lens, a.scene, f.centre_mm, f.diameter_mm, 1600,
-                                            1200, kBandPx);
+      const auto g =
+          CircleSceneSensitivity(lens, a.scene, f.centre_mm, f.diameter_mm, 1600, 1200, kBandPx);
       ASSERT_TRUE(g.has_value());
       f.scene_sensitivity = *g;
     }
     const int num_tiles = static_cast<int>(a.scene.table_pos_mm.size());
-    const MeasurementPropagation propagation(
-        features, a.scene.covariance, PlaneSceneCovarianceIntrinsicsIndex(num_tiles, 0));
+    const MeasurementPropagation propagation(features, a.scene.covariance,
+                                             PlaneSceneCovarianceIntrinsicsIndex(num_tiles, 0));
     SigmaBreakdown distance_sigma, diameter_sigma;
     const double distance = propagation.Distance(0, 1, &distance_sigma);
     propagation.Diameter(0, &diameter_sigma);

@@ -40,14 +40,14 @@ std::optional<Eigen::Vector2d> PartPointOfTilePixel(const LensProjection& lens,
   const Eigen::Matrix3d rot = RotationFromAngleAxis(scene.cam_from_part_r);
   const Eigen::Vector3d normal = rot.col(2);
   const Eigen::Vector2d table = scene.table_pos_mm[tile];
-  const Eigen::Vector3d on_plane = rot * Eigen::Vector3d(table.x(), table.y(), 0.0) +
-                                   scene.cam_from_part_t_mm;
+  const Eigen::Vector3d on_plane =
+      rot * Eigen::Vector3d(table.x(), table.y(), 0.0) + scene.cam_from_part_t_mm;
   const double along = normal.dot(ray);
   if (std::abs(along) < 1e-12) return std::nullopt;
   const double depth = normal.dot(on_plane) / along;
   if (!(depth > 0.0)) return std::nullopt;
-  Eigen::Vector2d part = (rot.transpose() * (depth * ray - scene.cam_from_part_t_mm)).head<2>() -
-                         table;
+  Eigen::Vector2d part =
+      (rot.transpose() * (depth * ray - scene.cam_from_part_t_mm)).head<2>() - table;
 
   constexpr int kMaxIterations = 20;
   constexpr double kTolerancePx = 1e-9;
@@ -64,9 +64,8 @@ std::optional<Eigen::Vector2d> PartPointOfTilePixel(const LensProjection& lens,
   return std::nullopt;
 }
 
-std::optional<Eigen::MatrixXd> SceneSensitivity(const LensProjection& lens,
-                                                const PlaneScene& scene, int tile,
-                                                const Eigen::Vector2d& part_mm) {
+std::optional<Eigen::MatrixXd> SceneSensitivity(const LensProjection& lens, const PlaneScene& scene,
+                                                int tile, const Eigen::Vector2d& part_mm) {
   const int num_tiles = NumTiles(scene), num_plates = NumPlates(scene);
   const int num_intrinsics = lens.NumIntrinsics();
   assert(tile >= 0 && tile < num_tiles);
@@ -86,12 +85,13 @@ std::optional<Eigen::MatrixXd> SceneSensitivity(const LensProjection& lens,
   for (int j = 0; j < 3; ++j) {
     Eigen::Vector3d step = Eigen::Vector3d::Zero();
     step[j] = kStepRad;
-    const Eigen::Vector3d dp_drj = (CameraPoint(scene.cam_from_part_r + step, scene, tile, part_mm) -
-                                    CameraPoint(scene.cam_from_part_r - step, scene, tile, part_mm)) /
-                                   (2.0 * kStepRad);
+    const Eigen::Vector3d dp_drj =
+        (CameraPoint(scene.cam_from_part_r + step, scene, tile, part_mm) -
+         CameraPoint(scene.cam_from_part_r - step, scene, tile, part_mm)) /
+        (2.0 * kStepRad);
     dq_dtheta.col(j) = dq_dp * dp_drj;
   }
-  dq_dtheta.block<2, 3>(0, 3) = dq_dp;                              // t
+  dq_dtheta.block<2, 3>(0, 3) = dq_dp;                                 // t
   dq_dtheta.block<2, 2>(0, 6 + 2 * tile) = dq_dp * rot.leftCols<2>();  // T_i
   dq_dtheta.rightCols(num_intrinsics) = dq_dk;
 
@@ -124,9 +124,8 @@ std::vector<std::pair<int, double>> MosaicBlendAt(const LensProjection& lens,
 
 std::optional<Eigen::MatrixXd> BlendedSceneSensitivity(const LensProjection& lens,
                                                        const PlaneScene& scene,
-                                                       const Eigen::Vector2d& part_mm,
-                                                       int width_px, int height_px,
-                                                       double band_px) {
+                                                       const Eigen::Vector2d& part_mm, int width_px,
+                                                       int height_px, double band_px) {
   const auto blend = MosaicBlendAt(lens, scene, part_mm, width_px, height_px, band_px);
   if (blend.empty()) return std::nullopt;
   Eigen::MatrixXd sum;

@@ -52,9 +52,8 @@ std::optional<Eigen::Vector2d> PartPointOfTilePixel(const LensProjection& lens,
 // S = d P-hat / d theta (2 x PlaneSceneCovarianceSize(...)) of the part point
 // P seen by tile `tile` (header comment). nullopt where the lens cannot
 // project P.
-std::optional<Eigen::MatrixXd> SceneSensitivity(const LensProjection& lens,
-                                                const PlaneScene& scene, int tile,
-                                                const Eigen::Vector2d& part_mm);
+std::optional<Eigen::MatrixXd> SceneSensitivity(const LensProjection& lens, const PlaneScene& scene,
+                                                int tile, const Eigen::Vector2d& part_mm);
 
 // The tiles the mosaic blends at P and their normalised weights, as
 // ResampleMosaic computes them (TileBorderDistancePx, TileBlendWeight with
@@ -68,8 +67,7 @@ std::vector<std::pair<int, double>> MosaicBlendAt(const LensProjection& lens,
 // tile sees P.
 std::optional<Eigen::MatrixXd> BlendedSceneSensitivity(const LensProjection& lens,
                                                        const PlaneScene& scene,
-                                                       const Eigen::Vector2d& part_mm,
-                                                       int width_px, int height_px,
-                                                       double band_px);
+                                                       const Eigen::Vector2d& part_mm, int width_px,
+                                                       int height_px, double band_px);
 
 }  // namespace omm

@@ -59,8 +59,8 @@ struct LocatedFeature {
 
 LocatedFeature LocateFeature(const FeatureSpec& spec, const SavedScene& saved,
                              const LensProjection& lens, const OrthoGrid& grid,
-                             const ImageF& mosaic, const CameraModel& camera,
-                             double source_px, std::vector<CircleFeatureValue>* values) {
+                             const ImageF& mosaic, const CameraModel& camera, double source_px,
+                             std::vector<CircleFeatureValue>* values) {
   LocatedFeature located;
   FeatureReport& report = located.report;
   report.name = spec.name;
@@ -94,9 +94,9 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const SavedScene& saved,
   const Eigen::Matrix3d to_mm =
       Eigen::Vector3d(grid.gsd_mm, -grid.gsd_mm, 2.0 * grid.gsd_mm).asDiagonal();
   value.edge_covariance = to_mm * circle.covariance_px2 * to_mm.transpose();
-  const auto sensitivity = CircleSceneSensitivity(lens, saved.scene, value.centre_mm,
-                                                  value.diameter_mm, camera.width_px,
-                                                  camera.height_px, OrthoOptions{}.blend_band_px);
+  const auto sensitivity =
+      CircleSceneSensitivity(lens, saved.scene, value.centre_mm, value.diameter_mm, camera.width_px,
+                             camera.height_px, OrthoOptions{}.blend_band_px);
   if (!sensitivity) {
     report.error = "the circle is not seen whole by the tiles";
     return located;
@@ -133,7 +133,8 @@ void RunMeasureStage(StageContext& context) {
   }
   const SavedScene saved = ReadSceneJson(scene_path);
   if (saved.lens_model.empty()) {
-    throw InputError(scene_path.string(), "no lens_model: written by an older omm; rerun `omm mosaic`");
+    throw InputError(scene_path.string(),
+                     "no lens_model: written by an older omm; rerun `omm mosaic`");
   }
   const CameraModel camera{saved.lens_model, saved.scene.intrinsics, project.image_width_px,
                            project.image_height_px};
@@ -162,8 +163,8 @@ void RunMeasureStage(StageContext& context) {
   for (int i = 0; i < num_features; ++i) {
     const FeatureSpec& spec = project.features[i];
     if (context.progress) context.progress(i, num_features + 1, "locate " + spec.name);
-    located.push_back(LocateFeature(spec, saved, lens, grid, mosaic.pixels, camera, source_px,
-                                    &values));
+    located.push_back(
+        LocateFeature(spec, saved, lens, grid, mosaic.pixels, camera, source_px, &values));
     by_name[spec.name] = i;
     if (!located.back().report.error.empty())
       spdlog::warn("measure: {}: {}", spec.name, located.back().report.error);
@@ -251,10 +252,10 @@ void RunMeasureStage(StageContext& context) {
       std::remove_if(context.report.extra.begin(), context.report.extra.end(),
                      [](const auto& member) { return member.first == "measure"; }),
       context.report.extra.end());
-  context.report.extra.emplace_back(
-      "measure", ReportObject{{"brief", brief},
-                              {"intrinsics_refined", saved.intrinsics_refined},
-                              {"seconds", SecondsSince(stage_start)}});
+  context.report.extra.emplace_back("measure",
+                                    ReportObject{{"brief", brief},
+                                                 {"intrinsics_refined", saved.intrinsics_refined},
+                                                 {"seconds", SecondsSince(stage_start)}});
   if (context.progress) context.progress(num_features + 1, num_features + 1, "measure done");
 }
 
