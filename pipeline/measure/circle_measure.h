@@ -93,8 +93,8 @@ struct CircleMeasureOptions {
   double max_radius_deviation = 0.05;    // |r / nominal - 1| above this: not the expected hole
   double max_rms_px = 0.5;               // inlier RMS above this: not a rim (not found), px
   double source_px = 1.0;      // size of a source (raw) pixel in image px: noise correlation floor
-  int max_passes = 8;          // edge + fit passes at most
-  double converged_px = 1e-3;  // stop when a pass moves centre and radius less, px
+  int max_passes = 5;          // edge + fit passes at most
+  double converged_px = 5e-3;  // stop when a pass moves centre and radius less, px
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
