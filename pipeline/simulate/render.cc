@@ -72,7 +72,8 @@ ImageF ExposeImage(const ImageF& reflectance, const PixelRect& rect, const Expos
           value += random.Normal() * sigma_e / sensor.full_well_e;
         }
         value = std::clamp(value, 0.0, 1.0);
-        if (levels > 0) value = std::round(value * levels) / levels;
+        // value >= 0: floor(x + 1/2) rounds as std::round does, and inlines.
+        if (levels > 0) value = std::floor(value * levels + 0.5) / levels;
         image(r, c) = static_cast<float>(value);
       }
     }

@@ -1,6 +1,7 @@
 #include "pipeline/simulate/texture.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <numbers>
 #include <utility>
@@ -38,20 +39,41 @@ GradientNoise::GradientNoise(std::uint64_t seed) : perm_(2 * kSize) {
   for (int i = 0; i < kSize; ++i) perm_[i + kSize] = perm_[i];
 }
 
-double GradientNoise::operator()(double x, double y) const {
-  const double fx = std::floor(x), fy = std::floor(y);
-  const double tx = x - fx, ty = y - fy;
-  const int ix = static_cast<int>(static_cast<long long>(fx) & (kSize - 1));
-  const int iy = static_cast<int>(static_cast<long long>(fy) & (kSize - 1));
-  auto corner = [&](int dx, int dy) {
-    const int g = perm_[perm_[ix + dx] + iy + dy] & 15;
-    return kGradients.gx[g] * (tx - dx) + kGradients.gy[g] * (ty - dy);
-  };
-  const double u = Fade(tx), v = Fade(ty);
-  const double n0 = corner(0, 0) + u * (corner(1, 0) - corner(0, 0));
-  const double n1 = corner(0, 1) + u * (corner(1, 1) - corner(0, 1));
-  return n0 + v * (n1 - n0);
+template <int N>
+void GradientNoise::Evaluate(const double* x, const double* y, double* value) const {
+  double tx[N], ty[N];
+  int ix[N], iy[N];
+  for (int k = 0; k < N; ++k) {
+    const double fx = std::floor(x[k]), fy = std::floor(y[k]);
+    tx[k] = x[k] - fx;
+    ty[k] = y[k] - fy;
+    ix[k] = static_cast<int>(static_cast<long long>(fx) & (kSize - 1));
+    iy[k] = static_cast<int>(static_cast<long long>(fy) & (kSize - 1));
+  }
+  // Gradients of the corners (0, 0), (1, 0), (0, 1), (1, 1) of each cell.
+  double gx[4][N], gy[4][N];
+  for (int k = 0; k < N; ++k) {
+    const int a = perm_[ix[k]] + iy[k], b = perm_[ix[k] + 1] + iy[k];
+    const int g[4] = {perm_[a] & 15, perm_[b] & 15, perm_[a + 1] & 15, perm_[b + 1] & 15};
+    for (int c = 0; c < 4; ++c) {
+      gx[c][k] = kGradients.gx[g[c]];
+      gy[c][k] = kGradients.gy[g[c]];
+    }
+  }
+  for (int k = 0; k < N; ++k) {
+    const double c00 = gx[0][k] * tx[k] + gy[0][k] * ty[k];
+    const double c10 = gx[1][k] * (tx[k] - 1) + gy[1][k] * ty[k];
+    const double c01 = gx[2][k] * tx[k] + gy[2][k] * (ty[k] - 1);
+    const double c11 = gx[3][k] * (tx[k] - 1) + gy[3][k] * (ty[k] - 1);
+    const double u = Fade(tx[k]), v = Fade(ty[k]);
+    const double n0 = c00 + u * (c10 - c00);
+    const double n1 = c01 + u * (c11 - c01);
+    value[k] = n0 + v * (n1 - n0);
+  }
 }
+
+template void GradientNoise::Evaluate<2>(const double*, const double*, double*) const;
+template void GradientNoise::Evaluate<4>(const double*, const double*, double*) const;
 
 SurfaceTexture::SurfaceTexture(TextureStyle style, std::uint64_t seed)
     : style_(style), noise_(seed) {
@@ -85,14 +107,25 @@ SurfaceTexture::SurfaceTexture(TextureStyle style, std::uint64_t seed)
   for (TextureOctave& octave : octaves_) octave.amplitude /= total;
 }
 
-double SurfaceTexture::Octaves(double x_mm, double y_mm) const {
-  double sum = 0.0;
-  for (const TextureOctave& o : octaves_) {
-    const double x = o.frequency_per_mm * x_mm, y = o.frequency_per_mm * y_mm;
-    sum += o.amplitude *
-           noise_(o.cos_a * x - o.sin_a * y + o.offset_x, o.sin_a * x + o.cos_a * y + o.offset_y);
+template <int N>
+double SurfaceTexture::SumOctaves(double x_mm, double y_mm) const {
+  double x[N], y[N], value[N];
+  for (int k = 0; k < N; ++k) {
+    const TextureOctave& o = octaves_[k];
+    const double fx = o.frequency_per_mm * x_mm, fy = o.frequency_per_mm * y_mm;
+    x[k] = o.cos_a * fx - o.sin_a * fy + o.offset_x;
+    y[k] = o.sin_a * fx + o.cos_a * fy + o.offset_y;
   }
+  noise_.Evaluate<N>(x, y, value);
+  double sum = 0.0;
+  for (int k = 0; k < N; ++k) sum += octaves_[k].amplitude * value[k];
   return sum;
+}
+
+double SurfaceTexture::Octaves(double x_mm, double y_mm) const {
+  // The octave count is a compile-time constant in the kernel, so that it vectorises.
+  assert(octaves_.size() == 2 || octaves_.size() == 4);
+  return octaves_.size() == 4 ? SumOctaves<4>(x_mm, y_mm) : SumOctaves<2>(x_mm, y_mm);
 }
 
 float SurfaceTexture::Reflectance(double x_mm, double y_mm) const {
