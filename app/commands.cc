@@ -34,8 +34,6 @@ Outcome Guarded(const std::function<void()>& body) {
     return {};
   } catch (const InputError& e) {
     return {kExitBadInput, e.what()};
-  } catch (const StageNotBuiltError& e) {
-    return {kExitNotBuilt, e.what()};
   } catch (const StageFailedError& e) {
     return {kExitFailed, e.what()};
   } catch (const std::exception& e) {

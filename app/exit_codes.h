@@ -6,7 +6,7 @@ namespace omm {
 inline constexpr int kExitOk = 0;        // everything asked for was done
 inline constexpr int kExitFailed = 1;    // a stage failed on the data; batch: some project failed
 inline constexpr int kExitBadInput = 2;  // bad command line, project files or options
-inline constexpr int kExitNotBuilt = 3;  // a stage that is not built yet was needed
+// 3 was "a stage not built yet" while the pipeline was being written; unused.
 inline constexpr int kExitInternal = 4;  // a bug: an unexpected error (please report it)
 
 }  // namespace omm

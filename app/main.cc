@@ -22,7 +22,6 @@ constexpr const char* kExitCodes = R"(Exit codes:
   0  done
   1  a stage failed on the data (e.g. no plate found); batch: some project failed
   2  bad input: command line, project files (the message names file and key or line)
-  3  a stage that is not built yet was needed
   4  internal error (a bug; please report it)
 
 Every project is a directory in format omm-project/1 (project.yaml, calib/,

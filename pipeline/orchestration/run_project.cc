@@ -161,17 +161,7 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
                          options.calibration_study};
     for (const Stage stage : options.stages) {
       spdlog::info("{}: starting", StageName(stage));
-      try {
-        options.runner(stage, context);
-      } catch (const StageNotBuiltError&) {
-        // The stages before it are complete and consistent: keep them, so a
-        // user (and the demo) sees what the built part of the pipeline gives.
-        if (!summary.stages_run.empty()) {
-          WriteReports(project, staging_dir, out_dir, report);
-          Commit(staging_dir, out_dir);
-        }
-        throw;
-      }
+      options.runner(stage, context);
       spdlog::info("{}: done", StageName(stage));
       summary.stages_run.push_back(stage);
     }

@@ -55,9 +55,7 @@ struct RunSummary {
 
 // Runs `options.stages` on `project` and commits their outputs to out/.
 // Throws InputError (bad input, including an unwritable out/) or
-// StageFailedError; out/ is untouched then. Throws StageNotBuiltError when it
-// reaches a stage whose code is not written yet, after committing the stages
-// that completed before it (their outputs and a report with their sections).
+// StageFailedError; out/ is untouched then.
 RunSummary RunProject(const Project& project, const RunOptions& options);
 
 // True if out/report.json exists, was written by this software version from

@@ -70,28 +70,6 @@ TEST_F(RunProjectTest, FailedStageStopsTheRunAndLeavesNoOut) {
   EXPECT_FALSE(fs::exists(project_.OutDir()));
 }
 
-TEST_F(RunProjectTest, StageNotBuiltCommitsTheStagesBeforeIt) {
-  RunOptions options;
-  options.runner = [](Stage stage, StageContext& context) {
-    if (stage == Stage::kMosaic) throw StageNotBuiltError(stage);
-    FakeStage(stage, context, "v1");
-  };
-  EXPECT_THROW(RunProject(project_, options), StageNotBuiltError);
-  EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
-  const Report report = ReadReportJson(Out("report.json"));
-  EXPECT_TRUE(report.calibration.has_value());
-  EXPECT_FALSE(report.mosaic.has_value());
-  EXPECT_FALSE(fs::exists(Out("mosaic.png")));
-  EXPECT_EQ(StagingDirs(), 0);
-}
-
-TEST_F(RunProjectTest, StageNotBuiltFirstLeavesNoOut) {
-  RunOptions options;
-  options.runner = [](Stage stage, StageContext&) { throw StageNotBuiltError(stage); };
-  EXPECT_THROW(RunProject(project_, options), StageNotBuiltError);
-  EXPECT_FALSE(fs::exists(project_.OutDir()));
-}
-
 TEST_F(RunProjectTest, SuccessfulRunCommitsOutputsAndReport) {
   RunOptions options;
   options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };

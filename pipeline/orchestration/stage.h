@@ -26,18 +26,6 @@ const char* StageName(Stage stage);
 // In run order.
 std::vector<Stage> AllStages();
 
-// A stage whose code is not written yet. `omm` exits with kExitNotBuilt.
-class StageNotBuiltError : public std::runtime_error {
- public:
-  explicit StageNotBuiltError(Stage stage)
-      : std::runtime_error(std::string("stage '") + StageName(stage) + "' is not built yet"),
-        stage_(stage) {}
-  Stage stage() const { return stage_; }
-
- private:
-  Stage stage_;
-};
-
 // A data failure that leaves a stage without a usable result (no plate found
 // in any calibration image, tiles that do not overlap, ...): the run stops
 // and out/ is left as it was. Failures of single items (one image, one
@@ -70,8 +58,8 @@ struct StageContext {
   std::filesystem::path Input(const std::string& name) const;
 };
 
-// The runners, one per stage. Each throws StageNotBuiltError until written,
-// InputError for bad input, StageFailedError for a data failure.
+// The runners, one per stage. Each throws InputError for bad input,
+// StageFailedError for a data failure.
 void RunCalibrateStage(StageContext& context);
 void RunMosaicStage(StageContext& context);
 void RunMeasureStage(StageContext& context);
