@@ -170,7 +170,8 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   const Clock::time_point start = Clock::now();
 
   Blocks b = BlocksFromScene(*scene);
-  const Eigen::VectorXd calibrated_intrinsics = scene->intrinsics;  // the prior's mean
+  const Eigen::VectorXd calibrated_intrinsics =  // the prior's mean
+      input.intrinsics_prior_mean.size() > 0 ? input.intrinsics_prior_mean : scene->intrinsics;
   ComputeResiduals(lens, input, &b, scene);
   const double outlier_px = 3.0 * options.loss_scale_px;
   summary.initial_rms_px = Stats(input, *scene, outlier_px).rms_px;
@@ -219,7 +220,7 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
     }
     if (config.refine_intrinsics) {
       problem.AddResidualBlock(
-          new IntrinsicsPriorCost(b.intrinsics, input.intrinsics_information), nullptr,
+          new IntrinsicsPriorCost(calibrated_intrinsics, input.intrinsics_information), nullptr,
           b.intrinsics.data());
     } else {
       problem.SetParameterBlockConstant(b.intrinsics.data());

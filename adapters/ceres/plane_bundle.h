@@ -5,7 +5,9 @@
 // Cost (all residuals dimensionless, so the covariance is absolute):
 //   sum over observations  rho(|(w / sigma_px) (q(R (P + T_i) + t) - q_obs)|^2)
 //   + sum over tiles        |(T_i - T_i,commanded) / sigma_table|^2
-//   + |U (k - k_calibrated)|^2                  (if the intrinsics are refined)
+//   + |U (k - k_calibrated)|^2                  (if the intrinsics are refined;
+//                                                k_calibrated: the input's prior
+//                                                mean, else the initial k)
 // with rho the robust loss (PlaneBundleOptions). Cost functions:
 // plane_costs.h. Points are eliminated by the Schur complement (ordering:
 // track points first, then pose, table positions, plates, intrinsics).

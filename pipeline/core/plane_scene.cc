@@ -85,6 +85,11 @@ std::string CheckPlaneBundleInput(const PlaneBundleInput& input,
     if (Eigen::LLT<Eigen::MatrixXd>(info).info() != Eigen::Success) {
       return "intrinsics_information is not positive definite";
     }
+    if (input.intrinsics_prior_mean.size() != 0 &&
+        input.intrinsics_prior_mean.size() != num_intrinsics) {
+      return "intrinsics_prior_mean must be empty or have " + std::to_string(num_intrinsics) +
+             " entries";
+    }
   }
   return "";
 }

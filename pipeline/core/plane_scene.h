@@ -85,6 +85,9 @@ struct PlaneBundleInput {
   // Calibration information matrix (inverse covariance) of the intrinsics,
   // N x N, positive definite; empty if not known. Needed to refine them.
   Eigen::MatrixXd intrinsics_information;
+  // The prior's mean (the calibrated intrinsics, N); empty: the initial
+  // scene's intrinsics. Lets a solve start from refined intrinsics.
+  Eigen::VectorXd intrinsics_prior_mean;
 };
 
 // How the part-frame origin (gauge (a) above) is fixed.

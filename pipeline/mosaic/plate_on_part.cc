@@ -44,12 +44,6 @@ double Seconds(Clock::time_point since) {
   return std::chrono::duration<double>(Clock::now() - since).count();
 }
 
-Eigen::Matrix3d Rotation(const Eigen::Vector3d& r) {
-  const double angle = r.norm();
-  return angle > 0 ? Eigen::AngleAxisd(angle, r / angle).toRotationMatrix()
-                   : Eigen::Matrix3d::Identity();
-}
-
 // cam_from_plate with the table at table_pos_mm (plane_scene.h's plate model
 // with s = 1: plate (u, v, w) -> (x, y, h) + [M(theta) 0; 0 -1] (u, v, w)).
 Eigen::Isometry3d CamFromPlate(const PlaneScene& scene, const PlatePose& plate,
@@ -60,7 +54,7 @@ Eigen::Isometry3d CamFromPlate(const PlaneScene& scene, const PlatePose& plate,
   part_from_plate.translation() << plate.x_mm + table_pos_mm.x(), plate.y_mm + table_pos_mm.y(),
       plate.height_mm;
   Eigen::Isometry3d cam_from_part = Eigen::Isometry3d::Identity();
-  cam_from_part.linear() = Rotation(scene.cam_from_part_r);
+  cam_from_part.linear() = RotationFromAngleAxis(scene.cam_from_part_r);
   cam_from_part.translation() = scene.cam_from_part_t_mm;
   return cam_from_part * part_from_plate;
 }
@@ -182,7 +176,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
   // 3. Marks predicted where the plate is cut (dots only: a chessboard's
   // corners have no ellipse to fit).
   const bool dots = board.type != BoardType::kChessboard;
-  const Eigen::Matrix3d rot = Rotation(registered_scene.cam_from_part_r);
+  const Eigen::Matrix3d rot = RotationFromAngleAxis(registered_scene.cam_from_part_r);
   const double radius_mm = 0.5 * board.dot_diameter_mm;
   for (int i = 0; i < num_tiles && dots; ++i) {
     if (whole[i].usable) continue;
@@ -335,10 +329,16 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   if (registered_scene.intrinsics.size() != camera.intrinsics.size())
     throw InputError("", "final adjustment: the scene's intrinsics do not fit the camera");
   const Clock::time_point start = Clock::now();
+  // Plate 0's (x, y, theta, h, s) in the covariance's vector.
+  const int plate_index =
+      PlaneSceneCovarianceSize(static_cast<int>(registered_scene.table_pos_mm.size()), 0, 0);
   FinalAdjustment result;
   result.intrinsics_refined = prior.information.size() > 0;
   result.input = plate.found ? WithPlate(registered_input, plate) : registered_input;
-  if (result.intrinsics_refined) result.input.intrinsics_information = prior.information;
+  if (result.intrinsics_refined) {
+    result.input.intrinsics_information = prior.information;
+    result.input.intrinsics_prior_mean = registered_scene.intrinsics;
+  }
   PlaneBundleConfig config;
   config.refine_intrinsics = result.intrinsics_refined;
   config.compute_covariance = options.compute_covariance;
@@ -348,9 +348,6 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
     throw InputError("", "final adjustment: " + e);
 
   const MrcalLensProjection lens(camera);
-  // Every solve starts from the registered scene: its intrinsics are the
-  // calibration's, i.e. the prior's mean (SolvePlaneBundle takes the initial
-  // intrinsics as the mean).
   PlaneScene initial = registered_scene;
   initial.covariance.resize(0, 0);
   if (plate.found) initial.plates = {plate.initial_pose};
@@ -386,8 +383,7 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
     for (Eigen::Index n = 0; n < res.cols(); ++n) sum_sq += res.col(n).squaredNorm();
     result.plate_rms_px = res.cols() > 0 ? std::sqrt(sum_sq / res.cols()) : 0.0;
     result.plate_height_mm = result.scene.plates[0].height_mm;
-    const int num_tiles = static_cast<int>(registered_scene.table_pos_mm.size());
-    const int h = 6 + 2 * num_tiles + 3;
+    const int h = plate_index + 3;
     if (result.scene.covariance.rows() > h)
       result.plate_height_sigma_mm = std::sqrt(std::max(0.0, result.scene.covariance(h, h)));
   }
@@ -399,11 +395,9 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
     check_config.refine_plate_scale = true;
     check_config.compute_covariance = true;
     PlaneScene check = result.scene;
-    check.intrinsics = registered_scene.intrinsics;  // the prior's mean again
     const PlaneBundleSummary summary =
         SolvePlaneBundle(lens, result.input, check_config, options.bundle, &check);
-    const int num_tiles = static_cast<int>(registered_scene.table_pos_mm.size());
-    const int s = 6 + 2 * num_tiles + 4;
+    const int s = plate_index + 4;
     if (summary.usable && summary.covariance_ok) {
       result.scale_check.ok = true;
       result.scale_check.scale_minus_1_ppm = (check.plates[0].scale - 1) * 1e6;

@@ -13,6 +13,8 @@
 
 #include <Eigen/Dense>
 
+#include "adapters/ceres/plane_bundle.h"
+#include "pipeline/mosaic/mrcal_projection.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 #include "pipeline/mosaic/synthetic_plane.h"
 
@@ -246,6 +248,40 @@ TEST(FinalAdjustment, IntrinsicsPriorGivesAJointCovariance) {
   EXPECT_FALSE(held.intrinsics_refined);
   EXPECT_EQ(held.scene.intrinsics, r.s.camera.intrinsics);
   EXPECT_EQ(held.scene.covariance.bottomRightCorner(12, 12).cwiseAbs().maxCoeff(), 0.0);
+}
+
+// PlaneBundleInput::intrinsics_prior_mean: a solve warm-started from refined
+// intrinsics with the calibrated ones as the mean lands where the solve from
+// the mean did, in a couple of iterations (what the scale check relies on).
+TEST(FinalAdjustment, PriorMeanAllowsAWarmStart) {
+  SyntheticPlaneOptions options;
+  options.num_tracks = 600;
+  const Registered r = Register(options);
+  Eigen::VectorXd sigma(12);
+  sigma << 0.5, 0.5, 0.4, 0.4, 2e-4, 5e-4, 2e-5, 2e-5, 1e-3, 1e-3, 1e-3, 1e-3;
+  PlaneBundleInput input = r.input;
+  input.intrinsics_information = sigma.array().square().inverse().matrix().asDiagonal();
+  Eigen::VectorXd mean = r.s.camera.intrinsics;
+  mean[0] += 0.7;  // a calibration 1.4 sigma off in fx: the refinement moves it
+  CameraModel calibrated = r.s.camera;
+  calibrated.intrinsics = mean;
+  const MrcalLensProjection lens(calibrated);
+  PlaneBundleConfig config;
+  config.refine_intrinsics = true;
+  config.compute_covariance = false;
+  PlaneScene from_mean = r.scene;
+  from_mean.intrinsics = mean;
+  const PlaneBundleSummary first = SolvePlaneBundle(lens, input, config, {}, &from_mean);
+  ASSERT_TRUE(first.usable) << first.brief;
+  ASSERT_GT(std::abs(from_mean.intrinsics[0] - mean[0]), 0.1);
+  PlaneScene warm = from_mean;
+  input.intrinsics_prior_mean = mean;
+  const PlaneBundleSummary second = SolvePlaneBundle(lens, input, config, {}, &warm);
+  EXPECT_LE(second.iterations, 2);
+  EXPECT_LT((warm.intrinsics - from_mean.intrinsics).cwiseQuotient(sigma).cwiseAbs().maxCoeff(),
+            1e-6);
+  // Without the mean the warm start would take the refined values as the prior.
+  EXPECT_NEAR(second.unit_weight_sigma, first.unit_weight_sigma, 1e-9);
 }
 
 }  // namespace

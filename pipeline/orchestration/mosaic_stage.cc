@@ -232,7 +232,9 @@ void RunMosaicStage(StageContext& context) {
   }
   const fs::path camera_path = CameraModelPath(context);
   CameraModel camera = ReadCameraModel(camera_path);
+  const auto prior_start = std::chrono::steady_clock::now();
   const IntrinsicsPrior prior = CalibrationPrior(context, &camera);
+  const double prior_seconds = SecondsSince(prior_start);
   const std::vector<ImageF> tiles = ReadTiles(project, camera, context.progress);
   const double read_seconds = SecondsSince(stage_start);
 
@@ -252,7 +254,6 @@ void RunMosaicStage(StageContext& context) {
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 
   // The final adjustment: the plate on the part, the intrinsics prior.
-  const auto final_start = std::chrono::steady_clock::now();
   PlateOnPart plate;
   if (project.board) {
     PlateOnPartOptions plate_options;
@@ -274,7 +275,6 @@ void RunMosaicStage(StageContext& context) {
   registration.rms_px = adjusted.summary.final_rms_px;
   registration.table_adjustment_mm = adjusted.summary.table_adjustment_mm;
   registration.plane_tilt_deg = adjusted.summary.plane_tilt_deg;
-  const double final_seconds = SecondsSince(final_start);
   // The camera of the adjusted scene: its (refined or held) intrinsics.
   CameraModel scene_camera = camera;
   scene_camera.intrinsics = adjusted.scene.intrinsics;
@@ -361,7 +361,8 @@ void RunMosaicStage(StageContext& context) {
                                  {"matching", registration.matching_seconds},
                                  {"adjustment", registration.adjustment_seconds},
                                  {"plate_detection", plate.seconds},
-                                 {"final_adjustment", final_seconds},
+                                 {"intrinsics_prior", prior_seconds},
+                                 {"final_adjustment", adjusted.seconds},
                                  {"ortho_geometry", ortho.summary.geometry_seconds},
                                  {"ortho_exposure", ortho.summary.exposure_seconds},
                                  {"ortho_resample", ortho.summary.resample_seconds},
