@@ -1,18 +1,17 @@
 #include "pipeline/mosaic/register_tiles.h"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <map>
 #include <random>
 #include <sstream>
-#include <thread>
 
 #include <Eigen/Dense>
 
 #include "adapters/mrcal/lens.h"
 #include "pipeline/core/error.h"
+#include "pipeline/mosaic/parallel_for.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 
 namespace omm {
@@ -38,6 +37,7 @@ std::string RegisterTilesOptions::Check() const {
   if (!(outlier_factor > 1)) return "outlier_factor must be > 1";
   if (!(min_outlier_threshold_px > 0)) return "min_outlier_threshold_px must be > 0";
   if (rematch_passes < 0) return "rematch_passes must be >= 0";
+  if (!(relocation_min_change_px >= 0)) return "relocation_min_change_px must be >= 0";
   if (num_threads < 1) return "num_threads must be >= 1";
   return {};
 }
@@ -48,18 +48,6 @@ using Clock = std::chrono::steady_clock;
 
 double Seconds(Clock::time_point since) {
   return std::chrono::duration<double>(Clock::now() - since).count();
-}
-
-template <typename Fn>
-void ParallelFor(int n, int num_threads, Fn fn) {
-  std::atomic<int> next{0};
-  const auto work = [&] {
-    for (int i = next++; i < n; i = next++) fn(i);
-  };
-  std::vector<std::thread> threads;
-  for (int t = 1; t < std::min(num_threads, n); ++t) threads.emplace_back(work);
-  work();
-  for (std::thread& t : threads) t.join();
 }
 
 // Homography b ~ H a by the normalised DLT (Hartley & Zisserman, alg. 4.2).
@@ -250,8 +238,10 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   std::sort(neighbour_pairs.begin(), neighbour_pairs.end());
   neighbour_pairs.erase(std::unique(neighbour_pairs.begin(), neighbour_pairs.end()),
                         neighbour_pairs.end());
+  ImageMotionOptions motion_options = options.motion;
+  motion_options.num_threads = options.num_threads;
   const ImageMotionEstimate motion =
-      EstimateImageMotion(normalized, commanded_table_pos_mm, neighbour_pairs, options.motion);
+      EstimateImageMotion(normalized, commanded_table_pos_mm, neighbour_pairs, motion_options);
   result.motion_brief = motion.brief;
   if (!motion.ok) {
     result.matching_seconds = Seconds(t0);
@@ -341,21 +331,48 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         RansacHomography(probe_a.leftCols(found), probe_b.leftCols(found),
                          options.probe_ransac_threshold_px, 1.0, options.ransac_iterations, &rng,
                          &h_pixels);
-    if (std::count(probe_inliers.begin(), probe_inliers.end(), true) < 8) return;
+    const int num_probe_inliers =
+        static_cast<int>(std::count(probe_inliers.begin(), probe_inliers.end(), true));
+    if (num_probe_inliers < 8) return;
+    // The plane-induced homography between the rays from the probe inliers:
+    // with the lens it predicts every candidate and the local affine of its
+    // template (the pixel homography ignores the distortion, whose
+    // derivatives differ between the two tiles' image positions).
+    Eigen::Matrix2Xd inlier_a(2, num_probe_inliers), inlier_b(2, num_probe_inliers);
+    for (int k = 0, n = 0; k < found; ++k) {
+      if (probe_inliers[k]) inlier_a.col(n) = probe_a.col(k), inlier_b.col(n++) = probe_b.col(k);
+    }
+    const Eigen::Matrix2Xd probe_rays_a = unproject(inlier_a), probe_rays_b = unproject(inlier_b);
+    if (probe_rays_a.cols() != num_probe_inliers || probe_rays_b.cols() != num_probe_inliers) return;
+    const Eigen::Matrix3d h_probe_rays = FitHomography(probe_rays_a, probe_rays_b);
+    const int num_candidates = static_cast<int>(candidates.size());
+    Eigen::Matrix3Xd p_a(3, num_candidates), p_b(3, num_candidates);
+    for (int n = 0; n < num_candidates; ++n) {
+      const Eigen::Vector2d ray_a = corner_rays[ta].col(candidates[n]);
+      p_a.col(n) = ray_a.homogeneous();
+      p_b.col(n) = Transfer(h_probe_rays, ray_a).homogeneous();
+    }
+    Eigen::Matrix2Xd q_a, q_b;
+    Eigen::MatrixXd dqa_dp, dqb_dp;
+    if (!ProjectPoints(camera, p_a, &q_a, &dqa_dp) || !ProjectPoints(camera, p_b, &q_b, &dqb_dp))
+      return;
 
-    // All candidates, predicted by the pixel homography.
+    // All candidates, predicted through the rays.
     std::vector<Match> matches;
-    for (int k : candidates) {
+    for (int n = 0; n < num_candidates; ++n) {
+      const int k = candidates[n];
       const Corner& c = corners[ta][k];
-      const Eigen::Vector2d a = c.pixel.cast<double>();
       Match m;
       m.tile_a = ta;
       m.tile_b = tb;
       m.key = CornerKey(ta, k);
       m.anchor_px = c.pixel;
-      m.db_da = TransferJacobian(h_pixels, a);
+      // dq_b/dq_a = dq_b/dray_b dray_b/dray_a (dq_a/dray_a)^-1; a ray is (x, y, 1).
+      const Eigen::Matrix2d dqa_dray = dqa_dp.block<2, 2>(2 * n, 0);
+      const Eigen::Matrix2d dqb_dray = dqb_dp.block<2, 2>(2 * n, 0);
+      m.db_da = dqb_dray * TransferJacobian(h_probe_rays, p_a.col(n).head<2>()) * dqa_dray.inverse();
       const PatchMatch pm = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
-                                       Transfer(h_pixels, a), m.db_da, options.search_radius_px,
+                                       q_b.col(n), m.db_da, options.search_radius_px,
                                        options.patch);
       if (!pm.ok) continue;
       m.q_b = pm.q_px;
@@ -570,7 +587,12 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       }
       const Eigen::Matrix2d dqa = dq_dp.block<2, 3>(0, 0) * r.leftCols<2>();
       const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(2, 0) * r.leftCols<2>();
-      m.db_da = dqb * dqa.inverse();
+      const Eigen::Matrix2d db_da = dqb * dqa.inverse();
+      // The template's corners move by at most |change| h sqrt(2): below a
+      // small fraction of a match's sigma, the match would not move.
+      const double change_px = (db_da - m.db_da).norm() * options.patch.half_size_px * std::sqrt(2.0);
+      if (change_px < options.relocation_min_change_px) return;
+      m.db_da = db_da;
       const PatchMatch pm = MatchPatch(normalized[m.tile_a], m.anchor_px, normalized[m.tile_b],
                                        spline[m.tile_b], m.q_b, m.db_da, 0, options.patch);
       if (!pm.ok) {

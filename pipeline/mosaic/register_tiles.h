@@ -79,7 +79,7 @@ struct RegisterTilesOptions {
   int probe_downsample_factor = 4;
   int probe_half_size_px = 5;  // at the downsampled level, px
   double probe_ransac_threshold_px = 3.0;  // pixel homography of the probes, px
-  int search_radius_px = 3;        // +- around the homography-predicted position, px
+  int search_radius_px = 1;        // +- around the ray-homography-predicted position, px
   // Plane-induced homography on undistorted rays: inlier distance, px (measured
   // in the target tile with the camera's fx).
   double ransac_threshold_px = 1.0;
@@ -96,10 +96,14 @@ struct RegisterTilesOptions {
   double outlier_factor = 4.0;         // drop |residual| > this x the median |residual|
   double min_outlier_threshold_px = 0.1;  // ... but never below this, px
   int rematch_passes = 1;  // relocations with the adjusted plane model's affine
+  // ... of the matches whose template corners that affine moves by at least
+  // this, px (the others would not move: their affine came from the probes'
+  // plane-induced homography and the lens already).
+  double relocation_min_change_px = 0.02;
   bool compute_covariance = true;  // the final scene's covariance (PlaneScene::covariance)
   PlaneBundleOptions bundle;
 
-  int num_threads = 2;  // features and matching run on this many threads
+  int num_threads = 2;  // features and matching run on this many threads (motion.num_threads too)
 
   // Empty if valid, else what is wrong.
   std::string Check() const;

@@ -139,16 +139,24 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
 
   // Local maxima inside the border.
   const int b = std::max(options.border_px, options.nms_radius_px + 1), n = options.nms_radius_px;
+  // The texture test: the window's variance by direct sums, only for the
+  // corners that reach the bucketing (a few per cell).
   const int t = options.texture_half_size_px;
   const double min_texture_var = options.min_texture_std * options.min_texture_std;
-  const WindowMoments moments(options.min_texture_std > 0 ? image : ImageF());
   const auto textured = [&](int r, int c) {
     if (options.min_texture_std <= 0) return true;
     const int r0 = std::max(0, r - t), r1 = std::min(rows, r + t + 1);
     const int c0 = std::max(0, c - t), c1 = std::min(cols, c + t + 1);
+    double sum = 0, sum_sq = 0;
+    for (int y = r0; y < r1; ++y) {
+      const float* row = image.data() + static_cast<size_t>(y) * cols;
+      float row_sum = 0, row_sq = 0;  // <= a few dozen terms
+      for (int x = c0; x < c1; ++x) row_sum += row[x], row_sq += row[x] * row[x];
+      sum += row_sum, sum_sq += row_sq;
+    }
     const double count = static_cast<double>(r1 - r0) * (c1 - c0);
-    const double mean = moments.Sum(r0, r1, c0, c1) / count;
-    return moments.SumSq(r0, r1, c0, c1) / count - mean * mean >= min_texture_var;
+    const double mean = sum / count;
+    return sum_sq / count - mean * mean >= min_texture_var;
   };
   std::vector<Corner> maxima;
   for (int r = b; r < rows - b; ++r) {
@@ -169,7 +177,7 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
           }
         }
       }
-      if (!is_max || !textured(r, c)) continue;
+      if (!is_max) continue;
       Corner corner;
       corner.pixel << c, r;
       corner.response = v;
@@ -192,7 +200,7 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
   for (Corner& m : maxima) {
     if (m.response < threshold) break;
     int& in_cell = count[(m.pixel.y() / options.cell_px) * cells_x + m.pixel.x() / options.cell_px];
-    if (in_cell >= options.max_per_cell) continue;
+    if (in_cell >= options.max_per_cell || !textured(m.pixel.y(), m.pixel.x())) continue;
     ++in_cell;
     const int x = m.pixel.x(), y = m.pixel.y();
     // Quadratic fit over the 3 x 3 neighbourhood (separable second differences).

@@ -9,6 +9,7 @@
 
 #include <Eigen/Dense>
 
+#include "pipeline/mosaic/parallel_for.h"
 #include "pipeline/mosaic/tile_features.h"
 
 namespace omm {
@@ -22,6 +23,7 @@ std::string ImageMotionOptions::Check() const {
   if (!(tolerance_fraction >= 0)) return "motion.tolerance_fraction must be >= 0";
   if (!(tolerance_px > 0)) return "motion.tolerance_px must be > 0";
   if (!(min_margin >= 1)) return "motion.min_margin must be >= 1";
+  if (num_threads < 1) return "motion.num_threads must be >= 1";
   return {};
 }
 
@@ -182,20 +184,23 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
     double score = 0.0;
     std::vector<LocalBest> at;  // per pair: the best coarse shift near the prediction
   };
-  std::vector<Candidate> candidates;
-  for (int k = 0; k < num_pairs; ++k) {
-    if (!(dt_mm[k].norm() > 0)) continue;
+  // Surface of pair k: NCC at shift (dx, dy) at [(dy + rows - 1) grid_w + dx + cols - 1].
+  const int rows = static_cast<int>(pyramids[0][0].image.rows());
+  const int cols = static_cast<int>(pyramids[0][0].image.cols());
+  const int grid_w = 2 * cols - 1, grid_h = 2 * rows - 1;
+  std::vector<std::vector<double>> surfaces(num_pairs);
+  std::vector<std::vector<std::pair<double, Eigen::Vector2i>>> peaks(num_pairs);
+  ParallelFor(num_pairs, options.num_threads, [&](int k) {
     const Level& a = pyramids[pairs[k].first][0];
     const Level& b = pyramids[pairs[k].second][0];
     const auto min_pixels = static_cast<Eigen::Index>(options.min_overlap_fraction * a.image.size());
-    const int rows = static_cast<int>(a.image.rows()), cols = static_cast<int>(a.image.cols());
-    const int grid_w = 2 * cols - 1, grid_h = 2 * rows - 1;
-    std::vector<double> surface(static_cast<size_t>(grid_w) * grid_h, -2.0);
+    std::vector<double>& surface = surfaces[k];
+    surface.assign(static_cast<size_t>(grid_w) * grid_h, -2.0);
     for (int dy = -rows + 1; dy < rows; ++dy)
       for (int dx = -cols + 1; dx < cols; ++dx)
         surface[(dy + rows - 1) * grid_w + dx + cols - 1] =
             OverlapNcc(a.image, b.image, a.moments, b.moments, dx, dy, min_pixels);
-    std::vector<std::pair<double, Eigen::Vector2i>> maxima;
+    std::vector<std::pair<double, Eigen::Vector2i>>& maxima = peaks[k];
     for (int y = 0; y < grid_h; ++y) {
       for (int x = 0; x < grid_w; ++x) {
         const double v = surface[y * grid_w + x];
@@ -210,10 +215,15 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
     const size_t keep = std::min<size_t>(options.peaks_per_pair, maxima.size());
     std::partial_sort(maxima.begin(), maxima.begin() + keep, maxima.end(),
                       [](const auto& x, const auto& y) { return x.first > y.first; });
-    for (size_t i = 0; i < keep; ++i) {
+    maxima.resize(keep);
+  });
+  std::vector<Candidate> candidates;
+  for (int k = 0; k < num_pairs; ++k) {
+    if (!(dt_mm[k].norm() > 0)) continue;
+    for (const auto& peak : peaks[k]) {
       for (const int m : {1, -1}) {
         Candidate c;
-        c.a = SimilarityThrough(dt_mm[k], coarse_factor * maxima[i].second.cast<double>(), m);
+        c.a = SimilarityThrough(dt_mm[k], coarse_factor * peak.second.cast<double>(), m);
         c.mirror = m;
         candidates.push_back(c);
       }
@@ -225,7 +235,8 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
     return estimate;
   }
 
-  // 2. Each candidate scored over all pairs.
+  // 2. Each candidate scored over all pairs: the best of the pair's surface
+  // within the tolerance of its prediction.
   const auto radius_of = [&](const Eigen::Vector2d& predicted_px) {
     return options.tolerance_fraction * predicted_px.norm() + options.tolerance_px;
   };
@@ -233,13 +244,18 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
     c.at.resize(num_pairs);
     for (int k = 0; k < num_pairs; ++k) {
       const Eigen::Vector2d predicted = c.a * dt_mm[k];
-      const Eigen::Vector2d coarse = predicted / coarse_factor;
+      const int cx = static_cast<int>(std::lround(predicted.x() / coarse_factor));
+      const int cy = static_cast<int>(std::lround(predicted.y() / coarse_factor));
       const int radius = static_cast<int>(std::ceil(radius_of(predicted) / coarse_factor));
-      c.at[k] = SearchShift(pyramids[pairs[k].first][0], pyramids[pairs[k].second][0],
-                            {static_cast<int>(std::lround(coarse.x())),
-                             static_cast<int>(std::lround(coarse.y()))},
-                            radius, options.min_overlap_fraction);
-      c.score += Evidence(c.at[k].ncc);
+      LocalBest& best = c.at[k];
+      for (int dy = std::max(cy - radius, -rows + 1); dy <= std::min(cy + radius, rows - 1); ++dy) {
+        for (int dx = std::max(cx - radius, -cols + 1); dx <= std::min(cx + radius, cols - 1);
+             ++dx) {
+          const double v = surfaces[k][(dy + rows - 1) * grid_w + dx + cols - 1];
+          if (v > best.ncc) best.ncc = v, best.shift << dx, dy;
+        }
+      }
+      c.score += Evidence(best.ncc);
     }
   }
   std::sort(candidates.begin(), candidates.end(),
