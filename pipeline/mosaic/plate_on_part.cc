@@ -238,6 +238,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     if (result.marks_per_tile[i] > 0) result.seen_in_tiles.push_back(i);
   }
   const int num_seen = static_cast<int>(result.seen_in_tiles.size());
+  result.scale_reference = true;
   if (options.height_mm) {
     result.marks.height_mm = *options.height_mm;
     result.height_source = "given";
@@ -246,8 +247,11 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     result.height_source = "estimated (seen in " + std::to_string(num_seen) + " tiles)";
   } else {
     result.marks.height_mm = 0.0;
+    result.scale_reference = false;
     result.height_source =
-        "assumed 0: seen in one tile only, where the plate's height and the scale are confounded";
+        "unknown: seen in one tile only, where the plate's height and the scale are confounded; "
+        "taken as 0, the plate checks the table's scale but does not set it "
+        "(mosaic.plate_height_mm sets it)";
   }
   result.found = true;
   std::ostringstream brief;
@@ -342,6 +346,8 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   PlaneBundleConfig config;
   config.refine_intrinsics = result.intrinsics_refined;
   config.compute_covariance = options.compute_covariance;
+  // A plate that only checks: its scale free in the final solve already.
+  config.refine_plate_scale = plate.found && !plate.scale_reference;
   if (const std::string e =
           CheckPlaneBundleInput(result.input, config, static_cast<int>(camera.intrinsics.size()));
       !e.empty())
@@ -390,14 +396,18 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.scale_sigma_ppm =
       TableScaleSigmaPpm(registered_input.commanded_table_pos_mm, result.scene.covariance);
 
-  if (plate.found && result.summary.usable && options.plate_scale_check) {
+  const int s = plate_index + 4;
+  if (config.refine_plate_scale && result.summary.usable && result.summary.covariance_ok) {
+    result.scale_check.ok = true;
+    result.scale_check.scale_minus_1_ppm = (result.scene.plates[0].scale - 1) * 1e6;
+    result.scale_check.sigma_ppm = std::sqrt(std::max(0.0, result.scene.covariance(s, s))) * 1e6;
+  } else if (plate.found && result.summary.usable && options.plate_scale_check) {
     PlaneBundleConfig check_config = config;
     check_config.refine_plate_scale = true;
     check_config.compute_covariance = true;
     PlaneScene check = result.scene;
     const PlaneBundleSummary summary =
         SolvePlaneBundle(lens, result.input, check_config, options.bundle, &check);
-    const int s = plate_index + 4;
     if (summary.usable && summary.covariance_ok) {
       result.scale_check.ok = true;
       result.scale_check.scale_minus_1_ppm = (check.plates[0].scale - 1) * 1e6;

@@ -19,19 +19,22 @@
 // corrected for the perspective bias of a circle's image (pipeline/
 // calibration/perspective_bias.h) with the tile's plate pose.
 //
-// Height of the marks above the top surface (the plate's thickness). Seen in
-// one tile only, the plate's image size depends on (d - h) / s (d the camera's
-// distance, s the table's scale): the height and the scale are confounded, so
-// h must be given (PlateOnPartOptions::height_mm, project.yaml
-// mosaic.plate_height_mm) or is assumed 0 (printed flat; the brief says so).
-// Seen in >= 2 tiles, the plate moves by T / (d - h) in the image while the
-// surface moves by T / d: the difference determines h, which is then
-// estimated (its sigma is in the covariance), and the plate's own motion in
-// pitch units gives the scale whatever h is.
+// Height of the marks above the top surface (the plate's thickness). Given
+// (PlateOnPartOptions::height_mm, project.yaml mosaic.plate_height_mm), it is
+// held. Seen in >= 2 tiles, the plate moves by T / (d - h) in the image while
+// the surface moves by T / d (d the camera's distance): the difference
+// determines h, which is then estimated (its sigma is in the covariance), and
+// the plate's own motion in pitch units gives the scale whatever h is. Seen
+// in one tile only, its image size depends on (d - h) / s (s the table's
+// scale): height and scale are confounded, and a plate of unknown thickness
+// (3 mm at 390 mm: 0.8 %) must not set the scale. Its height is then taken as
+// 0 and it only checks the table's scale (scale_reference = false): s - 1
+// holds h / (d - h) besides the table's own scale error.
 //
 // Scale check. The final solve holds the plate's scale at 1 (its pitch is the
 // metric reference); a second solve with the scale s free measures the
 // table's scale relative to the plate: s - 1 and its sigma (both in ppm).
+// Without scale_reference the final solve is that solve.
 #pragma once
 
 #include <optional>
@@ -52,7 +55,7 @@ struct PlateOnPartOptions {
   PlateDetectionOptions detection;   // DetectPlate, whole plates
   MarkRefinementOptions refinement;  // marks predicted in the other tiles
   // Height of the marks above the part's top surface, mm; unset: estimated if
-  // the plate is seen in >= 2 tiles, else assumed 0.
+  // the plate is seen in >= 2 tiles, else unknown (the plate only checks).
   std::optional<double> height_mm;
   // A predicted mark is searched if its ellipse plus this margin lies inside
   // the image, px.
@@ -74,11 +77,14 @@ struct PlateOnPart {
   std::string brief;  // one line: where, how many marks, height source
   PlateMarks marks;   // the board's marks; height_mm as PlateOnPartOptions says
   std::vector<PlateMarkObservation> observations;
-  PlatePose initial_pose;               // seed of the plate's pose on the part
-  std::vector<int> whole_in_tiles;      // DetectPlate found the whole plate
-  std::vector<int> seen_in_tiles;       // >= 1 mark located (whole tiles included)
-  std::vector<int> marks_per_tile;      // per tile
-  std::string height_source;            // "given", "estimated (seen in N tiles)", "assumed 0 (...)"
+  PlatePose initial_pose;           // seed of the plate's pose on the part
+  std::vector<int> whole_in_tiles;  // DetectPlate found the whole plate
+  std::vector<int> seen_in_tiles;   // >= 1 mark located (whole tiles included)
+  std::vector<int> marks_per_tile;  // per tile
+  // The plate's pitch sets the mosaic's scale; false when its height is
+  // unknown and confounded with the scale (seen in one tile, no height given).
+  bool scale_reference = false;
+  std::string height_source;            // "given", "estimated (seen in N tiles)", "unknown: ..."
   double max_bias_correction_px = 0.0;  // largest perspective-bias shift applied
   double seconds = 0.0;
 };

@@ -5,6 +5,7 @@
 // covariance). The plate's detection in rendered tiles: plate_on_part_sim_test.cc.
 #include "pipeline/mosaic/plate_on_part.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -65,6 +66,7 @@ Registered Register(const SyntheticPlaneOptions& options) {
 PlateOnPart PlateOf(const SyntheticPlane& s) {
   PlateOnPart plate;
   plate.found = true;
+  plate.scale_reference = true;
   plate.marks = s.input.plates[0];
   plate.observations = s.input.plate_observations;
   plate.initial_pose = s.truth.plates[0];
@@ -212,6 +214,49 @@ TEST(FinalAdjustment, ScaleCheckFindsATableScaleError) {
   const double realised = ScaleErrorPpm(r.s.input.commanded_table_pos_mm, r.s.truth.table_pos_mm);
   EXPECT_NEAR(a.scale_check.scale_minus_1_ppm, realised, 3 * a.scale_check.sigma_ppm);
   EXPECT_GT(a.scale_check.scale_minus_1_ppm / a.scale_check.sigma_ppm, 4.0);
+}
+
+// A plate seen in one tile, of unknown height (3 mm in truth), must not set
+// the scale: taken at height 0 it would make it 3 / 387 = 0.78 % wrong. It
+// only checks: the table-only scale stands, and s - 1 holds h / (H - h)
+// besides the table's own scale error (H the camera centre's height above
+// the top surface: the central projection from the plane Z = h to Z = 0
+// scales by H / (H - h)).
+TEST(FinalAdjustment, PlateOfUnknownHeightInOneTileOnlyChecks) {
+  SyntheticPlaneOptions options;
+  options.with_plate = true;
+  options.num_tracks = 600;
+  const Registered r = Register(options);
+  PlateOnPart plate = PlateOf(r.s);
+  std::vector<int> count(9, 0);
+  for (const PlateMarkObservation& o : plate.observations) ++count[o.tile];
+  const int tile = static_cast<int>(std::max_element(count.begin(), count.end()) - count.begin());
+  std::erase_if(plate.observations, [&](const PlateMarkObservation& o) { return o.tile != tile; });
+  plate.marks.height_mm = 0.0;
+  plate.scale_reference = false;
+  const FinalAdjustment a =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, plate, IntrinsicsPrior{}, {});
+  const FinalAdjustment none =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOnPart{}, IntrinsicsPrior{}, {});
+  ASSERT_TRUE(a.summary.usable) << a.summary.brief;
+  ASSERT_TRUE(a.scale_check.ok);
+  const double error = ScaleErrorPpm(a.scene.table_pos_mm, r.s.truth.table_pos_mm);
+  const double table_only = ScaleErrorPpm(none.scene.table_pos_mm, r.s.truth.table_pos_mm);
+  const double h = r.s.truth.plates[0].height_mm;
+  const double camera_height =
+      -(RotationFromAngleAxis(r.s.truth.cam_from_part_r).transpose() * r.s.truth.cam_from_part_t_mm)
+           .z();
+  const double expected = h / (camera_height - h) * 1e6 + table_only;
+  std::printf(
+      "one tile, height unknown: scale error %.1f ppm (table only %.1f); check s-1 %.1f "
+      "+- %.1f ppm, expected %.1f\n",
+      error, table_only, a.scale_check.scale_minus_1_ppm, a.scale_check.sigma_ppm, expected);
+  EXPECT_NEAR(error, table_only, 0.1 * none.scale_sigma_ppm);
+  EXPECT_NEAR(a.scale_sigma_ppm, none.scale_sigma_ppm, 0.01 * none.scale_sigma_ppm);
+  // The plate's own noise (synthetic marks of 0.07 px) around the expectation.
+  const double plate_noise =
+      std::sqrt(std::pow(a.scale_check.sigma_ppm, 2) - std::pow(none.scale_sigma_ppm, 2));
+  EXPECT_NEAR(a.scale_check.scale_minus_1_ppm, expected, 3 * plate_noise);
 }
 
 // The intrinsics prior makes the covariance joint: an intrinsics block no

@@ -202,6 +202,7 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
     return out;
   };
   ReportObject report{{"brief", plate.brief},
+                      {"scale_reference", plate.scale_reference},
                       {"whole_in_tiles", names(plate.whole_in_tiles)},
                       {"seen_in_tiles", names(plate.seen_in_tiles)},
                       {"marks", static_cast<int>(adjusted.input.plate_observations.size())},
