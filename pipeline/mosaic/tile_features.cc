@@ -18,21 +18,6 @@ float NthValue(std::vector<float>* v, double fraction) {
 
 }  // namespace
 
-WindowMoments::WindowMoments(const ImageF& image)
-    : stride_(static_cast<int>(image.cols()) + 1),
-      sum_(static_cast<size_t>(stride_) * (image.rows() + 1), 0.0),
-      sum_sq_(sum_.size(), 0.0) {
-  for (int r = 0; r < image.rows(); ++r) {
-    double acc = 0, acc_sq = 0;
-    for (int c = 0; c < image.cols(); ++c) {
-      const double v = image(r, c);
-      acc += v, acc_sq += v * v;
-      sum_[(r + 1) * stride_ + c + 1] = sum_[r * stride_ + c + 1] + acc;
-      sum_sq_[(r + 1) * stride_ + c + 1] = sum_sq_[r * stride_ + c + 1] + acc_sq;
-    }
-  }
-}
-
 ImageF NormalizeTileIntensity(const ImageF& image) {
   std::vector<float> sample;
   sample.reserve(image.size() / 7 + 1);

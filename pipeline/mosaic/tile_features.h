@@ -32,23 +32,6 @@ ImageF DownsampleBox(const ImageF& image, int factor);
 // Separable Gaussian blur (kernel radius ceil(3 sigma), borders clamped).
 ImageF GaussianBlur(const ImageF& image, double sigma_px);
 
-// Summed-area tables of an image's values and squares (double): the sum and
-// the sum of squares over any rectangle in O(1).
-class WindowMoments {
- public:
-  explicit WindowMoments(const ImageF& image);
-  // Over rows [r0, r1), columns [c0, c1).
-  double Sum(int r0, int r1, int c0, int c1) const { return Box(sum_, r0, r1, c0, c1); }
-  double SumSq(int r0, int r1, int c0, int c1) const { return Box(sum_sq_, r0, r1, c0, c1); }
-
- private:
-  double Box(const std::vector<double>& t, int r0, int r1, int c0, int c1) const {
-    return t[r1 * stride_ + c1] - t[r0 * stride_ + c1] - t[r1 * stride_ + c0] + t[r0 * stride_ + c0];
-  }
-  int stride_;
-  std::vector<double> sum_, sum_sq_;
-};
-
 struct HarrisOptions {
   double window_sigma_px = 1.5;  // Gaussian integration window of the structure tensor, px
   double k = 0.04;               // R = det(M) - k trace(M)^2

@@ -39,6 +39,38 @@ std::string PatchMatchOptions::Check() const {
 
 namespace {
 
+// Summed-area tables of an image's values and squares (double): the sum and
+// the sum of squares over any rectangle in O(1).
+class WindowMoments {
+ public:
+  explicit WindowMoments(const ImageF& image);
+  // Over rows [r0, r1), columns [c0, c1).
+  double Sum(int r0, int r1, int c0, int c1) const { return Box(sum_, r0, r1, c0, c1); }
+  double SumSq(int r0, int r1, int c0, int c1) const { return Box(sum_sq_, r0, r1, c0, c1); }
+
+ private:
+  double Box(const std::vector<double>& t, int r0, int r1, int c0, int c1) const {
+    return t[r1 * stride_ + c1] - t[r0 * stride_ + c1] - t[r1 * stride_ + c0] + t[r0 * stride_ + c0];
+  }
+  int stride_;
+  std::vector<double> sum_, sum_sq_;
+};
+
+WindowMoments::WindowMoments(const ImageF& image)
+    : stride_(static_cast<int>(image.cols()) + 1),
+      sum_(static_cast<size_t>(stride_) * (image.rows() + 1), 0.0),
+      sum_sq_(sum_.size(), 0.0) {
+  for (int r = 0; r < image.rows(); ++r) {
+    double acc = 0, acc_sq = 0;
+    for (int c = 0; c < image.cols(); ++c) {
+      const double v = image(r, c);
+      acc += v, acc_sq += v * v;
+      sum_[(r + 1) * stride_ + c + 1] = sum_[r * stride_ + c + 1] + acc;
+      sum_sq_[(r + 1) * stride_ + c + 1] = sum_sq_[r * stride_ + c + 1] + acc_sq;
+    }
+  }
+}
+
 // NCC of a and b over their overlap when b is shifted by (dx, dy): a(r, c)
 // against b(r + dy, c + dx). -2 if the overlap is smaller than min_pixels.
 double OverlapNcc(const ImageF& a, const ImageF& b, const WindowMoments& ma, const WindowMoments& mb, int dx,
