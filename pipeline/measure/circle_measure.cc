@@ -330,8 +330,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
   }
   constexpr double kStep = 0.25;
   const int samples = static_cast<int>(std::lround((d_hi - d_lo) / kStep)) + 1;
-  std::vector<double> profile(static_cast<size_t>(samples)),
-      deriv(static_cast<size_t>(samples), 0.0);
+  Eigen::VectorXd profile(samples), deriv = Eigen::VectorXd::Zero(samples);
   const int h = static_cast<int>(std::lround(0.5 / kStep));
   for (int k = 0; k < num; ++k) {
     WedgeEdge& wedge = pass.wedges[static_cast<size_t>(k)];
@@ -341,8 +340,8 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
     int first = samples;  // profile samples [first, samples) are valid
     for (int i = samples - 1; i >= 0; --i) {
       const Eigen::Vector2d p = circle.centre + (circle.radius + d_lo + i * kStep) * n;
-      profile[static_cast<size_t>(i)] = Bilinear(image, p.x(), p.y());
-      if (std::isnan(profile[static_cast<size_t>(i)])) break;
+      profile(i) = Bilinear(image, p.x(), p.y());
+      if (std::isnan(profile(i))) break;
       first = i;
     }
     const int i_lo = static_cast<int>(std::lround((-band - d_lo) / kStep));
@@ -353,18 +352,16 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       continue;
     }
     for (int i = first + h; i + h < samples; ++i) {
-      deriv[static_cast<size_t>(i)] =
-          profile[static_cast<size_t>(i + h)] - profile[static_cast<size_t>(i - h)];
+      deriv(i) = profile(i + h) - profile(i - h);
     }
     // The outermost strong dark-to-bright step within the band is the rim.
     double largest = 0.0;
-    for (int i = i_lo; i <= i_hi; ++i) largest = std::max(largest, deriv[static_cast<size_t>(i)]);
+    for (int i = i_lo; i <= i_hi; ++i) largest = std::max(largest, deriv(i));
     if (!(largest > 0.0)) continue;
     int peak = -1;
     for (int i = i_hi; i >= i_lo; --i) {
-      const double g = deriv[static_cast<size_t>(i)];
-      if (g >= 0.5 * largest && g >= deriv[static_cast<size_t>(i - 1)] &&
-          g >= deriv[static_cast<size_t>(i + 1)]) {
+      const double g = deriv(i);
+      if (g >= 0.5 * largest && g >= deriv(i - 1) && g >= deriv(i + 1)) {
         peak = i;
         break;
       }
@@ -399,9 +396,8 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       double best = 0.2 * options.min_contrast;
       int inner_peak = -1;
       for (int i = peak - static_cast<int>(std::lround(2.0 * sigma / kStep)); i >= stop; --i) {
-        const double g = deriv[static_cast<size_t>(i)];
-        if (g > best && g >= deriv[static_cast<size_t>(i - 1)] &&
-            g >= deriv[static_cast<size_t>(i + 1)]) {
+        const double g = deriv(i);
+        if (g > best && g >= deriv(i - 1) && g >= deriv(i + 1)) {
           best = g;
           inner_peak = i;
         }
@@ -700,6 +696,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
     if (inner == Inner::kFree && static_cast<int>(inner_index.size()) >= std::max(12, num / 10)) {
       const Eigen::Matrix2Xd inner_points = points_at(inner_index, true);
       std::vector<double> offsets;
+      offsets.reserve(inner_index.size());
       for (int k : inner_index) offsets.push_back(pass.wedges[static_cast<size_t>(k)].step.x1);
       const CircleFit bottom_fit =
           FitCircleRobust(inner_points, Circle{circle.centre, circle.radius + Median(offsets)},
@@ -738,7 +735,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
   result.edge_sigma_px = sigma;
   result.centre_px = circle.centre;
   result.radius_px = circle.radius + sigma * sigma / (2.0 * circle.radius);
-  const double num = static_cast<double>(result.num_wedges);
+  const auto num = static_cast<double>(result.num_wedges);
   if (result.num_inliers < options.min_found_fraction * num) {
     result.error = "not found near the expected position (" + std::to_string(result.num_inliers) +
                    " of " + std::to_string(result.num_wedges) + " wedges fit one circle)";

@@ -53,21 +53,20 @@ ImageF RenderSyntheticHole(const SyntheticHole& hole) {
   }
   // Separable Gaussian PSF, borders clamped.
   const int half = static_cast<int>(std::ceil(4.0 * hole.psf_sigma_px));
-  std::vector<double> kernel(static_cast<size_t>(2 * half + 1));
+  Eigen::VectorXd kernel(2 * half + 1);
   double total = 0.0;
   for (int i = -half; i <= half; ++i) {
-    kernel[static_cast<size_t>(i + half)] =
-        std::exp(-0.5 * i * i / (hole.psf_sigma_px * hole.psf_sigma_px));
-    total += kernel[static_cast<size_t>(i + half)];
+    kernel(i + half) = std::exp(-0.5 * i * i / (hole.psf_sigma_px * hole.psf_sigma_px));
+    total += kernel(i + half);
   }
-  for (double& k : kernel) k /= total;
+  kernel /= total;
   auto clamp = [](int i, int size) { return std::min(std::max(i, 0), size - 1); };
   ImageF rows_blurred(hole.height_px, hole.width_px), image(hole.height_px, hole.width_px);
   for (int row = 0; row < hole.height_px; ++row) {
     for (int col = 0; col < hole.width_px; ++col) {
       double sum = 0.0;
       for (int i = -half; i <= half; ++i)
-        sum += kernel[static_cast<size_t>(i + half)] * area(row, clamp(col + i, hole.width_px));
+        sum += kernel(i + half) * area(row, clamp(col + i, hole.width_px));
       rows_blurred(row, col) = static_cast<float>(sum);
     }
   }
@@ -77,8 +76,7 @@ ImageF RenderSyntheticHole(const SyntheticHole& hole) {
     for (int col = 0; col < hole.width_px; ++col) {
       double sum = 0.0;
       for (int i = -half; i <= half; ++i)
-        sum += kernel[static_cast<size_t>(i + half)] *
-               rows_blurred(clamp(row + i, hole.height_px), col);
+        sum += kernel(i + half) * rows_blurred(clamp(row + i, hole.height_px), col);
       const Eigen::Vector2d p(col, row);
       if (hole.seam_normal.dot(p) > hole.seam_offset_px) sum *= hole.seam_gain;
       sum += hole.noise_sigma * noise(rng);
