@@ -208,21 +208,41 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
 
 namespace {
 
-// In-place cubic B-spline prefilter of n samples at stride `stride`.
-void BSplinePrefilter1D(float* data, int n, int stride, std::vector<double>* work) {
+// In-place cubic B-spline prefilter along n samples at stride `stride`, of
+// `lanes` adjacent (unit-stride) sequences at once: the column pass walks
+// rows of a block of columns (cache-friendly, vectorisable) instead of one
+// column at a time.
+void BSplinePrefilter1D(float* data, int n, int stride, int lanes, std::vector<double>* work) {
   if (n < 2) return;
   const double z = std::sqrt(3.0) - 2.0;
   std::vector<double>& c = *work;
-  c.resize(n);
+  c.assign(static_cast<size_t>(n) * lanes, 0.0);
+  const auto at = [&](int k) { return data + static_cast<size_t>(k) * stride; };
   // Causal initialisation: mirrored sum truncated where z^k < 1e-9.
   const int horizon = std::min(n, 16);
-  double sum = 0, zk = 1;
-  for (int k = 0; k < horizon; ++k) sum += zk * data[k * stride], zk *= z;
-  c[0] = sum;
-  for (int k = 1; k < n; ++k) c[k] = data[k * stride] + z * c[k - 1];
-  c[n - 1] = (z / (z * z - 1.0)) * (c[n - 1] + z * c[n - 2]);
-  for (int k = n - 2; k >= 0; --k) c[k] = z * (c[k + 1] - c[k]);
-  for (int k = 0; k < n; ++k) data[k * stride] = static_cast<float>(6.0 * c[k]);
+  double zk = 1;
+  for (int k = 0; k < horizon; ++k, zk *= z) {
+    const float* x = at(k);
+    for (int l = 0; l < lanes; ++l) c[l] += zk * x[l];
+  }
+  for (int k = 1; k < n; ++k) {
+    const float* x = at(k);
+    double* ck = &c[static_cast<size_t>(k) * lanes];
+    const double* prev = ck - lanes;
+    for (int l = 0; l < lanes; ++l) ck[l] = x[l] + z * prev[l];
+  }
+  double* last = &c[static_cast<size_t>(n - 1) * lanes];
+  for (int l = 0; l < lanes; ++l) last[l] = (z / (z * z - 1.0)) * (last[l] + z * last[l - lanes]);
+  for (int k = n - 2; k >= 0; --k) {
+    double* ck = &c[static_cast<size_t>(k) * lanes];
+    const double* next = ck + lanes;
+    for (int l = 0; l < lanes; ++l) ck[l] = z * (next[l] - ck[l]);
+  }
+  for (int k = 0; k < n; ++k) {
+    float* x = at(k);
+    const double* ck = &c[static_cast<size_t>(k) * lanes];
+    for (int l = 0; l < lanes; ++l) x[l] = static_cast<float>(6.0 * ck[l]);
+  }
 }
 
 }  // namespace
@@ -231,8 +251,11 @@ ImageF BSplineCoefficients(const ImageF& image) {
   ImageF c = image;
   const int rows = static_cast<int>(c.rows()), cols = static_cast<int>(c.cols());
   std::vector<double> work;
-  for (int r = 0; r < rows; ++r) BSplinePrefilter1D(c.data() + static_cast<size_t>(r) * cols, cols, 1, &work);
-  for (int col = 0; col < cols; ++col) BSplinePrefilter1D(c.data() + col, rows, cols, &work);
+  for (int r = 0; r < rows; ++r)
+    BSplinePrefilter1D(c.data() + static_cast<size_t>(r) * cols, cols, 1, 1, &work);
+  constexpr int kBlock = 32;
+  for (int col = 0; col < cols; col += kBlock)
+    BSplinePrefilter1D(c.data() + col, rows, cols, std::min(kBlock, cols - col), &work);
   return c;
 }
 

@@ -17,7 +17,7 @@ namespace omm {
 struct ImageMotionOptions {
   int coarse_max_size_px = 96;   // the exhaustive search runs on tiles downsampled to this
   double min_overlap_fraction = 0.08;  // shifts overlapping less of the image are not scored
-  int finest_factor = 2;         // refinement stops at this downsampling factor
+  int finest_factor = 4;         // refinement stops at this downsampling factor
   // Every level minus the Gaussian blur of the coarsest by this sigma
   // (coarsest px; 0: off), so that shading and vignetting do not correlate.
   double coarse_highpass_sigma_px = 4.0;
