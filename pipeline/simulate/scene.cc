@@ -43,6 +43,8 @@ WorkpieceScene::WorkpieceScene(Layout layout, const SurfaceTexture* texture,
     add(layout_.holes[i].center_mm, layout_.holes[i].radius_mm, &Cell::holes, i);
   }
   for (int i = 0; i < static_cast<int>(layout_.markers.size()); ++i) {
+    const double angle = layout_.markers[i].angle_rad;
+    marker_axes_.emplace_back(std::cos(angle), std::sin(angle));
     add(layout_.markers[i].center_mm, layout_.markers[i].paper_size_mm / std::sqrt(2.0),
         &Cell::markers, i);
   }
@@ -65,7 +67,7 @@ SceneSample WorkpieceScene::Sample(const Eigen::Vector2d& p, const Eigen::Vector
   for (const int m : cell.markers) {
     const MarkerShape& marker = layout_.markers[m];
     const Eigen::Vector2d v = p - marker.center_mm;
-    const double c = std::cos(marker.angle_rad), s = std::sin(marker.angle_rad);
+    const double c = marker_axes_[m].x(), s = marker_axes_[m].y();
     const double u = c * v.x() + s * v.y();  // along the print's +x
     const double w = s * v.x() - c * v.y();  // along the print's +y (down)
     const double half = 0.5 * marker.paper_size_mm;

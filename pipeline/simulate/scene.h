@@ -180,6 +180,7 @@ class WorkpieceScene {
   // plate (x, y) = plate_from_part_2d_ * (p - plate_origin_)
   Eigen::Matrix2d plate_from_part_2d_;
   Eigen::Vector2d plate_origin_;
+  std::vector<Eigen::Vector2d> marker_axes_;  // (cos, sin) of each marker's angle
   // A uniform grid of kCellMm cells over the outline listing the holes and
   // markers that reach into each cell: one lookup instead of a loop over all
   // shapes for every ray.
