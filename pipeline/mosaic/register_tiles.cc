@@ -1,6 +1,7 @@
 #include "pipeline/mosaic/register_tiles.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -555,7 +556,9 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       }
     }
   };
+  // Returns the number of matches relocated.
   const auto relocate = [&] {
+    std::atomic<int> num_relocated{0};
     // The adjusted plane model's affine between the two tiles at each track
     // point: dq_b/dq_a = (dq_b/dP) (dq_a/dP)^-1, dq/dP = dq/dp_cam R[:, 0:2].
     const PlaneScene& scene = adjustment.scene;
@@ -592,6 +595,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       // small fraction of a match's sigma, the match would not move.
       const double change_px = (db_da - m.db_da).norm() * options.patch.half_size_px * std::sqrt(2.0);
       if (change_px < options.relocation_min_change_px) return;
+      ++num_relocated;
       m.db_da = db_da;
       const PatchMatch pm = MatchPatch(normalized[m.tile_a], m.anchor_px, normalized[m.tile_b],
                                        spline[m.tile_b], m.q_b, m.db_da, 0, options.patch);
@@ -602,13 +606,16 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       m.q_b = pm.q_px;
       m.sigma_px = pm.sigma_px;
     });
+    return num_relocated.load();
   };
 
   solve(false);
   if (adjustment.seed.ok) {
     drop_outliers();
     for (int pass = 0; pass < options.rematch_passes; ++pass) {
-      relocate();
+      const int relocated = relocate();
+      result.num_relocated += relocated;
+      if (relocated == 0) break;  // the final solve below sees the same matches
       solve(false);
       if (!adjustment.seed.ok) break;
       drop_outliers();

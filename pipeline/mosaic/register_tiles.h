@@ -140,6 +140,7 @@ struct TileRegistration {
   std::string motion_brief;  // how A was found (EstimateImageMotion's brief)
   int num_tags_detected = 0;      // tag detections over all tiles
   int num_dropped_observations = 0;  // by the outlier passes
+  int num_relocated = 0;  // matches relocated with the adjusted plane's affine (all passes)
   double rms_px = 0.0;               // final RMS reprojection error of used observations
   std::vector<Eigen::Vector2d> table_adjustment_mm;  // adjusted minus commanded, per tile
   double plane_tilt_deg = 0.0;
