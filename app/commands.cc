@@ -159,11 +159,12 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
 }
 
 int SimulateCommand(const fs::path& project_dir, std::uint64_t seed, const std::string& preset,
-                    const std::optional<fs::path>& truth) {
+                    int calib_images, const std::optional<fs::path>& truth) {
   return Finish(Guarded([&] {
     SimulationOptions options;
     options.seed = seed;
     options.preset = preset;
+    options.num_calib_images = calib_images;
     if (const std::string problem = options.Check(); !problem.empty()) {
       throw InputError("omm simulate", problem);
     }

@@ -24,7 +24,8 @@ int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force);
 
 // `omm simulate`.
 int SimulateCommand(const std::filesystem::path& project_dir, std::uint64_t seed,
-                    const std::string& preset, const std::optional<std::filesystem::path>& truth);
+                    const std::string& preset, int calib_images,
+                    const std::optional<std::filesystem::path>& truth);
 
 // `omm report`: regenerates out/report.html and out/report.json (normalised)
 // from out/ without running a stage, then prints a summary of the report, or

@@ -118,6 +118,7 @@ int main(int argc, char** argv) {
   fs::path simulate_out;
   std::uint64_t seed = 1;
   std::string preset = "demo";
+  int calib_images = omm::SimulationOptions().num_calib_images;
   std::optional<fs::path> truth;
   CLI::App* simulate = app.add_subcommand(
       "simulate",
@@ -128,6 +129,11 @@ int main(int argc, char** argv) {
   simulate->add_option("--seed", seed, "random seed; the same seed gives the same project")
       ->capture_default_str();
   simulate->add_option("--preset", preset, "scene preset: " + PresetList())->capture_default_str();
+  simulate
+      ->add_option("--calib-images", calib_images,
+                   "calibration images (3..100: one partly outside the image, one without "
+                   "the plate, the rest full)")
+      ->capture_default_str();
   simulate->add_option("--truth", truth, "where to write the truth JSON");
 
   bool json = false;
@@ -151,7 +157,8 @@ int main(int argc, char** argv) {
   if (run->parsed()) return omm::RunCommand(project, omm::AllStages());
   if (stage) return omm::RunCommand(project, {*stage}, study);
   if (batch->parsed()) return omm::BatchCommand(batch_dirs, force);
-  if (simulate->parsed()) return omm::SimulateCommand(simulate_out, seed, preset, truth);
+  if (simulate->parsed())
+    return omm::SimulateCommand(simulate_out, seed, preset, calib_images, truth);
   if (report->parsed()) return omm::ReportCommand(project, json);
   return omm::kExitBadInput;
 }

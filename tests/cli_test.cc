@@ -59,6 +59,13 @@ TEST_F(CliTest, BadProjectExitsTwoAndNamesFileAndKey) {
   EXPECT_FALSE(fs::exists(project_.OutDir()));
 }
 
+TEST_F(CliTest, SimulateRefusesTooFewCalibImagesBeforeWriting) {
+  const auto result = Omm("simulate " + Quoted(dir_.path() / "sim") + " --calib-images 2");
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("num_calib_images must be in 3..100"));
+  EXPECT_FALSE(fs::exists(dir_.path() / "sim"));
+}
+
 TEST_F(CliTest, MissingProjectExitsTwo) {
   const auto result = Omm("run " + Quoted(dir_.path() / "nowhere"));
   EXPECT_EQ(result.exit_code, 2);

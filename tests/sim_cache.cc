@@ -35,10 +35,12 @@ class FileLock {
 
 }  // namespace
 
-CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed) {
+CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
+                               std::optional<int> num_calib_images) {
   const fs::path cache = OMM_SIM_CACHE_DIR;
   fs::create_directories(cache);
-  const std::string name = preset + "-" + std::to_string(seed);
+  const std::string name = preset + "-" + std::to_string(seed) +
+                           (num_calib_images ? "-calib" + std::to_string(*num_calib_images) : "");
   const fs::path final_dir = cache / name;
   {
     FileLock lock(cache / (name + ".lock"));
@@ -49,6 +51,7 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed) {
       SimulationOptions options;
       options.preset = preset;
       options.seed = seed;
+      if (num_calib_images) options.num_calib_images = *num_calib_images;
       try {
         SimulateProjectDirectory(options, temp / "project", temp / "truth.json", {});
       } catch (const std::exception& e) {

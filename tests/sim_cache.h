@@ -1,7 +1,7 @@
 // Simulated projects rendered once per build tree and shared by every test
 // process: $build/sim-cache/<preset>-<seed>/{project/, truth.json}.
 //
-// Rendering takes ~30-60 s per project, so tests that need one call
+// Rendering takes ~10 s CPU per project, so tests that need one call
 // SimulatedProject(): the first caller renders into a temporary directory and
 // renames it into place under an exclusive lock (flock on <name>.lock), so
 // parallel ctest processes neither render twice nor see a half-written
@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "pipeline/core/truth.h"
@@ -24,8 +25,11 @@ struct CachedProject {
 };
 
 // Renders (or finds) the project of `preset` and `seed` with the simulator's
-// defaults. Fails the calling test (ADD_FAILURE) and throws if rendering fails.
-CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed);
+// defaults, or with num_calib_images calib/ images if given (cached apart, as
+// <preset>-<seed>-calib<N>). Fails the calling test (ADD_FAILURE) and throws
+// if rendering fails.
+CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
+                               std::optional<int> num_calib_images = std::nullopt);
 
 // Copies a project's inputs (everything but out/) into `to` (created).
 void CopyProject(const std::filesystem::path& from, const std::filesystem::path& to);
