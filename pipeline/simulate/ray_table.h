@@ -21,7 +21,7 @@
 // and even one projection each (~0.3 us through a splined model) dominates,
 // so rays are interpolated at two levels. A coarse grid (coarse_step_px) is
 // unprojected; the nodes of a fine grid (fine_step_px) start from a bicubic
-// (Catmull-Rom) interpolation of it (error ~1e-4 px at a 16 px spacing) and
+// (Catmull-Rom) interpolation of it (error 1e-5..1e-4 px at a 16 px spacing) and
 // are refined by the fixed-point step
 //   (x, y) += d(x, y)/dq * (q - project((x, y, 1))),
 // with d(x, y)/dq the interpolant's own derivative: an approximate inverse of

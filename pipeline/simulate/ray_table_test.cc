@@ -1,5 +1,8 @@
 #include "pipeline/simulate/ray_table.h"
 
+#include <algorithm>
+#include <cstdio>
+
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/lens.h"
@@ -54,6 +57,56 @@ TEST(RayTable, RaysProjectToTheirSamplesOpenCv8Centre) {
 
 TEST(RayTable, RaysProjectToTheirSamplesSplinedLensCorner) {
   ExpectRaysProjectToTheirSamples(TruthCamera("lens-mismatch"), {1552, 1160, 48, 40});
+}
+
+// The Gauss points' rays are as exact as the supersamples'; the affine map of
+// each pixel puts rays anywhere in it to within 1e-4 px (what the renderer's
+// edge blocks need: their edges are placed to ~1e-3 px).
+void ExpectGaussRaysAndPixelMapsProject(const CameraModel& camera, const PixelRect& rect) {
+  RayTableSummary summary;
+  const RayTable table = ComputeRayTable(camera, rect, RayTableOptions(), &summary);
+  ASSERT_TRUE(summary.ok);
+  constexpr int kFine = 8;  // map samples per pixel and axis, to the pixel's border
+  const int per_pixel = 4 + kFine * kFine;
+  const int n = rect.width * rect.height * per_pixel;
+  Eigen::Matrix3Xd p(3, n);
+  Eigen::Matrix2Xd q_expected(2, n);
+  int i = 0;
+  for (int r = 0; r < rect.height; ++r) {
+    for (int c = 0; c < rect.width; ++c) {
+      for (int k = 0; k < 4; ++k, ++i) {
+        p.col(i) << table.GaussRay(r, c, k), 1.0;
+        q_expected.col(i) = RayTable::GaussPixel(rect.x0 + c, rect.y0 + r, k);
+      }
+      const PixelRayMap map = table.PixelMap(r, c);
+      for (int j = 0; j < kFine; ++j) {
+        for (int k = 0; k < kFine; ++k, ++i) {
+          const double u = k / (kFine - 1.0) - 0.5, v = j / (kFine - 1.0) - 0.5;
+          p.col(i) << map(u, v), 1.0;
+          q_expected.col(i) << rect.x0 + c + u, rect.y0 + r + v;
+        }
+      }
+    }
+  }
+  Eigen::Matrix2Xd q;
+  ASSERT_TRUE(ProjectPoints(camera, p, &q));
+  double max_gauss = 0, max_map = 0;
+  for (int j = 0; j < n; ++j) {
+    const double error = (q.col(j) - q_expected.col(j)).norm();
+    double& max = j % per_pixel < 4 ? max_gauss : max_map;
+    max = std::max(max, error);
+  }
+  std::printf("Gauss rays %.1e px, pixel maps %.1e px\n", max_gauss, max_map);
+  EXPECT_LT(max_gauss, 1e-6);
+  EXPECT_LT(max_map, 1e-4);
+}
+
+TEST(RayTable, GaussRaysAndPixelMapsProjectToTheirPointsOpenCv8Corner) {
+  ExpectGaussRaysAndPixelMapsProject(TruthCamera("demo"), {0, 0, 48, 40});
+}
+
+TEST(RayTable, GaussRaysAndPixelMapsProjectToTheirPointsSplinedLensCorner) {
+  ExpectGaussRaysAndPixelMapsProject(TruthCamera("lens-mismatch"), {1552, 1160, 48, 40});
 }
 
 TEST(RayTable, DoesNotDependOnThreads) {
