@@ -4,7 +4,6 @@
 #include <chrono>
 #include <cmath>
 #include <sstream>
-#include <thread>
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
@@ -14,6 +13,7 @@
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
 #include "pipeline/mosaic/mrcal_projection.h"
+#include "pipeline/mosaic/parallel_for.h"
 #include "pipeline/mosaic/plane_seed.h"
 
 namespace omm {
@@ -115,20 +115,11 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
 
   // 1. Whole plates.
   std::vector<PlateObservation> whole(num_tiles);
-  {
-    std::vector<std::thread> threads;
-    const int num_threads = std::min(options.num_threads, num_tiles);
-    for (int t = 0; t < num_threads; ++t) {
-      threads.emplace_back([&, t] {
-        for (int i = t; i < num_tiles; i += num_threads) {
-          GrayImage image;
-          image.pixels = tiles[i];
-          whole[i] = DetectPlate(image, board, options.detection);
-        }
-      });
-    }
-    for (std::thread& thread : threads) thread.join();
-  }
+  ParallelFor(num_tiles, options.num_threads, [&](int i) {
+    GrayImage image;
+    image.pixels = tiles[i];
+    whole[i] = DetectPlate(image, board, options.detection);
+  });
   const int num_marks = static_cast<int>(result.marks.mark_uv_mm.cols());
   // Per tile and mark: the located centre and its sigma (sigma 0: not seen).
   std::vector<Eigen::Matrix2Xd> q_px(num_tiles, Eigen::Matrix2Xd::Zero(2, num_marks));
