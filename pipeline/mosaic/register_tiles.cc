@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <set>
 #include <random>
 #include <sstream>
 
@@ -157,14 +158,20 @@ struct Match {
   int tile_a = 0, tile_b = 0;
   long long key = 0;
   Eigen::Vector2i anchor_px = Eigen::Vector2i::Zero();
+  Eigen::Vector2d ray_a = Eigen::Vector2d::Zero();  // the anchor's undistorted ray (x, y; z = 1)
   Eigen::Vector2d q_b = Eigen::Vector2d::Zero();
   Eigen::Matrix2d db_da = Eigen::Matrix2d::Identity();  // affine of the last match
   double sigma_px = 0.0;  // the last match's predicted sigma (PatchMatch::sigma_px)
   bool tag = false;
+  bool sift = false;  // its anchor came from a SIFT match
   bool keep = true;
 };
 
-long long CornerKey(int tile, int corner) { return static_cast<long long>(tile) * 1000000 + corner; }
+// A template anchor's key (its track): tile and pixel, so that a Harris
+// corner and a SIFT keypoint at one pixel are one track.
+long long PixelKey(int tile, const Eigen::Vector2i& pixel, int width, int height) {
+  return (static_cast<long long>(tile) * height + pixel.y()) * width + pixel.x();
+}
 long long TagKey(int id, int k) { return -(static_cast<long long>(id) * 4 + k + 1); }
 
 }  // namespace
@@ -172,7 +179,8 @@ long long TagKey(int id, int k) { return -(static_cast<long long>(id) * 4 + k + 
 TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
                                double table_sigma_mm, const CameraModel& camera,
-                               const RegisterTilesOptions& options) {
+                               const RegisterTilesOptions& options,
+                               const std::vector<ColmapPairMatches>& sift_matches) {
   if (const std::string e = options.Check(); !e.empty())
     throw InputError("", "tile registration: " + e);
   if (tiles.size() != commanded_table_pos_mm.size())
@@ -202,7 +210,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     if (options.matching_blur_sigma_px > 0)
       normalized[i] = GaussianBlur(normalized[i], options.matching_blur_sigma_px);
     // On the matching image, so that the texture test sees the templates.
-    corners[i] = DetectHarrisCorners(normalized[i], options.harris);
+    if (options.features != FeatureSource::kSift)
+      corners[i] = DetectHarrisCorners(normalized[i], options.harris);
     spline[i] = BSplineCoefficients(normalized[i]);
     coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
     if (options.use_apriltags) tags[i] = DetectAprilTags36h11(tiles[i], options.tags);
@@ -284,97 +293,172 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
 
   const int h = options.patch.half_size_px;
   const double fx = camera.intrinsics(0);
+  const bool use_harris = options.features != FeatureSource::kSift;
+  const bool use_sift = options.features != FeatureSource::kHarris;
+  std::map<std::pair<int, int>, const ColmapPairMatches*> sift_of_pair;
+  if (use_sift) {
+    for (const ColmapPairMatches& m : sift_matches) sift_of_pair[{m.tile_a, m.tile_b}] = &m;
+  }
+  // An anchor of tile a to locate in tile b: its pixel and ray, the
+  // predicted position in b and the local affine there.
+  struct Candidate {
+    Eigen::Vector2i pixel = Eigen::Vector2i::Zero();
+    Eigen::Vector2d ray_a = Eigen::Vector2d::Zero();
+    Eigen::Vector2d q_b = Eigen::Vector2d::Zero();
+    Eigen::Matrix2d db_da = Eigen::Matrix2d::Identity();
+    bool sift = false;
+  };
+  // Predictions through a plane-induced homography between the rays (b ~ H
+  // a) and the lens, affine included: dq_b/dq_a = dq_b/dray_b dray_b/dray_a
+  // (dq_a/dray_a)^-1, a ray being (x, y, 1). False if the lens refuses.
+  const auto predict = [&](const Eigen::Matrix3d& h_rays, std::vector<Candidate>* todo) {
+    const int n = static_cast<int>(todo->size());
+    Eigen::Matrix3Xd p_a(3, n), p_b(3, n);
+    for (int k = 0; k < n; ++k) {
+      p_a.col(k) = (*todo)[k].ray_a.homogeneous();
+      p_b.col(k) = Transfer(h_rays, (*todo)[k].ray_a).homogeneous();
+    }
+    Eigen::Matrix2Xd q_a, q_b;
+    Eigen::MatrixXd dqa_dp, dqb_dp;
+    if (n == 0) return true;
+    if (!ProjectPoints(camera, p_a, &q_a, &dqa_dp) || !ProjectPoints(camera, p_b, &q_b, &dqb_dp))
+      return false;
+    for (int k = 0; k < n; ++k) {
+      Candidate& c = (*todo)[k];
+      c.q_b = q_b.col(k);
+      c.db_da = dqb_dp.block<2, 2>(2 * k, 0) * TransferJacobian(h_rays, c.ray_a) *
+                dqa_dp.block<2, 2>(2 * k, 0).inverse();
+    }
+    return true;
+  };
   std::vector<std::vector<Match>> pair_matches(result.pairs.size());
   ParallelFor(static_cast<int>(result.pairs.size()), options.num_threads, [&](int p) {
     PairRegistration& pair = result.pairs[p];
     const int ta = pair.tile_a, tb = pair.tile_b;
-    const Eigen::Vector2d shift =
-        a_px_per_mm * (commanded_table_pos_mm[tb] - commanded_table_pos_mm[ta]);
-    const int margin = h + options.probe_search_radius_px + 3;
-    std::vector<int> candidates;
-    for (size_t k = 0; k < corners[ta].size(); ++k) {
-      const Eigen::Vector2d q = corners[ta][k].pixel.cast<double>() + shift;
-      if (q.x() >= margin && q.y() >= margin && q.x() < width - margin && q.y() < height - margin)
-        candidates.push_back(static_cast<int>(k));
-    }
-    pair.num_candidates = static_cast<int>(candidates.size());
     std::mt19937_64 rng(options.ransac_seed + p);
-    // Probes: the strongest corners (already spread by the bucketing).
-    const int num_probes = std::min<int>(options.num_probe_corners, candidates.size());
-    Eigen::Matrix2Xd probe_a(2, num_probes), probe_b(2, num_probes);
-    int found = 0;
-    const int f = options.probe_downsample_factor;
-    const double centre = 0.5 * (f - 1);  // of downsampled pixel 0, in full-resolution px
-    for (int k = 0; k < num_probes; ++k) {
-      const Corner& c = corners[ta][candidates[k]];
-      // The downsampled pixel holding the corner, and its centre's predicted
-      // (downsampled) position in b.
-      const Eigen::Vector2i anchor_coarse = c.pixel / f;
-      const Eigen::Vector2d offset = c.pixel.cast<double>() - (f * anchor_coarse.cast<double>().array() + centre).matrix();
-      const Eigen::Vector2d predicted_coarse =
-          ((c.pixel.cast<double>() + shift - offset).array() - centre) / f;
-      const NccPeak probe_peak = SearchNcc(
-          coarse_probe[ta], anchor_coarse, options.probe_half_size_px, coarse_probe[tb],
-          Eigen::Vector2i(static_cast<int>(std::lround(predicted_coarse.x())),
-                          static_cast<int>(std::lround(predicted_coarse.y()))),
-          (options.probe_search_radius_px + f - 1) / f + 1);
-      if (!probe_peak.ok) continue;
-      const PatchMatch m = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
-                                      (f * probe_peak.q_px.array() + centre).matrix() + offset,
-                                      Eigen::Matrix2d::Identity(), f, options.patch);
-      if (!m.ok) continue;
-      probe_a.col(found) = c.pixel.cast<double>();
-      probe_b.col(found) = m.q_px;
-      ++found;
+    std::vector<Candidate> todo;
+    if (use_harris) {
+      const Eigen::Vector2d shift =
+          a_px_per_mm * (commanded_table_pos_mm[tb] - commanded_table_pos_mm[ta]);
+      const int margin = h + options.probe_search_radius_px + 3;
+      std::vector<int> candidates;
+      for (size_t k = 0; k < corners[ta].size(); ++k) {
+        const Eigen::Vector2d q = corners[ta][k].pixel.cast<double>() + shift;
+        if (q.x() >= margin && q.y() >= margin && q.x() < width - margin &&
+            q.y() < height - margin)
+          candidates.push_back(static_cast<int>(k));
+      }
+      pair.num_candidates += static_cast<int>(candidates.size());
+      // Probes: the strongest corners (already spread by the bucketing).
+      const int num_probes = std::min<int>(options.num_probe_corners, candidates.size());
+      Eigen::Matrix2Xd probe_a(2, num_probes), probe_b(2, num_probes);
+      int found = 0;
+      const int f = options.probe_downsample_factor;
+      const double centre = 0.5 * (f - 1);  // of downsampled pixel 0, in full-resolution px
+      for (int k = 0; k < num_probes; ++k) {
+        const Corner& c = corners[ta][candidates[k]];
+        // The downsampled pixel holding the corner, and its centre's
+        // predicted (downsampled) position in b.
+        const Eigen::Vector2i anchor_coarse = c.pixel / f;
+        const Eigen::Vector2d offset =
+            c.pixel.cast<double>() - (f * anchor_coarse.cast<double>().array() + centre).matrix();
+        const Eigen::Vector2d predicted_coarse =
+            ((c.pixel.cast<double>() + shift - offset).array() - centre) / f;
+        const NccPeak probe_peak = SearchNcc(
+            coarse_probe[ta], anchor_coarse, options.probe_half_size_px, coarse_probe[tb],
+            Eigen::Vector2i(static_cast<int>(std::lround(predicted_coarse.x())),
+                            static_cast<int>(std::lround(predicted_coarse.y()))),
+            (options.probe_search_radius_px + f - 1) / f + 1);
+        if (!probe_peak.ok) continue;
+        const PatchMatch m = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
+                                        (f * probe_peak.q_px.array() + centre).matrix() + offset,
+                                        Eigen::Matrix2d::Identity(), f, options.patch);
+        if (!m.ok) continue;
+        probe_a.col(found) = c.pixel.cast<double>();
+        probe_b.col(found) = m.q_px;
+        ++found;
+      }
+      Eigen::Matrix3d h_pixels;
+      const std::vector<bool> probe_inliers =
+          RansacHomography(probe_a.leftCols(found), probe_b.leftCols(found),
+                           options.probe_ransac_threshold_px, 1.0, options.ransac_iterations,
+                           &rng, &h_pixels);
+      const int num_probe_inliers =
+          static_cast<int>(std::count(probe_inliers.begin(), probe_inliers.end(), true));
+      // The plane-induced homography between the rays from the probe
+      // inliers predicts the candidates (the pixel homography ignores the
+      // distortion, whose derivatives differ between the two tiles' image
+      // positions).
+      Eigen::Matrix2Xd inlier_a(2, num_probe_inliers), inlier_b(2, num_probe_inliers);
+      for (int k = 0, n = 0; k < static_cast<int>(probe_inliers.size()); ++k) {
+        if (probe_inliers[k]) inlier_a.col(n) = probe_a.col(k), inlier_b.col(n++) = probe_b.col(k);
+      }
+      const Eigen::Matrix2Xd rays_a = unproject(inlier_a), rays_b = unproject(inlier_b);
+      if (num_probe_inliers >= 8 && rays_a.cols() == num_probe_inliers &&
+          rays_b.cols() == num_probe_inliers) {
+        std::vector<Candidate> harris;
+        for (int k : candidates) {
+          Candidate c;
+          c.pixel = corners[ta][k].pixel;
+          c.ray_a = corner_rays[ta].col(k);
+          harris.push_back(c);
+        }
+        if (predict(FitHomography(rays_a, rays_b), &harris))
+          todo.insert(todo.end(), harris.begin(), harris.end());
+      }
     }
-    Eigen::Matrix3d h_pixels;
-    const std::vector<bool> probe_inliers =
-        RansacHomography(probe_a.leftCols(found), probe_b.leftCols(found),
-                         options.probe_ransac_threshold_px, 1.0, options.ransac_iterations, &rng,
-                         &h_pixels);
-    const int num_probe_inliers =
-        static_cast<int>(std::count(probe_inliers.begin(), probe_inliers.end(), true));
-    if (num_probe_inliers < 8) return;
-    // The plane-induced homography between the rays from the probe inliers:
-    // with the lens it predicts every candidate and the local affine of its
-    // template (the pixel homography ignores the distortion, whose
-    // derivatives differ between the two tiles' image positions).
-    Eigen::Matrix2Xd inlier_a(2, num_probe_inliers), inlier_b(2, num_probe_inliers);
-    for (int k = 0, n = 0; k < found; ++k) {
-      if (probe_inliers[k]) inlier_a.col(n) = probe_a.col(k), inlier_b.col(n++) = probe_b.col(k);
+    if (const auto it = sift_of_pair.find({ta, tb}); it != sift_of_pair.end()) {
+      // COLMAP's verified matches, screened on the rays; their homography
+      // predicts the template anchors (their pixels rounded) in b.
+      const ColmapPairMatches& sift = *it->second;
+      const Eigen::Matrix2Xd rays_a = unproject(sift.q_a_px), rays_b = unproject(sift.q_b_px);
+      Eigen::Matrix3d h_rays;
+      const std::vector<bool> inliers =
+          rays_a.cols() == sift.q_a_px.cols() && rays_b.cols() == sift.q_b_px.cols()
+              ? RansacHomography(rays_a, rays_b, options.ransac_threshold_px, fx,
+                                 options.ransac_iterations, &rng, &h_rays)
+              : std::vector<bool>();
+      if (std::count(inliers.begin(), inliers.end(), true) >= 8) {
+        std::vector<Eigen::Vector2i> pixels;
+        for (size_t k = 0; k < inliers.size(); ++k) {
+          if (!inliers[k]) continue;
+          pixels.emplace_back(static_cast<int>(std::lround(sift.q_a_px(0, k))),
+                              static_cast<int>(std::lround(sift.q_a_px(1, k))));
+        }
+        pair.num_candidates += static_cast<int>(pixels.size());
+        Eigen::Matrix2Xd q(2, pixels.size());
+        for (size_t k = 0; k < pixels.size(); ++k) q.col(k) = pixels[k].cast<double>();
+        const Eigen::Matrix2Xd anchor_rays = unproject(q);
+        if (anchor_rays.cols() == q.cols()) {
+          std::vector<Candidate> from_sift;
+          for (size_t k = 0; k < pixels.size(); ++k) {
+            Candidate c;
+            c.pixel = pixels[k];
+            c.ray_a = anchor_rays.col(k);
+            c.sift = true;
+            from_sift.push_back(c);
+          }
+          if (predict(h_rays, &from_sift)) todo.insert(todo.end(), from_sift.begin(), from_sift.end());
+        }
+      }
     }
-    const Eigen::Matrix2Xd probe_rays_a = unproject(inlier_a), probe_rays_b = unproject(inlier_b);
-    if (probe_rays_a.cols() != num_probe_inliers || probe_rays_b.cols() != num_probe_inliers) return;
-    const Eigen::Matrix3d h_probe_rays = FitHomography(probe_rays_a, probe_rays_b);
-    const int num_candidates = static_cast<int>(candidates.size());
-    Eigen::Matrix3Xd p_a(3, num_candidates), p_b(3, num_candidates);
-    for (int n = 0; n < num_candidates; ++n) {
-      const Eigen::Vector2d ray_a = corner_rays[ta].col(candidates[n]);
-      p_a.col(n) = ray_a.homogeneous();
-      p_b.col(n) = Transfer(h_probe_rays, ray_a).homogeneous();
-    }
-    Eigen::Matrix2Xd q_a, q_b;
-    Eigen::MatrixXd dqa_dp, dqb_dp;
-    if (!ProjectPoints(camera, p_a, &q_a, &dqa_dp) || !ProjectPoints(camera, p_b, &q_b, &dqb_dp))
-      return;
 
-    // All candidates, predicted through the rays.
+    // Every candidate located by the template match (one per anchor pixel:
+    // a SIFT keypoint may repeat, or coincide with a corner).
     std::vector<Match> matches;
-    for (int n = 0; n < num_candidates; ++n) {
-      const int k = candidates[n];
-      const Corner& c = corners[ta][k];
+    std::set<long long> seen;
+    for (const Candidate& c : todo) {
       Match m;
       m.tile_a = ta;
       m.tile_b = tb;
-      m.key = CornerKey(ta, k);
+      m.key = PixelKey(ta, c.pixel, width, height);
+      if (!seen.insert(m.key).second) continue;
       m.anchor_px = c.pixel;
-      // dq_b/dq_a = dq_b/dray_b dray_b/dray_a (dq_a/dray_a)^-1; a ray is (x, y, 1).
-      const Eigen::Matrix2d dqa_dray = dqa_dp.block<2, 2>(2 * n, 0);
-      const Eigen::Matrix2d dqb_dray = dqb_dp.block<2, 2>(2 * n, 0);
-      m.db_da = dqb_dray * TransferJacobian(h_probe_rays, p_a.col(n).head<2>()) * dqa_dray.inverse();
-      const PatchMatch pm = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
-                                       q_b.col(n), m.db_da, options.search_radius_px,
-                                       options.patch);
+      m.ray_a = c.ray_a;
+      m.db_da = c.db_da;
+      m.sift = c.sift;
+      const PatchMatch pm = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb], c.q_b,
+                                       m.db_da, options.search_radius_px, options.patch);
       if (!pm.ok) continue;
       m.q_b = pm.q_px;
       m.sigma_px = pm.sigma_px;
@@ -384,7 +468,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     // Plane-induced homography on the undistorted rays.
     Eigen::Matrix2Xd ra(2, matches.size()), qb(2, matches.size());
     for (size_t k = 0; k < matches.size(); ++k) {
-      ra.col(k) = corner_rays[ta].col(matches[k].key - CornerKey(ta, 0));
+      ra.col(k) = matches[k].ray_a;
       qb.col(k) = matches[k].q_b;
     }
     const Eigen::Matrix2Xd rb = unproject(qb);
@@ -397,6 +481,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       if (inliers[k]) kept.push_back(matches[k]);
     }
     pair.num_inliers = static_cast<int>(kept.size());
+    pair.num_sift = static_cast<int>(
+        std::count_if(kept.begin(), kept.end(), [](const Match& m) { return m.sift; }));
     pair_matches[p] = std::move(kept);
   });
 

@@ -3,8 +3,9 @@
 // (no file I/O).
 //
 // Pipeline (design.md, "Planar mosaic"; the paper's Harris + NCC method):
-// 1. Each tile is normalised (NormalizeTileIntensity) and its Harris corners
-//    found (grid-bucketed); AprilTag 36h11 markers are detected if enabled.
+// 1. Each tile is normalised (NormalizeTileIntensity), blurred for matching
+//    and its Harris corners found (textured, grid-bucketed); AprilTag 36h11
+//    markers are detected if enabled.
 // 2. The image motion per table millimetre, A (2 x 2, px/mm: it holds the
 //    camera's unknown rotation about its axis, a possible mirror and the
 //    scale), from the tiles that are nearest neighbours on the table
@@ -12,17 +13,25 @@
 //    all neighbour pairs agree best, then shift_ij ~ A (T_j - T_i) fitted to
 //    the pairs' refined shifts.
 // 3. Every pair (i < j) that A and the commanded positions predict to
-//    overlap, diagonals too: a few strong corners of i are found in j with a
-//    wide NCC search (on downsampled images, then refined at full
-//    resolution), a pixel homography is fitted to them (RANSAC), then every
-//    corner of i predicted inside j is matched in a small window and refined
-//    by least-squares template matching warped by the homography's local
-//    affine (MatchPatch); the matches are then screened by RANSAC on the
-//    plane-induced homography between the undistorted rays of the two tiles.
-//    Tag corners are matched by id (the detections predict, the template
-//    match locates). A pair with fewer than min_pair_matches is dropped.
-// 4. Tracks: a corner of tile i (the anchor: its integer pixel, exact) and its
-//    matches in every j > i; a tag corner likewise from the first tile that
+//    overlap, diagonals too. Anchors (template centres in i) and their
+//    predictions in j come from
+//    - Harris: a few strong corners of i are found in j with a wide NCC
+//      search (on downsampled images, then refined at full resolution), a
+//      pixel homography screens them (RANSAC), and the plane-induced
+//      homography between the rays of its inliers, through the lens,
+//      predicts every corner of i inside j and the local affine there;
+//    - SIFT (options.features): COLMAP's verified matches of the pair,
+//      screened by RANSAC on the same ray homography, which predicts their
+//      keypoints in i rounded to pixels.
+//    Each anchor is then matched in a small window and refined by
+//    least-squares template matching warped by that affine (MatchPatch);
+//    the matches are screened by RANSAC on the plane-induced homography
+//    between the undistorted rays of the two tiles. Tag corners are matched
+//    by id (the detections predict, the template match locates). A pair with
+//    fewer than min_pair_matches is dropped.
+// 4. Tracks: an anchor of tile i (its integer pixel, exact; a corner and a
+//    SIFT keypoint at one pixel are one) and its matches in every j > i; a
+//    tag corner likewise from the first tile that
 //    sees the tag. Every observation of a track is the same part point,
 //    because each is located against the same template.
 // 5. AdjustPlaneScene (seed + robust bundle adjustment; each match weighted
@@ -31,7 +40,8 @@
 //    whose residual exceeds outlier_factor x the median residual are dropped
 //    and the scene re-solved; then (rematch_passes) every match is relocated
 //    with the affine the adjusted plane model predicts between the two tiles
-//    and the scene solved again (each from its first position, refined).
+//    and the scene solved again (each from its first position, refined;
+//    only the matches whose affine that changes by relocation_min_change_px).
 // A tile without a usable pair fails the registration (unusable, the brief
 // names it) if it overlaps no other tile or if its predicted overlaps hold
 // at least min_pair_matches textured corners: its image does not show what
@@ -48,6 +58,7 @@
 #include <Eigen/Core>
 
 #include "adapters/apriltag/tag_detector.h"
+#include "adapters/colmap/colmap_sift.h"
 #include "pipeline/core/camera.h"
 #include "pipeline/core/image.h"
 #include "pipeline/core/plane_scene.h"
@@ -57,7 +68,16 @@
 
 namespace omm {
 
+// Where the template anchors come from (every anchor is then located by the
+// same template match, screened and adjusted alike).
+enum class FeatureSource {
+  kHarris,         // Harris corners; per pair, probes find the motion that predicts them
+  kSift,           // keypoints of COLMAP's verified SIFT matches (adapters/colmap/colmap_sift.h)
+  kHarrisAndSift,  // both
+};
+
 struct RegisterTilesOptions {
+  FeatureSource features = FeatureSource::kHarris;
   HarrisOptions harris;
   ImageMotionOptions motion;
   PatchMatchOptions patch;
@@ -116,6 +136,7 @@ struct PairRegistration {
   int num_candidates = 0;           // corners of a predicted inside b
   int num_matched = 0;              // accepted by the template match
   int num_inliers = 0;              // after the plane-induced-homography RANSAC
+  int num_sift = 0;                 // of them, anchored at SIFT keypoints
   int num_tag_corners = 0;          // tag corners matched by id
   int num_used = 0;                 // matches in the final adjustment
   double rms_px = 0.0;              // final residual RMS of the used matches' observations
@@ -151,9 +172,13 @@ struct TileRegistration {
 // `commanded_table_pos_mm` (table.csv; sigma per axis `table_sigma_mm`) with
 // the calibrated `camera`. Throws InputError for invalid options or input
 // (sizes); data failures come back in the result (usable, brief).
+// sift_matches (used unless options.features is kHarris): COLMAP's verified
+// SIFT matches between the tiles (ColmapSiftMatches on the tile files), pairs
+// by tile index.
 TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
                                double table_sigma_mm, const CameraModel& camera,
-                               const RegisterTilesOptions& options);
+                               const RegisterTilesOptions& options,
+                               const std::vector<ColmapPairMatches>& sift_matches = {});
 
 }  // namespace omm
