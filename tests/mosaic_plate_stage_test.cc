@@ -88,7 +88,7 @@ TEST_F(MosaicPlateStageTest, ReportHasThePlateScaleCheckAndTheRefinedIntrinsics)
   EXPECT_LT(Number(Mosaic(), "scale_sigma_ppm"), 10.0);
   const ReportValue& check_value = Member(Mosaic(), "plate_scale_check");
   ASSERT_TRUE(std::holds_alternative<ReportObject>(check_value.data()));
-  const ReportObject& check = std::get<ReportObject>(check_value.data());
+  const auto& check = std::get<ReportObject>(check_value.data());
   const auto& whole = std::get<ReportValue::Array>(Member(check, "whole_in_tiles").data());
   const auto& seen = std::get<ReportValue::Array>(Member(check, "seen_in_tiles").data());
   ASSERT_EQ(whole.size(), 1u);
@@ -133,7 +133,7 @@ TEST_F(MosaicPlateStageTest, SceneJsonHoldsTheJointCovariance) {
 // calibration.from a .cameramodel (no covariance) and the tile with the
 // whole plate gone: intrinsics held, no plate, and the report says both.
 TEST_F(MosaicPlateStageTest, HeldIntrinsicsAndNoPlateAreSaid) {
-  const ReportObject& check = std::get<ReportObject>(Member(Mosaic(), "plate_scale_check").data());
+  const auto& check = std::get<ReportObject>(Member(Mosaic(), "plate_scale_check").data());
   const std::string plate_tile = std::get<std::string>(
       std::get<ReportValue::Array>(Member(check, "whole_in_tiles").data())[0].data());
   const fs::path dir = dir_->path() / "held";

@@ -31,7 +31,7 @@ std::string PlateOnPartOptions::Check() const {
 }
 
 std::string FinalAdjustmentOptions::Check() const {
-  if (const std::string e = bundle.Check(); !e.empty()) return e;
+  if (std::string e = bundle.Check(); !e.empty()) return e;
   if (!(plate_outlier_sigmas > 0)) return "plate_outlier_sigmas must be > 0";
   return {};
 }
@@ -180,7 +180,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     if (!ProjectPoints(camera, p_cam, &predicted, &dq_dp, &dq_dintrinsics)) continue;
     for (int m = 0; m < num_marks; ++m) {
       // The dot's image: the circle through the local affine of the plane.
-      const Eigen::Matrix2d j = dq_dp.block<2, 3>(2 * m, 0) * rot.leftCols<2>() * radius_mm;
+      const Eigen::Matrix2d j = dq_dp.block<2, 3>(2 * Eigen::Index{m}, 0) * rot.leftCols<2>() * radius_mm;
       const Eigen::Matrix2d shape = (j * j.transpose()).inverse();
       Ellipse rough;
       rough.centre_px = predicted.col(m);
@@ -305,8 +305,8 @@ double TableScaleSigmaPpm(const std::vector<Eigen::Vector2d>& commanded_table_po
   double spread = 0;
   Eigen::VectorXd g(2 * n);
   for (int i = 0; i < n; ++i) {
-    g.segment<2>(2 * i) = commanded_table_pos_mm[i] - mean;
-    spread += g.segment<2>(2 * i).squaredNorm();
+    g.segment<2>(2 * Eigen::Index{i}) = commanded_table_pos_mm[i] - mean;
+    spread += g.segment<2>(2 * Eigen::Index{i}).squaredNorm();
   }
   if (!(spread > 0)) return 0.0;
   g /= spread;

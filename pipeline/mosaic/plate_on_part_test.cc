@@ -117,7 +117,7 @@ TEST(IntrinsicsPrior, NearlyRedundantCombinationIsCapped) {
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(
       marginal.cwiseInverse().asDiagonal() * covariance * marginal.cwiseInverse().asDiagonal());
   const Eigen::MatrixXd info = marginal.asDiagonal() * prior.information * marginal.asDiagonal();
-  const Eigen::VectorXd mu = eigen.eigenvalues();
+  const Eigen::VectorXd& mu = eigen.eigenvalues();
   ASSERT_LT(mu[1], 1e-6 * mu[n - 1]);  // two directions capped, the others not
   ASSERT_GT(mu[2], 1e-6 * mu[n - 1]);
   for (int k = 0; k < n; ++k) {
