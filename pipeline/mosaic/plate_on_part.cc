@@ -180,7 +180,8 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     if (!ProjectPoints(camera, p_cam, &predicted, &dq_dp, &dq_dintrinsics)) continue;
     for (int m = 0; m < num_marks; ++m) {
       // The dot's image: the circle through the local affine of the plane.
-      const Eigen::Matrix2d j = dq_dp.block<2, 3>(2 * Eigen::Index{m}, 0) * rot.leftCols<2>() * radius_mm;
+      const Eigen::Matrix2d j =
+          dq_dp.block<2, 3>(2 * Eigen::Index{m}, 0) * rot.leftCols<2>() * radius_mm;
       const Eigen::Matrix2d shape = (j * j.transpose()).inverse();
       Ellipse rough;
       rough.centre_px = predicted.col(m);
@@ -351,6 +352,7 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.scene = initial;
   result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
 
+  std::string why_not_used;
   if (plate.found && result.summary.usable) {
     // Misread marks: drop and solve again.
     const double sigma = result.input.observation_sigma_px;
@@ -364,11 +366,22 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
         ++result.plate_outliers;
       }
     }
-    if (result.plate_outliers > 0) {
+    if (2 * kept.size() < result.input.plate_observations.size()) {
+      why_not_used = std::to_string(result.plate_outliers) + " of " +
+                     std::to_string(result.input.plate_observations.size()) + " marks are outliers";
+    } else if (result.plate_outliers > 0) {
       result.input.plate_observations = kept;
       result.scene = initial;
       result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
     }
+  }
+  if (plate.found && !result.summary.usable) why_not_used = result.summary.brief;
+  if (!why_not_used.empty()) {
+    FinalAdjustment without = AdjustWithPlateAndPrior(camera, registered_input, registered_scene,
+                                                      PlateOnPart{}, prior, options);
+    without.plate_not_used = why_not_used;
+    without.seconds = Seconds(start);
+    return without;
   }
   // Ceres' diagonal blocks are symmetric to rounding only; the saved matrix
   // is exactly.

@@ -142,6 +142,9 @@ struct FinalAdjustment {
   double plate_height_mm = 0.0;
   double plate_height_sigma_mm = 0.0;
   PlateScaleCheck scale_check;
+  // Set when a found plate was left out (its solve unusable, or most of its
+  // marks outliers: not the plate it seemed): the scene is the one without it.
+  std::string plate_not_used;
   double seconds = 0.0;
 };
 

@@ -259,6 +259,27 @@ TEST(FinalAdjustment, PlateOfUnknownHeightInOneTileOnlyChecks) {
   EXPECT_NEAR(a.scale_check.scale_minus_1_ppm, expected, 3 * plate_noise);
 }
 
+// A "plate" whose marks do not fit (misidentified: here every mark swapped
+// with its mirror across the plate's middle row) is left out, and said.
+TEST(FinalAdjustment, PlateThatDoesNotFitIsLeftOut) {
+  SyntheticPlaneOptions options;
+  options.with_plate = true;
+  options.num_tracks = 600;
+  const Registered r = Register(options);
+  PlateOnPart plate = PlateOf(r.s);
+  for (PlateMarkObservation& o : plate.observations) o.mark = (6 - o.mark / 7) * 7 + o.mark % 7;
+  const FinalAdjustment a =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, plate, IntrinsicsPrior{}, {});
+  const FinalAdjustment none =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOnPart{}, IntrinsicsPrior{}, {});
+  ASSERT_TRUE(a.summary.usable) << a.summary.brief;
+  EXPECT_FALSE(a.plate_not_used.empty());
+  std::printf("left out: %s\n", a.plate_not_used.c_str());
+  EXPECT_TRUE(a.scene.plates.empty());
+  EXPECT_EQ(a.scene.table_pos_mm, none.scene.table_pos_mm);
+  EXPECT_FALSE(a.scale_check.ok);
+}
+
 // The intrinsics prior makes the covariance joint: an intrinsics block no
 // larger than the prior, correlated with the pose and the table positions;
 // without it the intrinsics come back bit-identical with a zero block.

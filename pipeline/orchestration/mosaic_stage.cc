@@ -192,8 +192,10 @@ double IntrinsicsChangeSigmas(const CameraModel& camera, const FinalAdjustment& 
 // why there is none.
 ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
                         const FinalAdjustment& adjusted) {
-  if (!plate.found) {
-    return fmt::format("{}: scale from the table positions alone (sigma {:.0f} ppm)", plate.brief,
+  if (!plate.found || !adjusted.plate_not_used.empty()) {
+    const std::string why =
+        plate.found ? "plate on the part not used (" + adjusted.plate_not_used + ")" : plate.brief;
+    return fmt::format("{}: scale from the table positions alone (sigma {:.0f} ppm)", why,
                        adjusted.scale_sigma_ppm);
   }
   const auto names = [&](const std::vector<int>& tiles) {
