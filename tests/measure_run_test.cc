@@ -63,98 +63,64 @@ double RawPxMm(const SimulationTruth& truth) {
   return truth.camera.pixel_pitch_um * 1e-3 * distance_mm / truth.camera.focal_length_mm;
 }
 
-class MeasureRunTest : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() {
-    dir_ = new testing::TempDir();
-    outcomes_ = new std::vector<Outcome>();
-    failures_ = new std::vector<std::string>();
-    reports_ = new std::map<std::string, Report>();
-    for (const ProjectSpec& spec : Projects()) {
-      const std::string name = std::string(spec.preset) + "-" + std::to_string(spec.seed);
-      const testing::CachedProject sim =
-          testing::SimulatedProject(spec.preset, spec.seed, kCalibImages);
-      const fs::path project_dir = dir_->path() / name;
-      testing::CopyProject(sim.project_dir, project_dir);
-      try {
-        RunOptions options;
-        const RunSummary summary = RunProject(LoadProject(project_dir), options);
-        std::printf("%s: %s\n", name.c_str(), summary.Brief().c_str());
-      } catch (const std::exception& e) {
-        failures_->push_back(name + ": " + e.what());
+// Every check in one test: ctest runs each test in its own process, and the
+// 30 renders and runs are shared by all of them.
+TEST(MeasureRun, ThirtyProjectsAgainstTheirTruth) {
+  testing::TempDir dir;
+  std::vector<Outcome> outcomes;
+  std::map<std::string, Report> reports;
+  for (const ProjectSpec& spec : Projects()) {
+    const std::string name = std::string(spec.preset) + "-" + std::to_string(spec.seed);
+    const testing::CachedProject sim =
+        testing::SimulatedProject(spec.preset, spec.seed, kCalibImages);
+    const fs::path project_dir = dir.path() / name;
+    testing::CopyProject(sim.project_dir, project_dir);
+    try {
+      const RunSummary summary = RunProject(LoadProject(project_dir), RunOptions{});
+      std::printf("%s: %s\n", name.c_str(), summary.Brief().c_str());
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << name << ": " << e.what();
+      continue;
+    }
+    const Report report = ReadReportJson(project_dir / "out" / "report.json");
+    reports[name] = report;
+    for (const MeasurementReport& m : *report.measurements) {
+      const MeasurementTruth* truth = nullptr;
+      for (const MeasurementTruth& t : sim.truth.measurements) {
+        if (t.name == m.name) truth = &t;
+      }
+      ASSERT_NE(truth, nullptr) << name << ": no truth for " << m.name;
+      if (!m.value_mm || !m.sigma_mm) {
+        ADD_FAILURE() << name << ": " << m.name << ": " << m.error;
         continue;
       }
-      const Report report = ReadReportJson(project_dir / "out" / "report.json");
-      (*reports_)[name] = report;
-      for (const MeasurementReport& m : *report.measurements) {
-        const MeasurementTruth* truth = nullptr;
-        for (const MeasurementTruth& t : sim.truth.measurements) {
-          if (t.name == m.name) truth = &t;
-        }
-        if (truth == nullptr) {
-          failures_->push_back(name + ": no truth for " + m.name);
-          continue;
-        }
-        if (!m.value_mm || !m.sigma_mm) {
-          failures_->push_back(name + ": " + m.name + ": " + m.error);
-          continue;
-        }
-        outcomes_->push_back({name, spec.preset, m, truth->value_mm, RawPxMm(sim.truth)});
-      }
-    }
-    for (const Outcome& o : *outcomes_) {
-      std::printf("%-20s %-24s error %8.2f um = %6.3f raw px, sigma %6.2f um, z %6.2f\n",
-                  o.project.c_str(), o.measurement.name.c_str(), o.error_mm() * 1e3,
-                  o.error_mm() / o.raw_px_mm, *o.measurement.sigma_mm * 1e3,
-                  o.error_mm() / *o.measurement.sigma_mm);
+      outcomes.push_back({name, spec.preset, m, truth->value_mm, RawPxMm(sim.truth)});
     }
   }
-  static void TearDownTestSuite() {
-    delete reports_;
-    delete failures_;
-    delete outcomes_;
-    delete dir_;
-  }
+  ASSERT_GE(reports.size(), 30u);
 
-  static testing::TempDir* dir_;
-  static std::vector<Outcome>* outcomes_;
-  static std::vector<std::string>* failures_;
-  static std::map<std::string, Report>* reports_;
-};
-
-testing::TempDir* MeasureRunTest::dir_ = nullptr;
-std::vector<Outcome>* MeasureRunTest::outcomes_ = nullptr;
-std::vector<std::string>* MeasureRunTest::failures_ = nullptr;
-std::map<std::string, Report>* MeasureRunTest::reports_ = nullptr;
-
-TEST_F(MeasureRunTest, EveryProjectRunsAndEveryMeasurementIsMade) {
-  for (const std::string& failure : *failures_) ADD_FAILURE() << failure;
-  EXPECT_EQ(reports_->size(), Projects().size());
-}
-
-// The issue's statistical test of sigma.
-TEST_F(MeasureRunTest, ErrorOverSigmaIsStandardNormal) {
-  ASSERT_GE(reports_->size(), 30u);
+  // The issue's statistical test of sigma.
   double sum_z2 = 0.0;
   int within_2 = 0;
-  for (const Outcome& o : *outcomes_) {
+  for (const Outcome& o : outcomes) {
     const double z = o.error_mm() / *o.measurement.sigma_mm;
+    std::printf("%-20s %-24s error %8.2f um = %6.3f raw px, sigma %6.2f um, z %6.2f\n",
+                o.project.c_str(), o.measurement.name.c_str(), o.error_mm() * 1e3,
+                o.error_mm() / o.raw_px_mm, *o.measurement.sigma_mm * 1e3, z);
     sum_z2 += z * z;
     if (std::abs(z) <= 2.0) ++within_2;
   }
-  const double n = static_cast<double>(outcomes_->size());
+  const double n = static_cast<double>(outcomes.size());
   const double sd = std::sqrt(sum_z2 / n);
-  std::printf("%zu measurements: sd(error / sigma) %.3f, |z| <= 2 for %.1f %%\n", outcomes_->size(),
+  std::printf("%zu measurements: sd(error / sigma) %.3f, |z| <= 2 for %.1f %%\n", outcomes.size(),
               sd, 100.0 * within_2 / n);
   EXPECT_GE(sd, 0.7);
   EXPECT_LE(sd, 1.3);
   EXPECT_GE(within_2, 0.9 * n);
-}
 
-// Accuracy where the part carries its own metric scale (the plate on it),
-// and for diameters everywhere.
-TEST_F(MeasureRunTest, ErrorsWithinTheIssuesBounds) {
-  for (const Outcome& o : *outcomes_) {
+  // Accuracy where the part carries its own metric scale (the plate on it),
+  // and for diameters everywhere.
+  for (const Outcome& o : outcomes) {
     const bool loose = o.preset == "low-texture" || o.preset == "lens-mismatch";
     const double bound_raw_px = loose ? 0.1 : 0.05;
     const bool scale_on_part = o.preset == "demo";
@@ -162,14 +128,13 @@ TEST_F(MeasureRunTest, ErrorsWithinTheIssuesBounds) {
     EXPECT_LE(std::abs(o.error_mm()) / o.raw_px_mm, bound_raw_px)
         << o.project << " " << o.measurement.name;
   }
-}
 
-TEST_F(MeasureRunTest, ReportComparesWithTheCmm) {
-  for (const auto& [name, report] : *reports_) {
+  // The CMM comparison (the simulator writes cmm.csv for every measurement).
+  for (const auto& [name, report] : reports) {
     ASSERT_TRUE(report.features.has_value()) << name;
     for (const MeasurementReport& m : *report.measurements) {
       if (!m.value_mm) continue;
-      ASSERT_TRUE(m.cmm_mm.has_value()) << name << " " << m.name;  // the simulator writes cmm.csv
+      ASSERT_TRUE(m.cmm_mm.has_value()) << name << " " << m.name;
       EXPECT_DOUBLE_EQ(*m.deviation_mm, *m.value_mm - *m.cmm_mm);
       EXPECT_DOUBLE_EQ(*m.deviation_sigma, *m.deviation_mm / *m.sigma_mm);
       bool flagged = false, has_breakdown = false;
