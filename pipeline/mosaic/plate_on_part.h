@@ -101,7 +101,10 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
 // covariance (CalibrationUncertainty::IntrinsicsCovariance, N x N). Empty
 // information (with why_held) when they cannot be refined: a parameter the
 // calibration held (zero variance: no prior for it), or a covariance that is
-// not positive definite.
+// not positive semi-definite. Combinations the calibration determines beyond
+// a 1e6 conditioning of the correlation matrix (a rational model's near
+// redundancy) get that much information only: a weaker prior, never a
+// stronger one (the .cc says why).
 struct IntrinsicsPrior {
   Eigen::MatrixXd information;  // N x N, positive definite, or empty
   std::string why_held;         // set when information is empty
@@ -122,7 +125,7 @@ struct FinalAdjustmentOptions {
 // The table's scale relative to the plate (the solve with s free).
 struct PlateScaleCheck {
   bool ok = false;
-  double scale_minus_1_ppm = 0.0;  // s - 1: > 0 when the table's millimetres are long
+  double scale_minus_1_ppm = 0.0;  // s - 1: > 0 when the table reads more than it moved
   double sigma_ppm = 0.0;
 };
 
