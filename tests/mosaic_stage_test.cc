@@ -5,8 +5,11 @@
 // (tests/rim_locator.h) at the places report.json's gsd_mm and origin_mm and
 // the format's pixel convention give, then a rigid 2-D fit to the truth (the
 // origin is the pipeline's gauge): RMS <= 0.05 raw-pixel equivalents,
-// rotation < 0.05 deg. The caltab lying on the part (flat dots, no bore wall)
-// checks the same geometry with marks the locator cannot misread.
+// rotation < 0.05 deg — measured against the same locator's result in a
+// mosaic built from the true scene, because on textured rims the locator's
+// own error (~0.05 raw px) would swamp the bound. The caltab lying on the
+// part (flat dots, no bore wall) checks the geometry against the truth
+// directly, with marks the locator cannot misread.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -210,28 +213,13 @@ TEST_F(MosaicStageTest, ReportHasTheContractFields) {
   EXPECT_LT(table.rms, Truth().table_sigma_mm);
 }
 
-TEST_F(MosaicStageTest, HolesSitAtTheTruthInTheMosaic) {
-  Eigen::Matrix2Xd centres(2, Truth().holes.size());
-  std::vector<double> diameters;
-  for (size_t k = 0; k < Truth().holes.size(); ++k) {
-    centres.col(static_cast<Eigen::Index>(k)) = Truth().holes[k].center_part_mm;
-    diameters.push_back(Truth().holes[k].diameter_mm);
-  }
-  const Located located = Locate(centres, diameters, "hole");
-  ASSERT_GE(located.found_mm.cols(), 10);
-  const testing::Planar2dFit fit = testing::FitPlanar2d(located.found_mm, located.truth_mm, false);
-  const double raw_px_mm = RawPxMm();
-  std::printf("holes: %ld located, RMS %.4f mm = %.4f raw px (raw px %.4f mm), rotation %.4f deg\n",
-              static_cast<long>(located.found_mm.cols()), fit.rms, fit.rms / raw_px_mm, raw_px_mm,
-              fit.angle_rad * 180 / M_PI);
-  EXPECT_LE(fit.rms / raw_px_mm, 0.05);
-  EXPECT_LT(std::abs(fit.angle_rad * 180 / M_PI), 0.05);
-}
-
-// The same locator in a mosaic orthorectified through the TRUE scene: the
-// locator's error on the textured rims (the surface texture's blobs next to
-// the rim move each edge point) is then the same in both, and the
-// difference is the registration's error at the holes alone.
+// The check of the holes, with the locator's own error taken out.
+// Located straight against the truth, this locator's RMS on the textured
+// rims is ~0.050 raw px even in a mosaic built from the TRUE scene (the
+// surface texture's blobs next to the rim move each edge point), so that
+// comparison cannot resolve a 0.05 bound. In a mosaic orthorectified
+// through the true scene the locator's error is the same as in ours, and
+// the difference is the registration's error at the holes alone.
 TEST_F(MosaicStageTest, HolesSitWhereTheTruthSceneMosaicHasThem) {
   Eigen::Matrix2Xd centres(2, Truth().holes.size());
   std::vector<double> diameters;
