@@ -27,6 +27,8 @@ std::string RegisterTilesOptions::Check() const {
   if (!(min_overlap_fraction > 0 && min_overlap_fraction < 1))
     return "min_overlap_fraction must be in (0, 1)";
   if (num_probe_corners < 8) return "num_probe_corners must be >= 8";
+  if (max_corners_per_pair < num_probe_corners)
+    return "max_corners_per_pair must be >= num_probe_corners";
   if (probe_search_radius_px < 1) return "probe_search_radius_px must be >= 1";
   if (probe_downsample_factor < 1) return "probe_downsample_factor must be >= 1";
   if (probe_half_size_px < 2) return "probe_half_size_px must be >= 2";
@@ -349,6 +351,24 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
           candidates.push_back(static_cast<int>(k));
       }
       pair.num_candidates += static_cast<int>(candidates.size());
+      if (static_cast<int>(candidates.size()) > options.max_corners_per_pair) {
+        // The strongest of every Harris cell first, then the second, ...: the
+        // kept ones stay spread over the overlap (candidates are in
+        // response order).
+        std::map<int, int> in_cell;
+        std::vector<std::pair<int, int>> ranked;  // (rank in its cell, candidate)
+        for (int k : candidates) {
+          const Eigen::Vector2i cell = corners[ta][k].pixel / options.harris.cell_px;
+          ranked.emplace_back(in_cell[cell.y() * width + cell.x()]++, k);
+        }
+        std::stable_sort(ranked.begin(), ranked.end(),
+                         [](const auto& x, const auto& y) { return x.first < y.first; });
+        ranked.resize(options.max_corners_per_pair);
+        std::sort(ranked.begin(), ranked.end(),
+                  [](const auto& x, const auto& y) { return x.second < y.second; });
+        candidates.clear();
+        for (const auto& [rank, k] : ranked) candidates.push_back(k);
+      }
       // Probes: the strongest corners (already spread by the bucketing).
       const int num_probes = std::min<int>(options.num_probe_corners, candidates.size());
       Eigen::Matrix2Xd probe_a(2, num_probes), probe_b(2, num_probes);
