@@ -194,10 +194,12 @@ TileRegistration Register(const Rendered& r) {
 // Bounds per preset. The goals: matches unbiased to 0.03 px, the mosaic good
 // to 0.05 raw px. demo and markers meet them. exposure's darkest tiles (gain
 // 0.6) have ~1.7x less signal over the same noise, so its matches scatter
-// more (measured 0.038 px/axis), while its holes meet the goal. low-texture's
-// matches scatter more (flat texture under the sensor noise: measured 370 at
-// 0.10 px/axis), but weighted by their predicted sigmas they put its holes
-// within the goal (measured 0.037 raw px; 0.062 unweighted).
+// more (measured 0.040 px/axis), while its holes meet the goal. low-texture's
+// matches scatter more (little texture at the templates' scale but around
+// the holes, whose bore walls move between views: measured 434, 480 and 339
+// at 0.090, 0.111 and 0.136 px/axis for seeds 1-3), but weighted by their
+// predicted sigmas they put its holes within the goal (measured 0.029, 0.042
+// and 0.037 raw px).
 struct Bounds {
   int min_matches;
   double match_rms_px;
