@@ -88,7 +88,7 @@ SimulationSummary SimulateProjectDirectory(const SimulationOptions& options,
   summary.max_ray_residual_px = ray_summary.max_residual_px;
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.brief = fmt::format(
-      "simulated '{}' seed {}: {} calib images, {} tiles, {} rays/image "
+      "simulated '{}' seed {}: {} calib images, {} tiles, a table of {} rays "
       "(max ray error {:.1e} px) in {:.1f} s",
       options.preset, options.seed, num_calib, num_tiles, summary.num_rays,
       summary.max_ray_residual_px, summary.seconds);

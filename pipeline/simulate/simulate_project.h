@@ -18,7 +18,7 @@ namespace omm {
 struct SimulationSummary {
   int num_calib_images = 0;
   int num_tiles = 0;
-  std::size_t num_rays = 0;          // supersample rays cast per image
+  std::size_t num_rays = 0;          // supersample rays in the camera's ray table
   double max_ray_residual_px = 0.0;  // RayTableSummary::max_residual_px
   double seconds = 0.0;              // wall time of the whole run
   std::string brief;                 // one line for the log

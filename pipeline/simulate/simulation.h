@@ -17,9 +17,10 @@
 //   through-holes (8-60 mm), optionally paper AprilTags and the caltab lying
 //   on it; imaged as a 3 x 3 grid with 35-45 % overlap; actual table
 //   positions = commanded + N(0, table sigma).
-// - Images: ray casting with S x S supersamples per pixel (RayTable), exact
-//   analytic scenes (scene.h), then the sensor (render.h): Gaussian PSF,
-//   vignetting, gain, shot and read noise, 8-bit quantisation.
+// - Images: rays from the camera's ray table (RayTable) into exact analytic
+//   scenes (scene.h), 2 x 2 Gauss points per pixel and 16 x 16 rays where an
+//   edge crosses it (IntegratePixels), then the sensor (render.h): Gaussian
+//   PSF, vignetting, gain, shot and read noise, 8-bit quantisation.
 // Everything is a deterministic function of (seed, preset, options); noise
 // and scene draws come from separate streams (random.h).
 #pragma once
@@ -46,7 +47,7 @@ struct SimulationOptions {
   // image and one without the plate (>= 3).
   int num_calib_images = 20;
   bool sensor_noise = true;     // shot and read noise (images are quantised either way)
-  int supersampling = 4;        // S: S x S rays per pixel (>= 4 for metrology-grade edges)
+  int supersampling = 4;        // S: the ray table's S x S rays per pixel (IntegratePixels)
   int edge_supersampling = 16;  // rays per axis in pixels an edge crosses (IntegrationOptions)
   int num_threads = 2;          // rendering threads; the images do not depend on it
 
