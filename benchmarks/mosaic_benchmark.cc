@@ -17,9 +17,8 @@
 // The locator's own floor on these textured rims is ~0.05 raw px
 // (mosaic_stage_test.cc measures it in a mosaic built from the true scene).
 //
-// The tiles are rendered once and cached as PNG in $OMM_BENCHMARK_CACHE
-// (default /tmp/omm_benchmark_cache). Delete the cache after changing the
-// simulator.
+// The tiles come from the tests' render cache (tests/sim_cache.h:
+// build/sim-cache/demo-1, rendered on first use).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -37,50 +36,32 @@
 #include "adapters/mrcal/lens.h"
 #include "adapters/opencv/image_io.h"
 #include "adapters/opencv/opencv_stitcher.h"
+#include "adapters/project_io/project_reader.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/register_tiles.h"
-#include "pipeline/simulate/simulation.h"
 #include "tests/rim_locator.h"
+#include "tests/sim_cache.h"
 
 namespace omm {
 namespace {
 
 constexpr int kThreads = 2;
 
+// The demo project (seed 1) from the tests' render cache (tests/sim_cache.h).
 struct Demo {
-  SimulationPlan plan;
+  SimulationTruth truth;
+  double mosaic_gsd_mm = 0.0;
   std::vector<ImageF> tiles;
 };
 
 const Demo& GetDemo() {
   static const Demo demo = [] {
+    const testing::CachedProject cached = testing::SimulatedProject("demo", 1);
     Demo d;
-    SimulationOptions options;
-    options.seed = 1;
-    options.preset = "demo";
-    d.plan = PlanSimulation(options);
-    const char* env = std::getenv("OMM_BENCHMARK_CACHE");
-    const std::filesystem::path dir =
-        std::filesystem::path(env ? env : "/tmp/omm_benchmark_cache") / "demo_seed1";
-    std::filesystem::create_directories(dir);
-    const CameraModel& camera = d.plan.truth.camera.model;
-    std::unique_ptr<RayTable> rays;
-    std::unique_ptr<ProjectRenderer> renderer;
-    for (size_t i = 0; i < d.plan.truth.tiles.size(); ++i) {
-      const std::filesystem::path path = dir / d.plan.truth.tiles[i].image;
-      if (!std::filesystem::exists(path)) {
-        if (!rays) {
-          RayTableSummary summary;
-          rays = std::make_unique<RayTable>(
-              ComputeRayTable(camera, PixelRect{0, 0, camera.width_px, camera.height_px},
-                              RayOptionsFor(d.plan.options), &summary));
-          renderer = std::make_unique<ProjectRenderer>(d.plan);
-        }
-        WriteGrayImage(path, renderer->RenderTile(static_cast<int>(i), *rays),
-                       d.plan.sensor.bit_depth);
-      }
-      d.tiles.push_back(ReadGrayImage(path).pixels);
-    }
+    d.truth = cached.truth;
+    d.mosaic_gsd_mm = LoadProject(cached.project_dir).mosaic_gsd_mm;
+    for (const TileTruth& tile : d.truth.tiles)
+      d.tiles.push_back(ReadGrayImage(cached.project_dir / "tiles" / tile.image).pixels);
     return d;
   }();
   return demo;
@@ -175,7 +156,7 @@ std::vector<Eigen::Vector2d> RoughInMosaic(const SimulationTruth& truth, const O
 // matches below 0.7 or off a similarity fitted to the others by more than
 // 10 raw px are mismatches, and those holes are predicted by that similarity.
 std::vector<Eigen::Vector2d> RoughInPanorama(const Demo& demo, const ImageF& panorama) {
-  const SimulationTruth& truth = demo.plan.truth;
+  const SimulationTruth& truth = demo.truth;
   const CameraModel& camera = truth.camera.model;
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<Eigen::Vector2d> rough(truth.holes.size(), Eigen::Vector2d(nan, nan));
@@ -239,13 +220,13 @@ std::vector<Eigen::Vector2d> RoughInPanorama(const Demo& demo, const ImageF& pan
 
 void BM_OmmMosaic(benchmark::State& state) {
   const Demo& demo = GetDemo();
-  const SimulationTruth& truth = demo.plan.truth;
+  const SimulationTruth& truth = demo.truth;
   std::vector<Eigen::Vector2d> commanded_mm;
   for (const TileTruth& tile : truth.tiles) commanded_mm.push_back(tile.commanded_mm);
   RegisterTilesOptions register_options;
   register_options.num_threads = kThreads;
   OrthoOptions ortho_options;
-  ortho_options.gsd_mm = demo.plan.project.mosaic_gsd_mm;
+  ortho_options.gsd_mm = demo.mosaic_gsd_mm;
   ortho_options.num_threads = kThreads;
   OrthoResult ortho;
   double register_s = 0.0, ortho_s = 0.0, cpu_s = 0.0;
@@ -292,7 +273,7 @@ void BM_OpenCvStitcherScans(benchmark::State& state) {
   }
   if (!result.ok) return;
   // The panorama's scale is unknown: the rough hole radius assumes ~ the tiles' own.
-  const HoleScore score = ScoreHoles(demo.plan.truth, result.panorama, RawPxMm(demo.plan.truth),
+  const HoleScore score = ScoreHoles(demo.truth, result.panorama, RawPxMm(demo.truth),
                                      RoughInPanorama(demo, result.panorama));
   state.counters["total_s"] = result.seconds;
   state.counters["cpu_s"] = cpu_s;

@@ -2,59 +2,35 @@
 // truth camera), on 2 threads: features, matching and the planar bundle
 // adjustment, timed per step (counters, seconds) beside the process CPU time.
 //
-// The tiles are rendered once (~40 s) and cached as 16-bit PNG in
-// $OMM_BENCHMARK_CACHE (default /tmp/omm_benchmark_cache)/demo_seed1/tiles;
-// delete the cache after changing the simulator.
+// The tiles come from the tests' render cache (tests/sim_cache.h:
+// build/sim-cache/demo-1, rendered on first use).
 #include <ctime>
-#include <cstdlib>
-#include <filesystem>
-#include <memory>
-#include <string>
 #include <vector>
 
 #include <benchmark/benchmark.h>
 
 #include "adapters/opencv/image_io.h"
 #include "pipeline/mosaic/register_tiles.h"
-#include "pipeline/simulate/simulation.h"
+#include "tests/sim_cache.h"
 
 namespace omm {
 namespace {
 
+// The demo project (seed 1) from the tests' render cache (tests/sim_cache.h).
 struct DemoTiles {
-  SimulationPlan plan;
+  SimulationTruth truth;
   std::vector<ImageF> tiles;
   std::vector<Eigen::Vector2d> commanded_mm;
 };
 
 const DemoTiles& GetDemoTiles() {
   static const DemoTiles demo = [] {
+    const testing::CachedProject cached = testing::SimulatedProject("demo", 1);
     DemoTiles d;
-    SimulationOptions options;
-    options.seed = 1;
-    options.preset = "demo";
-    d.plan = PlanSimulation(options);
-    const char* env = std::getenv("OMM_BENCHMARK_CACHE");
-    const std::filesystem::path dir =
-        std::filesystem::path(env ? env : "/tmp/omm_benchmark_cache") / "demo_seed1" / "tiles";
-    std::filesystem::create_directories(dir);
-    const CameraModel& camera = d.plan.truth.camera.model;
-    std::unique_ptr<RayTable> rays;
-    std::unique_ptr<ProjectRenderer> renderer;
-    for (size_t i = 0; i < d.plan.truth.tiles.size(); ++i) {
-      const std::filesystem::path path = dir / d.plan.truth.tiles[i].image;
-      if (!std::filesystem::exists(path)) {
-        if (!rays) {
-          RayTableSummary summary;
-          rays = std::make_unique<RayTable>(
-              ComputeRayTable(camera, PixelRect{0, 0, camera.width_px, camera.height_px},
-                              RayOptionsFor(d.plan.options), &summary));
-          renderer = std::make_unique<ProjectRenderer>(d.plan);
-        }
-        WriteGrayImage(path, renderer->RenderTile(static_cast<int>(i), *rays), 16);
-      }
-      d.tiles.push_back(ReadGrayImage(path).pixels);
-      d.commanded_mm.push_back(d.plan.truth.tiles[i].commanded_mm);
+    d.truth = cached.truth;
+    for (const TileTruth& tile : d.truth.tiles) {
+      d.tiles.push_back(ReadGrayImage(cached.project_dir / "tiles" / tile.image).pixels);
+      d.commanded_mm.push_back(tile.commanded_mm);
     }
     return d;
   }();
@@ -76,8 +52,8 @@ void BM_RegisterTilesDemo(benchmark::State& state) {
   for (auto _ : state) {
     const double cpu0 = CpuSeconds();
     const TileRegistration reg =
-        RegisterTiles(demo.tiles, demo.commanded_mm, demo.plan.truth.table_sigma_mm,
-                      demo.plan.truth.camera.model, options);
+        RegisterTiles(demo.tiles, demo.commanded_mm, demo.truth.table_sigma_mm,
+                      demo.truth.camera.model, options);
     cpu += CpuSeconds() - cpu0;
     if (!reg.usable) state.SkipWithError(reg.brief.c_str());
     features += reg.features_seconds;
