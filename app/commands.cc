@@ -90,7 +90,7 @@ std::vector<fs::path> FindProjects(const std::vector<fs::path>& dirs) {
 }  // namespace
 
 int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
-               bool calibration_study) {
+               bool calibration_study, FeatureSource mosaic_features) {
   return Finish(Guarded([&] {
     const Project project = LoadProject(project_dir);
     spdlog::info("loaded {}: {} calibration images, {} tiles, {} measurements", project.name,
@@ -99,6 +99,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     RunOptions options;
     options.stages = stages;
     options.calibration_study = calibration_study;
+    options.mosaic_features = mosaic_features;
     options.progress = progress.Callback();
     const RunSummary summary = RunProject(project, options);
     progress.Finish();

@@ -13,9 +13,10 @@
 namespace omm {
 
 // `omm run` (all stages) and `omm calibrate|mosaic|measure` (one stage);
-// `calibration_study`: `omm calibrate --study`.
+// `calibration_study`: `omm calibrate --study`; `mosaic_features`: `--features`.
 int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage>& stages,
-               bool calibration_study = false);
+               bool calibration_study = false,
+               FeatureSource mosaic_features = FeatureSource::kHarris);
 
 // `omm batch`: each argument is a project directory or a directory whose
 // subdirectories are projects. Projects whose report is current are skipped

@@ -1,6 +1,7 @@
 // `omm`: on-machine vision metrology from the command line. See README.md.
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -93,11 +94,25 @@ int main(int argc, char** argv) {
                       "also run the image-count study: calibrate on random subsets of 3..N images,\n"
                       "report the spread of the intrinsics against the count and how many suffice\n"
                       "(slow: ~150 solves; writes out/calibration/study.svg)");
-  AddStageCommand(app, omm::Stage::kMosaic,
-                  "Register the tiles and write the orthorectified mosaic.\n"
-                  "Reads PROJECT/project.yaml, tiles/, table.csv and out/camera.cameramodel.\n"
-                  "Writes PROJECT/out/mosaic.* and the report's mosaic section.",
-                  project, stage);
+  CLI::App* mosaic =
+      AddStageCommand(app, omm::Stage::kMosaic,
+                      "Register the tiles and write the orthorectified mosaic.\n"
+                      "Reads PROJECT/project.yaml, tiles/, table.csv and out/camera.cameramodel.\n"
+                      "Writes PROJECT/out/mosaic.* and the report's mosaic section.",
+                      project, stage);
+  std::string features = "harris";
+  const std::map<std::string, omm::FeatureSource> feature_sources{
+      {"harris", omm::FeatureSource::kHarris},
+      {"sift", omm::FeatureSource::kSift},
+      {"both", omm::FeatureSource::kHarrisAndSift}};
+  for (CLI::App* command : {run, mosaic}) {
+    command
+        ->add_option("--features", features,
+                     "the mosaic's features: harris (default), sift (COLMAP's: runs the installed\n"
+                     "colmap on the tiles, a minute or two) or both")
+        ->check(CLI::IsMember({"harris", "sift", "both"}).description(""))
+        ->type_name("harris|sift|both");
+  }
   AddStageCommand(app, omm::Stage::kMeasure,
                   "Measure the features and measurements listed in project.yaml.\n"
                   "Reads PROJECT/project.yaml, cmm.csv and the mosaic stage's results in out/.\n"
@@ -154,8 +169,9 @@ int main(int argc, char** argv) {
   }
   SetUpLogging(verbose, quiet);
 
-  if (run->parsed()) return omm::RunCommand(project, omm::AllStages());
-  if (stage) return omm::RunCommand(project, {*stage}, study);
+  const omm::FeatureSource mosaic_features = feature_sources.at(features);
+  if (run->parsed()) return omm::RunCommand(project, omm::AllStages(), false, mosaic_features);
+  if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features);
   if (batch->parsed()) return omm::BatchCommand(batch_dirs, force);
   if (simulate->parsed())
     return omm::SimulateCommand(simulate_out, seed, preset, calib_images, truth);

@@ -765,6 +765,12 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         << result.input.num_tracks << " tracks, " << result.input.observations.size()
         << " observations (" << result.num_dropped_observations << " dropped), RMS "
         << result.rms_px << " px";
+  if (use_sift) {
+    int num_sift = 0;
+    for (const PairRegistration& pair : result.pairs) num_sift += pair.usable ? pair.num_sift : 0;
+    brief << "; " << num_sift << " matches anchored at SIFT keypoints ("
+          << sift_matches.size() << " SIFT pairs in)";
+  }
   if (!result.tiles_held_by_prior.empty()) {
     brief << "; held by the table prior alone: tile";
     for (int i : result.tiles_held_by_prior) brief << ' ' << i;

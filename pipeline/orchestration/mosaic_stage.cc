@@ -14,6 +14,7 @@
 #include <spdlog/spdlog.h>
 
 #include "adapters/colmap/colmap_model.h"
+#include "adapters/colmap/colmap_sift.h"
 #include "adapters/mrcal/cameramodel_io.h"
 #include "adapters/mrcal/solve_record_json.h"
 #include "adapters/mrcal/uncertainty.h"
@@ -251,8 +252,18 @@ void RunMosaicStage(StageContext& context) {
   if (context.progress) context.progress(num_tiles, num_tiles + 3, "register tiles");
   RegisterTilesOptions register_options;
   register_options.compute_covariance = false;  // the final adjustment's
-  TileRegistration registration =
-      RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera, register_options);
+  register_options.features = context.mosaic_features;
+  std::vector<ColmapPairMatches> sift_matches;
+  if (context.mosaic_features != FeatureSource::kHarris) {
+    std::vector<fs::path> tile_paths;
+    for (const TilePosition& tile : project.tiles) tile_paths.push_back(project.TilePath(tile.image));
+    const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, ColmapSiftOptions());
+    spdlog::info("mosaic: {}", sift.brief);
+    if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
+    sift_matches = sift.matches.pairs;
+  }
+  TileRegistration registration = RegisterTiles(tiles, commanded_mm, project.table_sigma_mm,
+                                                camera, register_options, sift_matches);
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 

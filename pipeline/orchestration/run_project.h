@@ -36,6 +36,9 @@ struct RunOptions {
   ProgressCallback progress;
   // Run the calibration's image-count study (`omm calibrate --study`).
   bool calibration_study = false;
+  // The mosaic's feature source (`omm mosaic|run --features`): SIFT runs the
+  // installed colmap on the tiles.
+  FeatureSource mosaic_features = FeatureSource::kHarris;
   // What runs a stage.
   StageRunner runner = RunStage;
 

@@ -16,6 +16,7 @@
 #include "pipeline/core/progress.h"
 #include "pipeline/core/project.h"
 #include "pipeline/core/report.h"
+#include "pipeline/mosaic/register_tiles.h"
 
 namespace omm {
 
@@ -52,6 +53,8 @@ struct StageContext {
   const ProgressCallback& progress;
   // `omm calibrate --study`: also run the image-count study (slow).
   bool calibration_study = false;
+  // `omm mosaic --features`: where the registration's anchors come from.
+  FeatureSource mosaic_features = FeatureSource::kHarris;
 
   // An earlier stage's output file: this run's if it wrote one, else the one
   // in out/ from an earlier run, else an empty path.
