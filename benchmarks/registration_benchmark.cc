@@ -51,9 +51,8 @@ void BM_RegisterTilesDemo(benchmark::State& state) {
   double features = 0, matching = 0, adjustment = 0, cpu = 0, rms = 0;
   for (auto _ : state) {
     const double cpu0 = CpuSeconds();
-    const TileRegistration reg =
-        RegisterTiles(demo.tiles, demo.commanded_mm, demo.truth.table_sigma_mm,
-                      demo.truth.camera.model, options);
+    const TileRegistration reg = RegisterTiles(
+        demo.tiles, demo.commanded_mm, demo.truth.table_sigma_mm, demo.truth.camera.model, options);
     cpu += CpuSeconds() - cpu0;
     if (!reg.usable) state.SkipWithError(reg.brief.c_str());
     features += reg.features_seconds;

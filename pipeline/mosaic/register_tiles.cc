@@ -5,8 +5,8 @@
 #include <chrono>
 #include <cmath>
 #include <map>
-#include <set>
 #include <random>
+#include <set>
 #include <sstream>
 
 #include <Eigen/Dense>
@@ -346,8 +346,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       std::vector<int> candidates;
       for (size_t k = 0; k < corners[ta].size(); ++k) {
         const Eigen::Vector2d q = corners[ta][k].pixel.cast<double>() + shift;
-        if (q.x() >= margin && q.y() >= margin && q.x() < width - margin &&
-            q.y() < height - margin)
+        if (q.x() >= margin && q.y() >= margin && q.x() < width - margin && q.y() < height - margin)
           candidates.push_back(static_cast<int>(k));
       }
       pair.num_candidates += static_cast<int>(candidates.size());
@@ -384,11 +383,11 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
             c.pixel.cast<double>() - (f * anchor_coarse.cast<double>().array() + centre).matrix();
         const Eigen::Vector2d predicted_coarse =
             ((c.pixel.cast<double>() + shift - offset).array() - centre) / f;
-        const NccPeak probe_peak = SearchNcc(
-            coarse_probe[ta], anchor_coarse, options.probe_half_size_px, coarse_probe[tb],
-            Eigen::Vector2i(static_cast<int>(std::lround(predicted_coarse.x())),
-                            static_cast<int>(std::lround(predicted_coarse.y()))),
-            (options.probe_search_radius_px + f - 1) / f + 1);
+        const NccPeak probe_peak =
+            SearchNcc(coarse_probe[ta], anchor_coarse, options.probe_half_size_px, coarse_probe[tb],
+                      Eigen::Vector2i(static_cast<int>(std::lround(predicted_coarse.x())),
+                                      static_cast<int>(std::lround(predicted_coarse.y()))),
+                      (options.probe_search_radius_px + f - 1) / f + 1);
         if (!probe_peak.ok) continue;
         const PatchMatch m = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
                                         (f * probe_peak.q_px.array() + centre).matrix() + offset,
@@ -399,10 +398,9 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         ++found;
       }
       Eigen::Matrix3d h_pixels;
-      const std::vector<bool> probe_inliers =
-          RansacHomography(probe_a.leftCols(found), probe_b.leftCols(found),
-                           options.probe_ransac_threshold_px, 1.0, options.ransac_iterations,
-                           &rng, &h_pixels);
+      const std::vector<bool> probe_inliers = RansacHomography(
+          probe_a.leftCols(found), probe_b.leftCols(found), options.probe_ransac_threshold_px, 1.0,
+          options.ransac_iterations, &rng, &h_pixels);
       const int num_probe_inliers =
           static_cast<int>(std::count(probe_inliers.begin(), probe_inliers.end(), true));
       // The plane-induced homography between the rays from the probe
@@ -458,7 +456,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
             c.sift = true;
             from_sift.push_back(c);
           }
-          if (predict(h_rays, &from_sift)) todo.insert(todo.end(), from_sift.begin(), from_sift.end());
+          if (predict(h_rays, &from_sift))
+            todo.insert(todo.end(), from_sift.begin(), from_sift.end());
         }
       }
     }
@@ -699,7 +698,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       const Eigen::Matrix2d db_da = dqb * dqa.inverse();
       // The template's corners move by at most |change| h sqrt(2): below a
       // small fraction of a match's sigma, the match would not move.
-      const double change_px = (db_da - m.db_da).norm() * options.patch.half_size_px * std::sqrt(2.0);
+      const double change_px =
+          (db_da - m.db_da).norm() * options.patch.half_size_px * std::sqrt(2.0);
       if (change_px < options.relocation_min_change_px) return;
       ++num_relocated;
       m.db_da = db_da;
@@ -768,8 +768,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   if (use_sift) {
     int num_sift = 0;
     for (const PairRegistration& pair : result.pairs) num_sift += pair.usable ? pair.num_sift : 0;
-    brief << "; " << num_sift << " matches anchored at SIFT keypoints ("
-          << sift_matches.size() << " SIFT pairs in)";
+    brief << "; " << num_sift << " matches anchored at SIFT keypoints (" << sift_matches.size()
+          << " SIFT pairs in)";
   }
   if (!result.tiles_held_by_prior.empty()) {
     brief << "; held by the table prior alone: tile";

@@ -104,7 +104,7 @@ struct RegisterTilesOptions {
   int probe_downsample_factor = 4;
   int probe_half_size_px = 5;  // at the downsampled level, px
   double probe_ransac_threshold_px = 3.0;  // pixel homography of the probes, px
-  int search_radius_px = 1;        // +- around the ray-homography-predicted position, px
+  int search_radius_px = 1;                // +- around the ray-homography-predicted position, px
   // Plane-induced homography on undistorted rays: inlier distance, px (measured
   // in the target tile with the camera's fx).
   double ransac_threshold_px = 1.0;
@@ -167,7 +167,7 @@ struct TileRegistration {
   std::vector<PairRegistration> pairs;
   std::vector<int> tiles_held_by_prior;  // no observation kept: table prior only
   Eigen::Matrix2d image_px_per_table_mm = Eigen::Matrix2d::Zero();  // A
-  std::string motion_brief;  // how A was found (EstimateImageMotion's brief)
+  std::string motion_brief;       // how A was found (EstimateImageMotion's brief)
   int num_tags_detected = 0;      // tag detections over all tiles
   int num_dropped_observations = 0;  // by the outlier passes
   int num_relocated = 0;  // matches relocated with the adjusted plane's affine (all passes)

@@ -170,25 +170,26 @@ Scores Score(const Rendered& r, const TileRegistration& reg) {
   s.hole_rms_px = HoleRmsRawPx(r.truth, reg, &s.num_hole_sightings);
   s.table_rms_mm = TableRmsMm(r.truth, reg.scene.table_pos_mm);
   s.commanded_rms_mm = TableRmsMm(r.truth, r.commanded_mm);
-  std::printf("%s seed %llu: %s\n  motion: %s\n  features %.2f s, matching %.2f s, adjustment %.2f s\n"
-              "  match RMS %.4f px/axis over %d, hole RMS %.4f raw px over %d sightings, "
-              "table RMS %.4f mm/axis (commanded %.4f), tilt %.2f deg\n",
-              r.truth.preset.c_str(), static_cast<unsigned long long>(r.truth.seed),
-              reg.brief.c_str(), reg.motion_brief.c_str(), reg.features_seconds,
-              reg.matching_seconds, reg.adjustment_seconds, s.match_rms_px, s.num_matches,
-              s.hole_rms_px, s.num_hole_sightings, s.table_rms_mm, s.commanded_rms_mm,
-              reg.plane_tilt_deg);
+  std::printf(
+      "%s seed %llu: %s\n  motion: %s\n  features %.2f s, matching %.2f s, adjustment %.2f s\n"
+      "  match RMS %.4f px/axis over %d, hole RMS %.4f raw px over %d sightings, "
+      "table RMS %.4f mm/axis (commanded %.4f), tilt %.2f deg\n",
+      r.truth.preset.c_str(), static_cast<unsigned long long>(r.truth.seed), reg.brief.c_str(),
+      reg.motion_brief.c_str(), reg.features_seconds, reg.matching_seconds, reg.adjustment_seconds,
+      s.match_rms_px, s.num_matches, s.hole_rms_px, s.num_hole_sightings, s.table_rms_mm,
+      s.commanded_rms_mm, reg.plane_tilt_deg);
   for (const PairRegistration& p : reg.pairs)
-    std::printf("  pair %d-%d overlap %.2f: %d candidates, %d matched, %d inliers (%d SIFT), "
-                "%d tag, %d used, RMS %.4f px\n",
-                p.tile_a, p.tile_b, p.predicted_overlap, p.num_candidates, p.num_matched,
-                p.num_inliers, p.num_sift, p.num_tag_corners, p.num_used, p.rms_px);
+    std::printf(
+        "  pair %d-%d overlap %.2f: %d candidates, %d matched, %d inliers (%d SIFT), "
+        "%d tag, %d used, RMS %.4f px\n",
+        p.tile_a, p.tile_b, p.predicted_overlap, p.num_candidates, p.num_matched, p.num_inliers,
+        p.num_sift, p.num_tag_corners, p.num_used, p.rms_px);
   return s;
 }
 
 TileRegistration Register(const Rendered& r) {
-  return RegisterTiles(r.tiles, r.commanded_mm, r.truth.table_sigma_mm,
-                       r.truth.camera.model, RegisterTilesOptions());
+  return RegisterTiles(r.tiles, r.commanded_mm, r.truth.table_sigma_mm, r.truth.camera.model,
+                       RegisterTilesOptions());
 }
 
 // Bounds per preset. The goals: matches unbiased to 0.03 px, the mosaic good
@@ -276,10 +277,9 @@ TEST(RegisterTiles, ExposureNormalisedCornersRepeatAsWithTheTrueFlatField) {
   const CameraModel& camera = r.truth.camera.model;
   const Eigen::Vector2d centre(camera.intrinsics[2], camera.intrinsics[3]);
   double corner_radius = 0;  // the simulator's rho = 1
-  for (const Eigen::Vector2d& c :
-       {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera.width_px - 1, 0),
-        Eigen::Vector2d(0, camera.height_px - 1),
-        Eigen::Vector2d(camera.width_px - 1, camera.height_px - 1)})
+  for (const Eigen::Vector2d& c : {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera.width_px - 1, 0),
+                                   Eigen::Vector2d(0, camera.height_px - 1),
+                                   Eigen::Vector2d(camera.width_px - 1, camera.height_px - 1)})
     corner_radius = std::max(corner_radius, (c - centre).norm());
   const RegisterTilesOptions options;
   const auto detect = [&](bool flat_field) {
@@ -308,9 +308,9 @@ TEST(RegisterTiles, ExposureNormalisedCornersRepeatAsWithTheTrueFlatField) {
         const int d = std::abs(a - b);
         if (!((d == 1 && a / 3 == b / 3) || d == 3)) continue;
         for (const Corner& c : corners[a]) {
-          const Eigen::Vector2d q = PixelOf(
-              camera, TruthPose(r.truth, b),
-              PartAtPixel(camera, TruthPose(r.truth, a), c.pixel.cast<double>()));
+          const Eigen::Vector2d q =
+              PixelOf(camera, TruthPose(r.truth, b),
+                      PartAtPixel(camera, TruthPose(r.truth, a), c.pixel.cast<double>()));
           if (q.x() < 40 || q.y() < 40 || q.x() > camera.width_px - 41 ||
               q.y() > camera.height_px - 41)
             continue;
@@ -325,8 +325,8 @@ TEST(RegisterTiles, ExposureNormalisedCornersRepeatAsWithTheTrueFlatField) {
   };
   const auto [total, repeated] = repeatability(detect(false));
   const auto [flat_total, flat_repeated] = repeatability(detect(true));
-  std::printf("normalised: %d of %d corners repeated; true flat field: %d of %d\n", repeated,
-              total, flat_repeated, flat_total);
+  std::printf("normalised: %d of %d corners repeated; true flat field: %d of %d\n", repeated, total,
+              flat_repeated, flat_total);
   // As many corners, as repeatable: within 1 % (~100 corners, ~10x the
   // counts' own scatter between pairs of tiles).
   EXPECT_GT(total, 0.99 * flat_total);

@@ -71,9 +71,9 @@ TEST(DetectHarrisCorners, TextureTestDropsNoiseOnFlatAreas) {
   ImageF image(256, 256);
   for (int r = 0; r < 256; ++r)
     for (int c = 0; c < 256; ++c)
-      image(r, c) = noise(rng) + (c < 128 ? 0.0f
-                                          : static_cast<float>(0.7 * std::sin(0.1 * c) *
-                                                               std::sin(0.1 * r)));
+      image(r, c) =
+          noise(rng) +
+          (c < 128 ? 0.0f : static_cast<float>(0.7 * std::sin(0.1 * c) * std::sin(0.1 * r)));
   HarrisOptions options;
   const auto leftmost = [](const std::vector<Corner>& corners) {
     int x = 1 << 30;

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
-#include <sstream>
 #include <limits>
+#include <sstream>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -73,8 +73,9 @@ WindowMoments::WindowMoments(const ImageF& image)
 
 // NCC of a and b over their overlap when b is shifted by (dx, dy): a(r, c)
 // against b(r + dy, c + dx). -2 if the overlap is smaller than min_pixels.
-double OverlapNcc(const ImageF& a, const ImageF& b, const WindowMoments& ma, const WindowMoments& mb, int dx,
-                  int dy, Eigen::Index min_pixels, double* overlap_fraction = nullptr) {
+double OverlapNcc(const ImageF& a, const ImageF& b, const WindowMoments& ma,
+                  const WindowMoments& mb, int dx, int dy, Eigen::Index min_pixels,
+                  double* overlap_fraction = nullptr) {
   const int c0 = std::max(0, -dx), c1 = std::min<int>(a.cols(), b.cols() - dx);
   const int r0 = std::max(0, -dy), r1 = std::min<int>(a.rows(), b.rows() - dy);
   if (c1 <= c0 || r1 <= r0) return -2.0;
@@ -126,9 +127,9 @@ std::vector<Level> Pyramid(const ImageF& tile, const ImageMotionOptions& options
     // A level pixel's centre in coarsest pixels (centres at integers),
     // clamped: the two neighbours and the weight of the second.
     const auto locate = [&](int i, Eigen::Index n, int* i0, int* i1, double* w) {
-      const double v = std::clamp(
-          (factor * i + 0.5 * (factor - 1) - 0.5 * (coarse_factor - 1)) / coarse_factor, 0.0,
-          static_cast<double>(n - 1));
+      const double v =
+          std::clamp((factor * i + 0.5 * (factor - 1) - 0.5 * (coarse_factor - 1)) / coarse_factor,
+                     0.0, static_cast<double>(n - 1));
       *i0 = static_cast<int>(v);
       *i1 = std::min<int>(*i0 + 1, static_cast<int>(n) - 1);
       *w = v - *i0;
@@ -245,7 +246,8 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
   ParallelFor(num_pairs, options.num_threads, [&](int k) {
     const Level& a = pyramids[pairs[k].first][0];
     const Level& b = pyramids[pairs[k].second][0];
-    const auto min_pixels = static_cast<Eigen::Index>(options.min_overlap_fraction * a.image.size());
+    const auto min_pixels =
+        static_cast<Eigen::Index>(options.min_overlap_fraction * a.image.size());
     std::vector<double>& surface = surfaces[k];
     surface.assign(static_cast<size_t>(grid_w) * grid_h, -2.0);
     for (int dy = -rows + 1; dy < rows; ++dy)
@@ -339,8 +341,8 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
   }
   if (!(best.score > 0) || estimate.margin < options.min_margin) {
     std::ostringstream brief;
-    brief << "the image motion per table mm is ambiguous: the best consensus of the "
-          << num_pairs << " neighbour pairs (evidence " << best.score
+    brief << "the image motion per table mm is ambiguous: the best consensus of the " << num_pairs
+          << " neighbour pairs (evidence " << best.score
           << ") beats a different one only by a factor " << estimate.margin
           << " on the pairs where they differ";
     estimate.brief = brief.str();
@@ -408,8 +410,8 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
   estimate.ok = true;
   std::ostringstream brief;
   brief << estimate.num_agreeing << " of " << num_pairs
-        << " neighbour pairs agree on the image motion (evidence " << best.score
-        << ", margin " << estimate.margin << ")";
+        << " neighbour pairs agree on the image motion (evidence " << best.score << ", margin "
+        << estimate.margin << ")";
   estimate.brief = brief.str();
   return estimate;
 }

@@ -15,13 +15,13 @@
 namespace omm {
 
 struct ImageMotionOptions {
-  int coarse_max_size_px = 96;   // the exhaustive search runs on tiles downsampled to this
+  int coarse_max_size_px = 96;         // the exhaustive search runs on tiles downsampled to this
   double min_overlap_fraction = 0.08;  // shifts overlapping less of the image are not scored
-  int finest_factor = 4;         // refinement stops at this downsampling factor
+  int finest_factor = 4;               // refinement stops at this downsampling factor
   // Every level minus the Gaussian blur of the coarsest by this sigma
   // (coarsest px; 0: off), so that shading and vignetting do not correlate.
   double coarse_highpass_sigma_px = 4.0;
-  int peaks_per_pair = 4;        // candidate shifts per pair: its strongest local NCC maxima
+  int peaks_per_pair = 4;  // candidate shifts per pair: its strongest local NCC maxima
   // A pair agrees with a motion when its shift is within this fraction of
   // the predicted shift's length plus tolerance_px of the prediction (the
   // lens distortion and the tilt make the motion vary over the image).
@@ -32,7 +32,6 @@ struct ImageMotionOptions {
   // Measured 3.1-8.7 on the simulator's presets.
   double min_margin = 1.5;
   int num_threads = 1;  // the pairs' surfaces on this many threads
-
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
@@ -52,8 +51,8 @@ struct ImageMotionEstimate {
   // A: the image motion per table millimetre (shift_ij ~ A (T_j - T_i)).
   Eigen::Matrix2d px_per_table_mm = Eigen::Matrix2d::Zero();
   bool mirrored = false;  // the consensus similarity's handedness (det A < 0)
-  double score = 0.0;   // the best candidate's evidence (sum of z over all pairs)
-  double margin = 0.0;  // the smallest ratio of step 3 (infinity: no different candidate)
+  double score = 0.0;     // the best candidate's evidence (sum of z over all pairs)
+  double margin = 0.0;    // the smallest ratio of step 3 (infinity: no different candidate)
   std::vector<TranslationEstimate> pair_shifts;  // per input pair, refined around A's prediction
   std::vector<bool> pair_agrees;                 // its shift agrees with A
   int num_agreeing = 0;

@@ -57,8 +57,8 @@ GridTiles CropGrid(const Eigen::Matrix2d& a_px_per_mm, unsigned seed) {
       for (int y = 0; y < rows; ++y) {
         for (int x = 0; x < cols; ++x) {
           const double u = (x - 0.5 * cols) / cols, v = (y - 0.5 * rows) / cols;
-          tile(y, x) = static_cast<float>((tile(y, x) + 8.0) * (1.0 - 1.2 * (u * u + v * v))) +
-                       noise(rng);
+          tile(y, x) =
+              static_cast<float>((tile(y, x) + 8.0) * (1.0 - 1.2 * (u * u + v * v))) + noise(rng);
         }
       }
       g.tiles.push_back(NormalizeTileIntensity(tile));
@@ -75,9 +75,8 @@ GridTiles CropGrid(const Eigen::Matrix2d& a_px_per_mm, unsigned seed) {
 TEST(EstimateImageMotion, FindsAMirroredOrRotatedMotionOnWeakTexture) {
   // A mirror (det < 0: table X -> image -y, Y -> image -x) and a rotation by
   // 180 deg, 6 px/mm: shifts of 120 and 90 px.
-  for (const Eigen::Matrix2d& truth :
-       {(Eigen::Matrix2d() << 0, -6, -6, 0).finished(),
-        (Eigen::Matrix2d() << -6, 0, 0, -6).finished()}) {
+  for (const Eigen::Matrix2d& truth : {(Eigen::Matrix2d() << 0, -6, -6, 0).finished(),
+                                       (Eigen::Matrix2d() << -6, 0, 0, -6).finished()}) {
     const GridTiles g = CropGrid(truth, 3);
     const ImageMotionOptions options;
     const ImageMotionEstimate e = EstimateImageMotion(g.tiles, g.table_mm, g.neighbours, options);
@@ -91,7 +90,8 @@ TEST(EstimateImageMotion, FindsAMirroredOrRotatedMotionOnWeakTexture) {
       ASSERT_TRUE(e.pair_shifts[k].ok);
       // One step of the finest level's pixel at most, and A predicts the
       // shift as well (what the matching needs from it).
-      EXPECT_LE((e.pair_shifts[k].shift_px - truth * dt).cwiseAbs().maxCoeff(), options.finest_factor)
+      EXPECT_LE((e.pair_shifts[k].shift_px - truth * dt).cwiseAbs().maxCoeff(),
+                options.finest_factor)
           << i << "-" << j << ": " << e.pair_shifts[k].shift_px.transpose();
       EXPECT_LE(((e.px_per_table_mm - truth) * dt).cwiseAbs().maxCoeff(), options.finest_factor);
     }

@@ -256,14 +256,15 @@ void RunMosaicStage(StageContext& context) {
   std::vector<ColmapPairMatches> sift_matches;
   if (context.mosaic_features != FeatureSource::kHarris) {
     std::vector<fs::path> tile_paths;
-    for (const TilePosition& tile : project.tiles) tile_paths.push_back(project.TilePath(tile.image));
+    for (const TilePosition& tile : project.tiles)
+      tile_paths.push_back(project.TilePath(tile.image));
     const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, ColmapSiftOptions());
     spdlog::info("mosaic: {}", sift.brief);
     if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
     sift_matches = sift.matches.pairs;
   }
-  TileRegistration registration = RegisterTiles(tiles, commanded_mm, project.table_sigma_mm,
-                                                camera, register_options, sift_matches);
+  TileRegistration registration = RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera,
+                                                register_options, sift_matches);
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 

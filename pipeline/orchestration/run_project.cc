@@ -157,10 +157,8 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
     spdlog::info("hashing the inputs of {}", project.dir.string());
     Report report = StartingReport(project, HashProjectInputs(project));
     DropSectionsFrom(options.stages.front(), report);
-    StageContext context{project,          staging_dir,
-                         out_dir,          report,
-                         options.progress, options.calibration_study,
-                         options.mosaic_features};
+    StageContext context{project, staging_dir, out_dir, report, options.progress,
+                         options.calibration_study, options.mosaic_features};
     for (const Stage stage : options.stages) {
       spdlog::info("{}: starting", StageName(stage));
       options.runner(stage, context);
