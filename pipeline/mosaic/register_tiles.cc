@@ -325,7 +325,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     if (n == 0) return true;
     if (!ProjectPoints(camera, p_a, &q_a, &dqa_dp) || !ProjectPoints(camera, p_b, &q_b, &dqb_dp))
       return false;
-    for (int k = 0; k < n; ++k) {
+    for (Eigen::Index k = 0; k < n; ++k) {
       Candidate& c = (*todo)[k];
       c.q_b = q_b.col(k);
       c.db_da = dqb_dp.block<2, 2>(2 * k, 0) * TransferJacobian(h_rays, c.ray_a) *
