@@ -33,6 +33,8 @@ std::string RegisterTilesOptions::Check() const {
   if (probe_downsample_factor < 1) return "probe_downsample_factor must be >= 1";
   if (probe_half_size_px < 2) return "probe_half_size_px must be >= 2";
   if (!(probe_ransac_threshold_px > 0)) return "probe_ransac_threshold_px must be > 0";
+  if (!(probe_contradiction_ncc > -1 && probe_contradiction_ncc < 1))
+    return "probe_contradiction_ncc must be in (-1, 1)";
   if (search_radius_px < 1) return "search_radius_px must be >= 1";
   if (!(ransac_threshold_px > 0)) return "ransac_threshold_px must be > 0";
   if (ransac_iterations < 1) return "ransac_iterations must be >= 1";
@@ -389,6 +391,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                       static_cast<int>(std::lround(predicted_coarse.y()))),
                       (options.probe_search_radius_px + f - 1) / f + 1);
         if (!probe_peak.ok) continue;
+        ++pair.num_probes;
+        if (probe_peak.ncc < options.probe_contradiction_ncc) ++pair.num_contradicting_probes;
         const PatchMatch m = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
                                         (f * probe_peak.q_px.array() + centre).matrix() + offset,
                                         Eigen::Matrix2d::Identity(), f, options.patch);
@@ -562,14 +566,15 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   result.matching_seconds = Seconds(t0);
 
   // A tile without a usable pair is placed by nothing but table.csv: only
-  // acceptable when its overlaps hold no texture to check it with.
+  // acceptable when its image does not contradict it.
   std::vector<int> num_usable(num_tiles, 0), num_predicted(num_tiles, 0),
-      num_textured(num_tiles, 0);
+      num_probes(num_tiles, 0), num_contradicting(num_tiles, 0);
   for (const PairRegistration& pair : result.pairs) {
     for (int t : {pair.tile_a, pair.tile_b}) {
       num_usable[t] += pair.usable;
       ++num_predicted[t];
-      num_textured[t] += pair.num_candidates;
+      num_probes[t] += pair.num_probes;
+      num_contradicting[t] += pair.num_contradicting_probes;
     }
   }
   std::ostringstream unplaced;
@@ -577,11 +582,14 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     if (num_usable[i] > 0) continue;
     if (num_predicted[i] == 0) {
       unplaced << "; tile " << i << " overlaps no other tile at its table position";
-    } else if (num_textured[i] >= options.min_pair_matches) {
+    } else if (num_contradicting[i] >= options.min_pair_matches &&
+               2 * num_contradicting[i] >= num_probes[i]) {
       unplaced << "; tile " << i << " matches none of its " << num_predicted[i]
-               << " predicted neighbours, though their overlaps hold " << num_textured[i]
-               << " textured corners: the image does not show what its table position says "
-                  "(or its texture is too weak to check)";
+               << " predicted neighbours: " << num_contradicting[i] << " of " << num_probes[i]
+               << " probe templates find nothing alike (NCC < " << options.probe_contradiction_ncc
+               << ") within " << options.probe_search_radius_px
+               << " px of where table.csv puts them: the image does not show what its table "
+                  "position says";
     }
   }
   if (!unplaced.str().empty()) {

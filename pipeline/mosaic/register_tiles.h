@@ -43,13 +43,15 @@
 //    and the scene solved again (each from its first position, refined;
 //    only the matches whose affine that changes by relocation_min_change_px).
 // A tile without a usable pair fails the registration (unusable, the brief
-// names it) if it overlaps no other tile or if its predicted overlaps hold
-// at least min_pair_matches textured corners: its image does not show what
-// table.csv says (or too weakly to check), and placing it by table.csv
-// would put a wrong or unverified tile in the mosaic. Otherwise (a blank
-// tile) and for a tile whose observations the outlier passes all dropped, the
-// tile is held by its table prior alone; the summary lists it
-// (tiles_held_by_prior) and its brief says so.
+// names it) if it overlaps no other tile, or if its image contradicts
+// table.csv: at least min_pair_matches of its pairs' probe templates, and at
+// least half of them, find nothing alike (NCC below
+// probe_contradiction_ncc) anywhere in the probe search, as when the wrong
+// image is listed. Otherwise (weak or no texture: smooth patches correlate
+// well with their surroundings, so their probes do not contradict) and for
+// a tile whose observations the outlier passes all dropped, the tile is held
+// by its table prior alone; the summary lists it (tiles_held_by_prior) and
+// its brief says so.
 #pragma once
 
 #include <string>
@@ -104,6 +106,12 @@ struct RegisterTilesOptions {
   int probe_downsample_factor = 4;
   int probe_half_size_px = 5;  // at the downsampled level, px
   double probe_ransac_threshold_px = 3.0;  // pixel homography of the probes, px
+  // A probe whose best NCC in the whole probe search is below this
+  // contradicts the table position (the other tile shows nothing alike
+  // there). Demo with two tiles' images swapped: ~70 % of the swapped pairs'
+  // probes, median NCC 0.35-0.65; correct pairs, rich or weak texture: the
+  // median is 0.83-0.99 even where too few probes pass the template match.
+  double probe_contradiction_ncc = 0.7;
   int search_radius_px = 1;                // +- around the ray-homography-predicted position, px
   // Plane-induced homography on undistorted rays: inlier distance, px (measured
   // in the target tile with the camera's fx).
@@ -143,6 +151,8 @@ struct PairRegistration {
   int tile_a = 0, tile_b = 0;       // tile_a < tile_b
   double predicted_overlap = 0.0;   // fraction of the image, from A and the commanded positions
   int num_candidates = 0;           // corners of a predicted inside b
+  int num_probes = 0;               // of them, searched with the wide probe window
+  int num_contradicting_probes = 0; // ... whose best NCC is below probe_contradiction_ncc
   int num_matched = 0;              // accepted by the template match
   int num_inliers = 0;              // after the plane-induced-homography RANSAC
   int num_sift = 0;                 // of them, anchored at SIFT keypoints
