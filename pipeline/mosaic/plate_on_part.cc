@@ -375,6 +375,12 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
       result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
     }
   }
+  if (options.rescale_observation_sigma && why_not_used.empty() && result.summary.usable &&
+      result.summary.unit_weight_sigma > 1.0) {
+    result.observation_sigma_scale = result.summary.unit_weight_sigma;
+    result.input.observation_sigma_px *= result.observation_sigma_scale;
+    result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
+  }
   if (plate.found && !result.summary.usable) why_not_used = result.summary.brief;
   if (!why_not_used.empty()) {
     FinalAdjustment without = AdjustWithPlateAndPrior(camera, registered_input, registered_scene,

@@ -118,6 +118,11 @@ struct FinalAdjustmentOptions {
   // Plate observations whose residual exceeds this many of their sigmas are
   // dropped and the scene solved again (a mark misread, a speck on the plate).
   double plate_outlier_sigmas = 5.0;
+  // Observations that scatter more than declared (the solve's unit-weight
+  // sigma above 1: weak texture's matches) widen the covariance: their
+  // sigma is scaled by it and the scene solved again; the priors (table,
+  // intrinsics) keep their declared sigmas. Never narrowed.
+  bool rescale_observation_sigma = true;
 
   std::string Check() const;
 };
@@ -148,6 +153,8 @@ struct FinalAdjustment {
   // Set when a found plate was left out (its solve unusable, or most of its
   // marks outliers: not the plate it seemed): the scene is the one without it.
   std::string plate_not_used;
+  // The factor the observations' sigma was scaled by (1: as declared).
+  double observation_sigma_scale = 1.0;
   double seconds = 0.0;
 };
 

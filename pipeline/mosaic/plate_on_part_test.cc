@@ -276,7 +276,10 @@ TEST(FinalAdjustment, PlateThatDoesNotFitIsLeftOut) {
   EXPECT_FALSE(a.plate_not_used.empty());
   std::printf("left out: %s\n", a.plate_not_used.c_str());
   EXPECT_TRUE(a.scene.plates.empty());
-  EXPECT_EQ(a.scene.table_pos_mm, none.scene.table_pos_mm);
+  // The same solve as without the plate (to Ceres' multithreaded rounding).
+  ASSERT_EQ(a.scene.table_pos_mm.size(), none.scene.table_pos_mm.size());
+  for (size_t i = 0; i < none.scene.table_pos_mm.size(); ++i)
+    EXPECT_LT((a.scene.table_pos_mm[i] - none.scene.table_pos_mm[i]).norm(), 1e-9);
   EXPECT_FALSE(a.scale_check.ok);
 }
 

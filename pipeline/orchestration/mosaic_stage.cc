@@ -284,6 +284,12 @@ void RunMosaicStage(StageContext& context) {
   const FinalAdjustment adjusted = AdjustWithPlateAndPrior(
       camera, registration.input, registration.scene, plate, prior, final_options);
   spdlog::info("mosaic: final {}", adjusted.summary.brief);
+  if (adjusted.observation_sigma_scale > 1.0) {
+    spdlog::info(
+        "mosaic: the matches scatter {:.2f}x their declared sigma: the covariance is widened "
+        "accordingly",
+        adjusted.observation_sigma_scale);
+  }
   if (!adjusted.summary.usable) throw StageFailedError(Stage::kMosaic, adjusted.summary.brief);
   registration.scene = adjusted.scene;
   registration.bundle = adjusted.summary;
@@ -339,6 +345,9 @@ void RunMosaicStage(StageContext& context) {
       {"num_dropped_observations", registration.num_dropped_observations},
       {"num_tags_detected", registration.num_tags_detected},
       {"unit_weight_sigma", registration.bundle.unit_weight_sigma},
+      // > 1: the matches scattered more than declared; their sigma (and so
+      // the covariance) was widened by this factor (FinalAdjustmentOptions).
+      {"observation_sigma_scale", adjusted.observation_sigma_scale},
       {"plane_tilt_deg", registration.plane_tilt_deg},
       {"image_px_per_table_mm", ReportValue::Array{ReportValue::Array{a(0, 0), a(0, 1)},
                                                    ReportValue::Array{a(1, 0), a(1, 1)}}},
