@@ -24,7 +24,9 @@
 //      screened by RANSAC on the same ray homography, which predicts their
 //      keypoints in i rounded to pixels.
 //    Each anchor is then matched in a small window and refined by
-//    least-squares template matching warped by that affine (MatchPatch);
+//    least-squares template matching warped by that affine, its pixels
+//    robustly weighted so that content off the plane (a bore) does not pull
+//    it (MatchPatch);
 //    the matches are screened by RANSAC on the plane-induced homography
 //    between the undistorted rays of the two tiles. Tag corners are matched
 //    by id (the detections predict, the template match locates). A pair with

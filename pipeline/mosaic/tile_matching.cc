@@ -34,10 +34,24 @@ std::string PatchMatchOptions::Check() const {
   if (max_iterations < 1) return "patch.max_iterations must be >= 1";
   if (!(convergence_px > 0)) return "patch.convergence_px must be > 0";
   if (!(max_refinement_px > 0)) return "patch.max_refinement_px must be > 0";
+  if (!(robust_tukey_c >= 0)) return "patch.robust_tukey_c must be >= 0";
+  if (max_robust_iterations < 1) return "patch.max_robust_iterations must be >= 1";
   return {};
 }
 
 namespace {
+
+// Tukey's biweight w = (1 - (e / (c s))^2)^2 for |e| < c s, else 0, with the
+// robust scale s = 1.4826 median |e| (the residuals of a fit with an offset
+// centre on 0). All ones when s is 0 (an exact fit).
+Eigen::VectorXd TukeyWeights(const Eigen::VectorXd& residual, double c) {
+  std::vector<double> magnitude(residual.size());
+  for (Eigen::Index i = 0; i < residual.size(); ++i) magnitude[i] = std::abs(residual(i));
+  std::nth_element(magnitude.begin(), magnitude.begin() + magnitude.size() / 2, magnitude.end());
+  const double cut = c * 1.4826 * magnitude[magnitude.size() / 2];
+  if (!(cut > 0)) return Eigen::VectorXd::Ones(residual.size());
+  return (1 - (residual.array() / cut).square()).max(0.0).square();
+}
 
 // Summed-area tables of an image's values and squares (double): the sum and
 // the sum of squares over any rectangle in O(1).
@@ -547,42 +561,60 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   double gain = t_std / std::max(peak.target_std, 1e-6);
   double offset = t_mean - gain * peak.target_mean;
   bool converged = false;
-  Eigen::VectorXd sampled(n);  // the target at the last iteration's position
+  Eigen::VectorXd sampled(n), weight = Eigen::VectorXd::Ones(n), residual(n);
+  Eigen::Matrix2Xd gradient(2, n);
   Eigen::Matrix4d normal;
-  for (int it = 0; it < options.max_iterations && !converged; ++it) {
-    // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain, doffset).
-    double n00 = 0, n01 = 0, n02 = 0, n03 = 0, n11 = 0, n12 = 0, n13 = 0, n22 = 0, n23 = 0;
-    double b0 = 0, b1 = 0, b2 = 0, b3 = 0;
-    for (int i = 0; i < n; ++i) {
-      const Eigen::Vector2d p = q + offsets[i];
-      double v;
-      Eigen::Vector2d g;
-      if (!SampleBSpline(target_spline, p.x(), p.y(), &v, &g)) return match;
-      sampled(i) = v;
-      const double e = gain * v + offset - templ(i);
-      const double j0 = gain * g.x(), j1 = gain * g.y();
-      n00 += j0 * j0, n01 += j0 * j1, n02 += j0 * v, n03 += j0;
-      n11 += j1 * j1, n12 += j1 * v, n13 += j1;
-      n22 += v * v, n23 += v;
-      b0 -= j0 * e, b1 -= j1 * e, b2 -= v * e, b3 -= e;
+  // Phase 0: plain least squares; phase 1 (robust_tukey_c > 0) from its
+  // solution: iteratively reweighted least squares with Tukey's biweight of
+  // every pixel's current residual, to its fixed point (the M-estimate).
+  const int num_phases = options.robust_tukey_c > 0 ? 2 : 1;
+  for (int phase = 0; phase < num_phases; ++phase) {
+    converged = false;
+    const int max_iterations = phase == 0 ? options.max_iterations : options.max_robust_iterations;
+    for (int it = 0; it < max_iterations && !converged; ++it) {
+      for (int i = 0; i < n; ++i) {
+        const Eigen::Vector2d p = q + offsets[i];
+        double v;
+        Eigen::Vector2d g;
+        if (!SampleBSpline(target_spline, p.x(), p.y(), &v, &g)) return match;
+        sampled(i) = v;
+        gradient.col(i) = g;
+        residual(i) = gain * v + offset - templ(i);
+      }
+      if (phase > 0) weight = TukeyWeights(residual, options.robust_tukey_c);
+      // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain, doffset).
+      double n00 = 0, n01 = 0, n02 = 0, n03 = 0, n11 = 0, n12 = 0, n13 = 0, n22 = 0, n23 = 0,
+             n33 = 0;
+      double b0 = 0, b1 = 0, b2 = 0, b3 = 0;
+      for (int i = 0; i < n; ++i) {
+        const double w = weight(i), v = sampled(i), e = w * residual(i);
+        const double j0 = gain * gradient(0, i), j1 = gain * gradient(1, i);
+        const double wj0 = w * j0, wj1 = w * j1, wv = w * v;
+        n00 += wj0 * j0, n01 += wj0 * j1, n02 += wj0 * v, n03 += wj0;
+        n11 += wj1 * j1, n12 += wj1 * v, n13 += wj1;
+        n22 += wv * v, n23 += wv, n33 += w;
+        b0 -= j0 * e, b1 -= j1 * e, b2 -= v * e, b3 -= e;
+      }
+      normal << n00, n01, n02, n03, n01, n11, n12, n13, n02, n12, n22, n23, n03, n13, n23, n33;
+      const Eigen::Vector4d step = normal.ldlt().solve(Eigen::Vector4d(b0, b1, b2, b3));
+      if (!step.allFinite()) return match;
+      ++match.iterations;
+      converged = step.head<2>().norm() < options.convergence_px;
+      if (converged) break;  // the samples stay those of q (within convergence_px of q + step)
+      q += step.head<2>();
+      gain += step(2);
+      offset += step(3);
+      if ((q - start).norm() > options.max_refinement_px) return match;
     }
-    normal << n00, n01, n02, n03, n01, n11, n12, n13, n02, n12, n22, n23, n03, n13, n23, n;
-    const Eigen::Vector4d step = normal.ldlt().solve(Eigen::Vector4d(b0, b1, b2, b3));
-    if (!step.allFinite()) return match;
-    match.iterations = it + 1;
-    converged = step.head<2>().norm() < options.convergence_px;
-    if (converged) break;  // the samples stay those of q (within convergence_px of q + step)
-    q += step.head<2>();
-    gain += step(2);
-    offset += step(3);
-    if ((q - start).norm() > options.max_refinement_px) return match;
+    if (!converged) break;
   }
   // Quality at the final position (the last iteration's samples).
   const Eigen::VectorXd s0 = sampled.array() - sampled.mean();
   match.ncc = s0.dot(t0) / (s0.norm() * t_norm);
-  match.residual_rms = (gain * sampled.array() + offset - templ.array()).matrix().norm() /
-                       std::sqrt(static_cast<double>(n));
-  const double variance = match.residual_rms * match.residual_rms * n / (n - 4);
+  match.residual_rms = residual.norm() / std::sqrt(static_cast<double>(n));
+  // The weighted residual variance over the pixels that count.
+  const double w_sum = weight.sum();
+  const double variance = weight.dot(residual.cwiseAbs2()) / std::max(1.0, w_sum - 4);
   match.sigma_px = std::sqrt(0.5 * variance * normal.inverse().topLeftCorner<2, 2>().trace());
   match.q_px = q;
   match.ok = converged && match.ncc >= options.min_ncc;

@@ -113,6 +113,15 @@ struct PatchMatchOptions {
   int max_iterations = 15;            // Gauss-Newton iterations of the template match
   double convergence_px = 1e-4;       // stop when the update is below this, px
   double max_refinement_px = 1.5;     // the refined position may move this far from the NCC peak
+  // Template pixels whose residual exceeds this many robust sigmas (1.4826
+  // MAD) get no weight (Tukey's biweight, iterated from the plain
+  // least-squares solution): content that does not follow the plane between
+  // the two views (a bore's wall and the table seen through it, which move
+  // with the parallax) must not pull the match. 0: plain least squares.
+  double robust_tukey_c = 4.685;
+  // Iterations of the reweighted phase: it converges linearly, and stopping
+  // it early (15) rejected a third of the low-texture preset's rim templates.
+  int max_robust_iterations = 50;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
@@ -142,7 +151,13 @@ struct PatchMatch {
 //    dq_reference the local affine of the tile-to-tile map (the prediction's
 //    Jacobian, e.g. from the plane-induced homography), held fixed: only the
 //    position, gain and offset are estimated. The template is never resampled,
-//    so the anchor is exact and only the target is interpolated.
+//    so the anchor is exact and only the target is interpolated;
+// 3. (options.robust_tukey_c > 0) the same, iteratively reweighted from step
+//    2's solution with Tukey's biweight of each pixel's residual (scale
+//    1.4826 MAD), to its fixed point: pixels whose content differs between
+//    the views beyond the plane's warp (a bore's wall and what is seen
+//    through it) stop pulling the match. sigma_px then comes from the
+//    weighted normal matrix and weighted residual variance.
 // `target_spline` is BSplineCoefficients(target).
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
                       const ImageF& target, const ImageF& target_spline,
