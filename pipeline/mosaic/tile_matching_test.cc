@@ -38,7 +38,9 @@ struct GridTiles {
 GridTiles CropGrid(const Eigen::Matrix2d& a_px_per_mm, unsigned seed) {
   const int rows = 240, cols = 320;
   const Eigen::Vector2d step_mm(20, 15);
-  ImageF scene = RandomTexture(rows + 400, cols + 400, 12.0, seed);
+  // Room for the largest shift |A T| (6 px/mm x 40 mm) on every side.
+  const int margin = 260;
+  ImageF scene = RandomTexture(rows + 2 * margin, cols + 2 * margin, 12.0, seed);
   std::mt19937 rng(seed + 1);
   std::uniform_real_distribution<float> where(0.0f, 1.0f);
   for (int d = 0; d < 12; ++d) {
@@ -52,7 +54,7 @@ GridTiles CropGrid(const Eigen::Matrix2d& a_px_per_mm, unsigned seed) {
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) {
       const Eigen::Vector2d t(c * step_mm.x(), r * step_mm.y());
-      const Eigen::Vector2d origin = Eigen::Vector2d(200, 200) - a_px_per_mm * t;
+      const Eigen::Vector2d origin = Eigen::Vector2d(margin, margin) - a_px_per_mm * t;
       ImageF tile = scene.block(std::lround(origin.y()), std::lround(origin.x()), rows, cols);
       for (int y = 0; y < rows; ++y) {
         for (int x = 0; x < cols; ++x) {
