@@ -1,14 +1,12 @@
 #include "pipeline/calibration/calibrate_stage.h"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <numbers>
 #include <sstream>
-#include <thread>
 
 #include <fmt/format.h>
 
@@ -17,6 +15,7 @@
 #include "adapters/mrcal/uncertainty.h"
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
 
 namespace omm {
 namespace {
@@ -229,17 +228,10 @@ std::vector<PlateObservation> DetectPlates(const std::vector<NamedImage>& images
                                            const BoardSpec& board,
                                            const PlateDetectionOptions& options, int num_threads) {
   std::vector<PlateObservation> detections(images.size());
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t i = next++; i < images.size(); i = next++) {
-      detections[i] = DetectPlate(images[i].image, board, options);
-      detections[i].image = images[i].name;
-    }
-  };
-  std::vector<std::jthread> threads;
-  const int extra = std::min<int>(num_threads, static_cast<int>(images.size())) - 1;
-  for (int t = 0; t < extra; ++t) threads.emplace_back(work);
-  work();
+  ParallelFor(static_cast<int>(images.size()), num_threads, [&](int i) {
+    detections[i] = DetectPlate(images[i].image, board, options);
+    detections[i].image = images[i].name;
+  });
   return detections;
 }
 

@@ -13,7 +13,7 @@
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
 #include "pipeline/mosaic/mrcal_projection.h"
-#include "pipeline/mosaic/parallel_for.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/mosaic/plane_seed.h"
 
 namespace omm {

@@ -13,7 +13,7 @@
 
 #include "adapters/mrcal/lens.h"
 #include "pipeline/core/error.h"
-#include "pipeline/mosaic/parallel_for.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 
 namespace omm {

@@ -9,7 +9,7 @@
 
 #include <Eigen/Dense>
 
-#include "pipeline/mosaic/parallel_for.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/mosaic/tile_features.h"
 
 namespace omm {

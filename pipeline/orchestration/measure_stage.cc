@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -23,6 +24,7 @@
 #include "adapters/opencv/image_io.h"
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/measure/circle_measure.h"
 #include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/measure/scene_sensitivity.h"
@@ -54,13 +56,17 @@ ReportValue BreakdownReport(const SigmaBreakdown& sigma) {
 // A feature as found (or not), with what the measurements need of it.
 struct LocatedFeature {
   FeatureReport report;
+  std::optional<CircleFeatureValue> value;  // none if not found
   int value_index = -1;  // into the propagation's features; -1 if not found
 };
 
+// Hole fits run on this many threads (the 2-core machine the stages target).
+constexpr int kNumThreads = 2;
+
+// Pure in its inputs: features are located concurrently.
 LocatedFeature LocateFeature(const FeatureSpec& spec, const SavedScene& saved,
                              const LensProjection& lens, const OrthoGrid& grid,
-                             const ImageF& mosaic, const CameraModel& camera, double source_px,
-                             std::vector<CircleFeatureValue>* values) {
+                             const ImageF& mosaic, const CameraModel& camera, double source_px) {
   LocatedFeature located;
   FeatureReport& report = located.report;
   report.name = spec.name;
@@ -109,8 +115,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const SavedScene& saved,
   report.extra.emplace_back("edge_points", circle.num_edge_points);
   report.extra.emplace_back("inliers", circle.num_inliers);
   report.extra.emplace_back("rms_px", circle.rms_px);
-  located.value_index = static_cast<int>(values->size());
-  values->push_back(std::move(value));
+  located.value = std::move(value);
   return located;
 }
 
@@ -157,17 +162,26 @@ void RunMeasureStage(StageContext& context) {
   }
 
   const int num_features = static_cast<int>(project.features.size());
+  std::vector<LocatedFeature> located(num_features);
+  std::mutex progress_mutex;
+  int num_located = 0;
+  ParallelFor(num_features, kNumThreads, [&](int i) {
+    const FeatureSpec& spec = project.features[i];
+    located[i] = LocateFeature(spec, saved, lens, grid, mosaic.pixels, camera, source_px);
+    const std::lock_guard lock(progress_mutex);
+    if (context.progress) context.progress(++num_located, num_features + 1, "located " + spec.name);
+  });
   std::vector<CircleFeatureValue> values;
-  std::vector<LocatedFeature> located;
   std::map<std::string, int> by_name;
   for (int i = 0; i < num_features; ++i) {
-    const FeatureSpec& spec = project.features[i];
-    if (context.progress) context.progress(i, num_features + 1, "locate " + spec.name);
-    located.push_back(
-        LocateFeature(spec, saved, lens, grid, mosaic.pixels, camera, source_px, &values));
-    by_name[spec.name] = i;
-    if (!located.back().report.error.empty())
-      spdlog::warn("measure: {}: {}", spec.name, located.back().report.error);
+    by_name[project.features[i].name] = i;
+    LocatedFeature& feature = located[i];
+    if (feature.value) {
+      feature.value_index = static_cast<int>(values.size());
+      values.push_back(std::move(*feature.value));
+    }
+    if (!feature.report.error.empty())
+      spdlog::warn("measure: {}: {}", project.features[i].name, feature.report.error);
   }
 
   const int num_tiles = static_cast<int>(saved.scene.table_pos_mm.size());
