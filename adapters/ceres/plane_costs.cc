@@ -5,6 +5,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 
+#include "pipeline/core/plane_scene.h"
+
 namespace omm {
 namespace {
 
@@ -15,12 +17,6 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
   Eigen::Matrix3d m;
   m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
   return m;
-}
-
-Eigen::Matrix3d RotationFromAngleAxis(const Eigen::Vector3d& r) {
-  const double angle = r.norm();
-  if (angle < 1e-12) return Eigen::Matrix3d::Identity() + Skew(r);
-  return Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
 }
 
 // The part shared by both reprojection costs: residual of the moved part

@@ -11,7 +11,13 @@ namespace omm {
 
 Eigen::Matrix3d RotationFromAngleAxis(const Eigen::Vector3d& r) {
   const double angle = r.norm();
-  if (angle == 0.0) return Eigen::Matrix3d::Identity();
+  // First order where r / angle loses its digits (exact to rounding there).
+  if (angle < 1e-12) {
+    Eigen::Matrix3d m = Eigen::Matrix3d::Identity();
+    m(0, 1) = -r.z(), m(0, 2) = r.y(), m(1, 0) = r.z(), m(1, 2) = -r.x(), m(2, 0) = -r.y(),
+    m(2, 1) = r.x();
+    return m;
+  }
   return Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
 }
 

@@ -53,10 +53,7 @@ Eigen::Matrix<double, 18, 1> SolveK(const std::vector<Pair>& pairs, const std::v
 
 // Pixel residual RMS of the scene over all used observations.
 double SceneRms(const CameraModel& camera, const PlaneBundleInput& input, const PlaneScene& scene) {
-  const double angle = scene.cam_from_part_r.norm();
-  const Eigen::Matrix3d rot =
-      angle > 0.0 ? Eigen::AngleAxisd(angle, scene.cam_from_part_r / angle).toRotationMatrix()
-                  : Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d rot = RotationFromAngleAxis(scene.cam_from_part_r);
   Eigen::Matrix3Xd p_cam(3, input.observations.size());
   for (size_t n = 0; n < input.observations.size(); ++n) {
     const TrackObservation& obs = input.observations[n];

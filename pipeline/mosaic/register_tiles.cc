@@ -675,9 +675,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     // The adjusted plane model's affine between the two tiles at each track
     // point: dq_b/dq_a = (dq_b/dP) (dq_a/dP)^-1, dq/dP = dq/dp_cam R[:, 0:2].
     const PlaneScene& scene = adjustment.scene;
-    const Eigen::Matrix3d r =
-        Eigen::AngleAxisd(scene.cam_from_part_r.norm(), scene.cam_from_part_r.normalized())
-            .toRotationMatrix();
+    const Eigen::Matrix3d r = RotationFromAngleAxis(scene.cam_from_part_r);
     std::vector<std::pair<int, int>> todo;
     for (size_t o = 0; o < match_of_observation.size(); ++o)
       if (match_of_observation[o].first >= 0) todo.push_back(match_of_observation[o]);

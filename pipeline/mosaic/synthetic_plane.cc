@@ -25,8 +25,7 @@ bool Inside(const CameraModel& camera, const Eigen::Vector2d& q) {
 Eigen::Vector2d ProjectPartPoint(const CameraModel& camera, const PlaneScene& scene,
                                  const Eigen::Vector3d& part_mm,
                                  const Eigen::Vector2d& table_pos_mm) {
-  const Eigen::Vector3d& r = scene.cam_from_part_r;
-  const Eigen::Matrix3d rot = Eigen::AngleAxisd(r.norm(), r.normalized()).toRotationMatrix();
+  const Eigen::Matrix3d rot = RotationFromAngleAxis(scene.cam_from_part_r);
   const Eigen::Vector3d moved = part_mm + Eigen::Vector3d(table_pos_mm.x(), table_pos_mm.y(), 0.0);
   Eigen::Matrix2Xd q;
   ProjectPoints(camera, rot * moved + scene.cam_from_part_t_mm, &q);
