@@ -12,8 +12,8 @@
 #include "adapters/mrcal/lens.h"
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
-#include "pipeline/mosaic/mrcal_projection.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/mosaic/mrcal_projection.h"
 #include "pipeline/mosaic/plane_seed.h"
 
 namespace omm {

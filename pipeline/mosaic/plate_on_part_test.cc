@@ -62,6 +62,15 @@ Registered Register(const SyntheticPlaneOptions& options) {
   return r;
 }
 
+// The synthetic part with the plate lying on it, 600 tracks: the final
+// adjustment's test scene.
+SyntheticPlaneOptions PlateScene() {
+  SyntheticPlaneOptions options;
+  options.with_plate = true;
+  options.num_tracks = 600;
+  return options;
+}
+
 // The synthetic plate as FindPlateOnPart would hand it over (height unknown).
 PlateOnPart PlateOf(const SyntheticPlane& s) {
   PlateOnPart plate;
@@ -162,9 +171,7 @@ TEST(FinalAdjustment, PlateScaleErrorMatchesItsSigma) {
   double sum_z2 = 0;
   const int draws = 6;
   for (int seed = 0; seed < draws; ++seed) {
-    SyntheticPlaneOptions options;
-    options.with_plate = true;
-    options.num_tracks = 600;
+    SyntheticPlaneOptions options = PlateScene();
     options.noise_seed = 100 + seed;
     const Registered r = Register(options);
     const FinalAdjustment with = AdjustWithPlateAndPrior(
@@ -200,9 +207,7 @@ TEST(FinalAdjustment, PlateScaleErrorMatchesItsSigma) {
 
 // A systematic table scale error is what the check is for: s - 1 finds it.
 TEST(FinalAdjustment, ScaleCheckFindsATableScaleError) {
-  SyntheticPlaneOptions options;
-  options.with_plate = true;
-  options.num_tracks = 600;
+  SyntheticPlaneOptions options = PlateScene();
   options.table_scale_error = 3e-4;
   const Registered r = Register(options);
   const FinalAdjustment a = AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOf(r.s),
@@ -223,10 +228,7 @@ TEST(FinalAdjustment, ScaleCheckFindsATableScaleError) {
 // the top surface: the central projection from the plane Z = h to Z = 0
 // scales by H / (H - h)).
 TEST(FinalAdjustment, PlateOfUnknownHeightInOneTileOnlyChecks) {
-  SyntheticPlaneOptions options;
-  options.with_plate = true;
-  options.num_tracks = 600;
-  const Registered r = Register(options);
+  const Registered r = Register(PlateScene());
   PlateOnPart plate = PlateOf(r.s);
   std::vector<int> count(9, 0);
   for (const PlateMarkObservation& o : plate.observations) ++count[o.tile];
@@ -262,10 +264,7 @@ TEST(FinalAdjustment, PlateOfUnknownHeightInOneTileOnlyChecks) {
 // A "plate" whose marks do not fit (misidentified: here every mark swapped
 // with its mirror across the plate's middle row) is left out, and said.
 TEST(FinalAdjustment, PlateThatDoesNotFitIsLeftOut) {
-  SyntheticPlaneOptions options;
-  options.with_plate = true;
-  options.num_tracks = 600;
-  const Registered r = Register(options);
+  const Registered r = Register(PlateScene());
   PlateOnPart plate = PlateOf(r.s);
   for (PlateMarkObservation& o : plate.observations) o.mark = (6 - o.mark / 7) * 7 + o.mark % 7;
   const FinalAdjustment a =
@@ -283,14 +282,57 @@ TEST(FinalAdjustment, PlateThatDoesNotFitIsLeftOut) {
   EXPECT_FALSE(a.scale_check.ok);
 }
 
+// Matches that scatter 3x more than declared: the final adjustment finds the
+// factor (the unit-weight sigma) and its covariance becomes that of a solve
+// told the true sigma; declared right, nothing is widened. Without the
+// rescaling the covariance stays too small (the check that the test sees it).
+TEST(FinalAdjustment, MatchesNoisierThanDeclaredWidenTheCovariance) {
+  SyntheticPlaneOptions options;
+  options.num_tracks = 600;
+  const Registered r = Register(options);
+  PlaneBundleInput understated = r.input;
+  understated.observation_sigma_px /= 3.0;
+  const FinalAdjustment told_truth =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOnPart{}, IntrinsicsPrior{}, {});
+  const FinalAdjustment widened = AdjustWithPlateAndPrior(r.s.camera, understated, r.scene,
+                                                          PlateOnPart{}, IntrinsicsPrior{}, {});
+  FinalAdjustmentOptions as_declared;
+  as_declared.rescale_observation_sigma = false;
+  const FinalAdjustment narrow = AdjustWithPlateAndPrior(r.s.camera, understated, r.scene,
+                                                         PlateOnPart{}, IntrinsicsPrior{}, as_declared);
+  for (const FinalAdjustment* a : {&told_truth, &widened, &narrow}) {
+    ASSERT_TRUE(a->summary.usable) << a->summary.brief;
+    ASSERT_GT(a->scene.covariance.size(), 0);
+  }
+  std::printf("observation sigma scale: told the truth %.3f, told a third %.3f\n",
+              told_truth.observation_sigma_scale, widened.observation_sigma_scale);
+  // The unit-weight sigma over ~3000 residuals scatters by a few %.
+  EXPECT_LT(told_truth.observation_sigma_scale, 1.05);
+  EXPECT_NEAR(widened.observation_sigma_scale, 3.0, 0.15);
+  EXPECT_EQ(narrow.observation_sigma_scale, 1.0);
+  // The plane pose (observation-driven) and table positions: per parameter,
+  // the widened sigma within 1 % of the one told the truth.
+  const Eigen::VectorXd truth_sigma = told_truth.scene.covariance.diagonal().cwiseSqrt();
+  const Eigen::VectorXd widened_sigma = widened.scene.covariance.diagonal().cwiseSqrt();
+  const Eigen::VectorXd narrow_sigma = narrow.scene.covariance.diagonal().cwiseSqrt();
+  const int n = PlaneSceneCovarianceSize(static_cast<int>(r.scene.table_pos_mm.size()), 0, 0);
+  double worst = 0.0, narrowest = 1.0;
+  for (int k = 0; k < n; ++k) {
+    if (!(truth_sigma(k) > 0)) continue;
+    worst = std::max(worst, std::abs(widened_sigma(k) / truth_sigma(k) - 1.0));
+    narrowest = std::min(narrowest, narrow_sigma(k) / truth_sigma(k));
+  }
+  std::printf("widened vs told the truth: worst %.3f; as declared: narrowest %.3f\n", worst,
+              narrowest);
+  EXPECT_LT(worst, 0.01);  // both estimate the sigma from the same residuals
+  EXPECT_LT(narrowest, 0.5);
+}
+
 // The intrinsics prior makes the covariance joint: an intrinsics block no
 // larger than the prior, correlated with the pose and the table positions;
 // without it the intrinsics come back bit-identical with a zero block.
 TEST(FinalAdjustment, IntrinsicsPriorGivesAJointCovariance) {
-  SyntheticPlaneOptions options;
-  options.with_plate = true;
-  options.num_tracks = 600;
-  const Registered r = Register(options);
+  const Registered r = Register(PlateScene());
   Eigen::VectorXd sigma(12);
   sigma << 0.5, 0.5, 0.4, 0.4, 2e-4, 5e-4, 2e-5, 2e-5, 1e-3, 1e-3, 1e-3, 1e-3;
   IntrinsicsPrior prior;
