@@ -3,8 +3,8 @@
 #include <fstream>
 #include <vector>
 
+#include "adapters/openssl/sha256.h"
 #include "pipeline/core/error.h"
-#include "pipeline/orchestration/sha256.h"
 
 namespace fs = std::filesystem;
 

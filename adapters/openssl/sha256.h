@@ -1,10 +1,9 @@
-// SHA-256 (FIPS 180-4), for hashing a project's input files. Small and
-// self-contained; checked against the FIPS 180-4 / NIST example vectors.
+// SHA-256 (FIPS 180-4) through OpenSSL's libcrypto (EVP), for hashing a
+// project's input files.
 #pragma once
 
-#include <array>
 #include <cstddef>
-#include <cstdint>
+#include <memory>
 #include <string>
 #include <string_view>
 
@@ -13,6 +12,10 @@ namespace omm {
 class Sha256 {
  public:
   Sha256();
+  ~Sha256();
+  Sha256(const Sha256&) = delete;
+  Sha256& operator=(const Sha256&) = delete;
+
   // Appends bytes to the message; may be called any number of times.
   void Update(const void* data, std::size_t size);
   void Update(std::string_view text) { Update(text.data(), text.size()); }
@@ -20,12 +23,11 @@ class Sha256 {
   std::string HexDigest();
 
  private:
-  void Block(const std::uint8_t* block);
-
-  std::array<std::uint32_t, 8> state_;
-  std::array<std::uint8_t, 64> buffer_{};
-  std::size_t buffered_ = 0;
-  std::uint64_t length_bytes_ = 0;
+  struct Context;
+  std::unique_ptr<Context> context_;
 };
+
+// SHA-256 of `bytes`, 64 lower-case hex digits.
+std::string Sha256Hex(std::string_view bytes);
 
 }  // namespace omm

@@ -1,4 +1,4 @@
-#include "pipeline/orchestration/sha256.h"
+#include "adapters/openssl/sha256.h"
 
 #include <utility>
 #include <vector>
@@ -41,6 +41,8 @@ TEST(Sha256, PaddingEdgesInChunks) {
     EXPECT_EQ(chunked.HexDigest(), digest) << size << " bytes";
   }
 }
+
+TEST(Sha256, OneCallFormEqualsTheStream) { EXPECT_EQ(Sha256Hex("abc"), Hash("abc")); }
 
 }  // namespace
 }  // namespace omm
