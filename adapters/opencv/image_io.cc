@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 #include <system_error>
 #include <vector>
@@ -15,17 +16,8 @@
 namespace omm {
 namespace {
 
-cv::Mat ReadRaw(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) {
-    throw InputError(path.string(), "image file not found");
-  }
-  cv::Mat raw;
-  try {
-    raw = cv::imread(path.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
-  } catch (const cv::Exception& e) {
-    throw InputError(path.string(), std::string("cannot decode image: ") + e.what());
-  }
+// The decoded file as gray samples at its own depth; `raw` empty: not decodable.
+StoredImage ToStored(cv::Mat raw, const std::filesystem::path& path) {
   if (raw.empty()) {
     throw InputError(path.string(),
                      "cannot decode image (corrupt, truncated or not a PNG/TIFF/JPEG file)");
@@ -33,13 +25,6 @@ cv::Mat ReadRaw(const std::filesystem::path& path) {
   if (raw.depth() != CV_8U && raw.depth() != CV_16U) {
     throw InputError(path.string(), "expected an 8- or 16-bit image");
   }
-  return raw;
-}
-
-}  // namespace
-
-GrayImage ReadGrayImage(const std::filesystem::path& path) {
-  cv::Mat raw = ReadRaw(path);
   if (raw.channels() == 3) {
     cv::cvtColor(raw, raw, cv::COLOR_BGR2GRAY);
   } else if (raw.channels() == 4) {
@@ -47,36 +32,81 @@ GrayImage ReadGrayImage(const std::filesystem::path& path) {
   } else if (raw.channels() != 1) {
     throw InputError(path.string(), "expected a gray or color image");
   }
-  GrayImage image;
+  StoredImage image;
+  image.width = raw.cols;
+  image.height = raw.rows;
   image.bit_depth = raw.depth() == CV_16U ? 16 : 8;
-  image.pixels.resize(raw.rows, raw.cols);
-  // ImageF is row-major and contiguous: convert straight into its storage.
-  cv::Mat as_float(raw.rows, raw.cols, CV_32F, image.pixels.data());
-  raw.convertTo(as_float, CV_32F, 1.0 / ((1 << image.bit_depth) - 1));
+  image.samples.resize(raw.total() * raw.elemSize());
+  // Samples is row-major and contiguous: copy straight into its storage.
+  raw.copyTo(cv::Mat(raw.rows, raw.cols, raw.type(), image.samples.data()));
   return image;
 }
 
-Eigen::Vector2i ReadImageSize(const std::filesystem::path& path) {
-  // imgcodecs has no header-only query; decoding is the honest check that the
-  // file is not corrupt anyway.
-  const cv::Mat raw = ReadRaw(path);
-  return {raw.cols, raw.rows};
+// A cv::Mat header over the image's samples (no copy).
+cv::Mat SamplesMat(const StoredImage& image) {
+  return cv::Mat(image.height, image.width, image.bit_depth == 16 ? CV_16U : CV_8U,
+                 const_cast<std::uint8_t*>(image.samples.data()));
 }
 
-void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int bit_depth) {
-  if (bit_depth != 8 && bit_depth != 16) {
-    throw InputError(path.string(), "can write 8- or 16-bit images only");
+}  // namespace
+
+StoredImage ReadStoredImage(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    throw InputError(path.string(), "image file not found");
   }
-  const cv::Mat as_float(static_cast<int>(pixels.rows()), static_cast<int>(pixels.cols()), CV_32F,
-                         const_cast<float*>(pixels.data()));
-  cv::Mat out;
-  const double full_scale = (1 << bit_depth) - 1;
-  as_float.convertTo(out, bit_depth == 16 ? CV_16U : CV_8U, full_scale);  // saturating, rounded
+  try {
+    return ToStored(cv::imread(path.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR), path);
+  } catch (const cv::Exception& e) {
+    throw InputError(path.string(), std::string("cannot decode image: ") + e.what());
+  }
+}
+
+StoredImage DecodeImage(std::string_view file_bytes, const std::filesystem::path& path) {
+  try {
+    const cv::Mat bytes(1, static_cast<int>(file_bytes.size()), CV_8U,
+                        const_cast<char*>(file_bytes.data()));
+    return ToStored(cv::imdecode(bytes, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR), path);
+  } catch (const cv::Exception& e) {
+    throw InputError(path.string(), std::string("cannot decode image: ") + e.what());
+  }
+}
+
+GrayImage ToGrayImage(const StoredImage& image) {
+  GrayImage gray;
+  gray.bit_depth = image.bit_depth;
+  gray.pixels.resize(image.height, image.width);
+  // ImageF is row-major and contiguous: convert straight into its storage.
+  cv::Mat as_float(image.height, image.width, CV_32F, gray.pixels.data());
+  SamplesMat(image).convertTo(as_float, CV_32F, 1.0 / ((1 << image.bit_depth) - 1));
+  return gray;
+}
+
+GrayImage ReadGrayImage(const std::filesystem::path& path) {
+  return ToGrayImage(ReadStoredImage(path));
+}
+
+StoredImage QuantizeImage(const ImageF& pixels, int bit_depth) {
+  if (bit_depth != 8 && bit_depth != 16) {
+    throw std::invalid_argument("QuantizeImage: bit_depth must be 8 or 16");
+  }
+  StoredImage image;
+  image.width = static_cast<int>(pixels.cols());
+  image.height = static_cast<int>(pixels.rows());
+  image.bit_depth = bit_depth;
+  image.samples.resize(pixels.size() * (bit_depth / 8));
+  const cv::Mat as_float(image.height, image.width, CV_32F, const_cast<float*>(pixels.data()));
+  cv::Mat out = SamplesMat(image);
+  as_float.convertTo(out, out.type(), (1 << bit_depth) - 1);  // saturating, rounded
+  return image;
+}
+
+void WriteStoredImage(const std::filesystem::path& path, const StoredImage& image) {
   std::filesystem::path tmp = path;
   tmp += ".tmp" + path.extension().string();
   bool ok = false;
   try {
-    ok = cv::imwrite(tmp.string(), out);
+    ok = cv::imwrite(tmp.string(), SamplesMat(image));
   } catch (const cv::Exception&) {
     ok = false;
   }
@@ -86,6 +116,13 @@ void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int
     std::filesystem::remove(tmp, ec);
     throw InputError(path.string(), "cannot write image");
   }
+}
+
+void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int bit_depth) {
+  if (bit_depth != 8 && bit_depth != 16) {
+    throw InputError(path.string(), "can write 8- or 16-bit images only");
+  }
+  WriteStoredImage(path, QuantizeImage(pixels, bit_depth));
 }
 
 std::string EncodePreviewPng(const ImageF& pixels, int max_width_px) {

@@ -3,24 +3,39 @@
 
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "pipeline/core/image.h"
 
 namespace omm {
 
-// Reads an 8- or 16-bit gray or color image as gray in [0, 1]. Throws
-// InputError naming the file when it is missing, unreadable, corrupt or of
-// another depth.
+// Reads an 8- or 16-bit gray or color image as gray in [0, 1]:
+// ToGrayImage(ReadStoredImage(path)). Throws InputError naming the file when
+// it is missing, unreadable, corrupt or of another depth.
 GrayImage ReadGrayImage(const std::filesystem::path& path);
 
-// Width and height of an image file from its header (no pixel decoding where
-// the format allows). Throws InputError like ReadGrayImage.
-Eigen::Vector2i ReadImageSize(const std::filesystem::path& path);
+// Reads an 8- or 16-bit gray or color image file's samples, color converted
+// to gray at the file's depth. Throws InputError like ReadGrayImage.
+StoredImage ReadStoredImage(const std::filesystem::path& path);
 
-// Writes `image` as an 8- or 16-bit gray PNG or TIFF (by extension), values
-// clamped to [0, 1] and rounded to the nearest digital number. Writes to a
-// temporary file beside `path` and renames it, so a reader never sees a
+// The same from the file's bytes already in memory; `path` only names the
+// file in errors.
+StoredImage DecodeImage(std::string_view file_bytes, const std::filesystem::path& path);
+
+// The samples scaled to [0, 1] of full scale (255 or 65535), bit_depth kept:
+// the one conversion every image read goes through.
+GrayImage ToGrayImage(const StoredImage& image);
+
+// `pixels` clamped to [0, 1] and rounded to the nearest digital number of
+// `bit_depth` (8 or 16) bits: the samples WriteGrayImage writes.
+StoredImage QuantizeImage(const ImageF& pixels, int bit_depth);
+
+// Writes `image` as a gray PNG or TIFF (by extension) at its depth, through a
+// temporary file beside `path` and a rename, so a reader never sees a
 // half-written file. Throws InputError if it cannot be written.
+void WriteStoredImage(const std::filesystem::path& path, const StoredImage& image);
+
+// WriteStoredImage(path, QuantizeImage(pixels, bit_depth)).
 void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int bit_depth);
 
 // An 8-bit gray PNG file's bytes, in memory, of `pixels` (values clamped to

@@ -1,6 +1,9 @@
 #include "adapters/opencv/image_io.h"
 
+#include <cmath>
 #include <fstream>
+#include <iterator>
+#include <string>
 
 #include <gtest/gtest.h>
 
@@ -26,7 +29,48 @@ TEST(ImageIo, SixteenBitRoundTripIsExact) {
   ASSERT_EQ(read.width(), 5);
   ASSERT_EQ(read.height(), 3);
   EXPECT_LT((read.pixels - pixels).cwiseAbs().maxCoeff(), 0.5f / 65535.f);
-  EXPECT_EQ(ReadImageSize(path), Eigen::Vector2i(5, 3));
+}
+
+// What a run keeps in memory is what the file holds: the quantised samples
+// written and read back are identical, and decoding the file's bytes in memory
+// gives the same samples and, through ToGrayImage, the same floats bit for bit.
+TEST(ImageIo, QuantisedSamplesMatchTheFileExactly) {
+  for (const int bits : {8, 16}) {
+    ImageF pixels(37, 53);
+    for (int r = 0; r < 37; ++r)
+      for (int c = 0; c < 53; ++c)
+        pixels(r, c) = static_cast<float>(std::sin(0.37 * r + 0.11 * c * c)) * 0.6f + 0.45f;
+    const StoredImage quantised = QuantizeImage(pixels, bits);
+    EXPECT_EQ(quantised.bit_depth, bits);
+    const auto path = TempDir() / ("quantised_" + std::to_string(bits) + ".png");
+    WriteStoredImage(path, quantised);
+    const StoredImage read = ReadStoredImage(path);
+    EXPECT_EQ(read.width, 53);
+    EXPECT_EQ(read.height, 37);
+    EXPECT_EQ(read.bit_depth, bits);
+    EXPECT_EQ(read.samples, quantised.samples) << bits << " bit";
+
+    std::ifstream in(path, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_EQ(DecodeImage(bytes, path).samples, read.samples) << bits << " bit";
+    const GrayImage from_memory = ToGrayImage(quantised);
+    const GrayImage from_file = ReadGrayImage(path);
+    EXPECT_EQ(from_memory.bit_depth, bits);
+    EXPECT_TRUE((from_memory.pixels.array() == from_file.pixels.array()).all()) << bits << " bit";
+    // Clamped and rounded to the nearest digital number.
+    const float full_scale = static_cast<float>((1 << bits) - 1);
+    EXPECT_LE((from_memory.pixels - pixels.cwiseMax(0.f).cwiseMin(1.f)).cwiseAbs().maxCoeff(),
+              0.5f / full_scale + 1e-7f);
+  }
+}
+
+TEST(ImageIo, CorruptBytesInMemoryNameTheFile) {
+  try {
+    DecodeImage("\x89PNG this is not an image", "tiles/broken.png");
+    FAIL() << "no error for corrupt bytes";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("tiles/broken.png"), std::string::npos);
+  }
 }
 
 TEST(ImageIo, MissingAndCorruptFilesNameTheFile) {

@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <exception>
 #include <fstream>
+#include <iterator>
 #include <map>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <system_error>
@@ -13,7 +16,10 @@
 #include <yaml-cpp/yaml.h>
 
 #include "adapters/opencv/image_io.h"
+#include "adapters/openssl/sha256.h"
+#include "adapters/project_io/text_file.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
 
 namespace fs = std::filesystem;
 
@@ -21,6 +27,8 @@ namespace omm {
 namespace {
 
 constexpr const char* kProjectFormat = "omm-project/1";
+// Images are read and decoded on this many threads (the 2-core machine omm targets).
+constexpr int kNumThreads = 2;
 
 // ---------------------------------------------------------------- helpers --
 
@@ -642,24 +650,48 @@ Project LoadProject(const fs::path& dir_in) {
     }
   }
 
-  // Decode every image once: a corrupt file is found now, not halfway through.
+  // Read, hash and decode every image once, here: a corrupt file is found now,
+  // not halfway through, and the stages take the decoded images from memory.
   std::vector<fs::path> all_images = project.calib_images;
   for (const TilePosition& tile : project.tiles) all_images.push_back(project.TilePath(tile.image));
-  std::optional<fs::path> first;
-  for (const fs::path& path : all_images) {
-    const Eigen::Vector2i size = ReadImageSize(path);
-    if (!first) {
-      first = path;
-      project.image_width_px = size.x();
-      project.image_height_px = size.y();
-    } else if (size.x() != project.image_width_px || size.y() != project.image_height_px) {
-      throw InputError(path.string(),
-                       fmt::format("image is {} x {} px but {} is {} x {} px; all images of a "
-                                   "project must have one size",
-                                   size.x(), size.y(), fs::relative(*first, dir).string(),
-                                   project.image_width_px, project.image_height_px));
+  std::vector<LoadedImage> loaded(all_images.size());
+  std::vector<std::exception_ptr> errors(all_images.size());
+  ParallelFor(static_cast<int>(all_images.size()), kNumThreads, [&](int i) {
+    try {
+      const fs::path& path = all_images[i];
+      std::error_code exists_ec;
+      if (!fs::is_regular_file(path, exists_ec))
+        throw InputError(path.string(), "image file not found");
+      const std::string bytes = ReadTextFile(path, "cannot read image file");
+      loaded[i].sha256 = Sha256Hex(bytes);
+      loaded[i].image = DecodeImage(bytes, path);
+    } catch (...) {
+      errors[i] = std::current_exception();
+    }
+  });
+  // The first bad file in file-name order, whatever the threads' order.
+  for (const std::exception_ptr& error : errors) {
+    if (error) std::rethrow_exception(error);
+  }
+  for (size_t i = 0; i < loaded.size(); ++i) {
+    const StoredImage& image = loaded[i].image;
+    if (i == 0) {
+      project.image_width_px = image.width;
+      project.image_height_px = image.height;
+    } else if (image.width != project.image_width_px || image.height != project.image_height_px) {
+      throw InputError(
+          all_images[i].string(),
+          fmt::format("image is {} x {} px but {} is {} x {} px; all images of a "
+                      "project must have one size",
+                      image.width, image.height, fs::relative(all_images[0], dir).string(),
+                      project.image_width_px, project.image_height_px));
     }
   }
+  auto images = std::make_shared<LoadedImages>();
+  const auto calib_end = loaded.begin() + static_cast<std::ptrdiff_t>(project.calib_images.size());
+  images->calib.assign(std::make_move_iterator(loaded.begin()), std::make_move_iterator(calib_end));
+  images->tiles.assign(std::make_move_iterator(calib_end), std::make_move_iterator(loaded.end()));
+  project.images = std::move(images);
   for (size_t i = 0; i < project.features.size(); ++i) {
     const FeatureSpec& feature = project.features[i];
     const Eigen::Vector2d& q = feature.near_px;

@@ -3,6 +3,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "adapters/opencv/image_io.h"
+#include "adapters/openssl/sha256.h"
 #include "adapters/project_io/project_writer.h"
 #include "pipeline/core/error.h"
 #include "tests/test_util.h"
@@ -361,6 +363,43 @@ TEST_F(ProjectReaderTest, ImagesOfDifferentSizes) {
 TEST_F(ProjectReaderTest, CorruptImageIsNamed) {
   testing::WriteTextFile(project_.TilePath("Part_02.png"), "\x89PNG\r\n\x1a\n truncated");
   ExpectError({"Part_02.png", "cannot decode"});
+}
+
+// Read on two threads, the error is still that of the first bad file in
+// order (calib/ before tiles/, file names in order), as a serial read gives.
+TEST_F(ProjectReaderTest, FirstOfSeveralCorruptImagesIsNamed) {
+  testing::WriteTextFile(project_.TilePath("Part_04.png"), "not a PNG at all");
+  testing::WriteTextFile(project_.TilePath("Part_02.png"), "\x89PNG\r\n\x1a\n truncated");
+  ExpectError({"Part_02.png", "cannot decode"});
+  testing::WriteTextFile(project_.calib_images.back(), "not a PNG either");
+  ExpectError({project_.calib_images.back().filename().string(), "cannot decode"});
+}
+
+TEST_F(ProjectReaderTest, MissingImageIsNamed) {
+  fs::remove(project_.TilePath("Part_03.png"));
+  ExpectError({"Part_03.png"});
+}
+
+// What LoadProject keeps for the stages is each file's samples and the
+// SHA-256 of its bytes.
+TEST_F(ProjectReaderTest, LoadedImagesAreThoseOfTheFiles) {
+  const Project read = LoadProject(project_.dir);
+  ASSERT_NE(read.images, nullptr);
+  ASSERT_EQ(read.images->calib.size(), read.calib_images.size());
+  ASSERT_EQ(read.images->tiles.size(), read.tiles.size());
+  std::vector<std::pair<fs::path, const LoadedImage*>> all;
+  for (size_t i = 0; i < read.calib_images.size(); ++i)
+    all.emplace_back(read.calib_images[i], &read.images->calib[i]);
+  for (size_t i = 0; i < read.tiles.size(); ++i)
+    all.emplace_back(read.TilePath(read.tiles[i].image), &read.images->tiles[i]);
+  for (const auto& [path, loaded] : all) {
+    const StoredImage file = ReadStoredImage(path);
+    EXPECT_EQ(loaded->image.width, file.width) << path;
+    EXPECT_EQ(loaded->image.height, file.height) << path;
+    EXPECT_EQ(loaded->image.bit_depth, file.bit_depth) << path;
+    EXPECT_EQ(loaded->image.samples, file.samples) << path;
+    EXPECT_EQ(loaded->sha256, Sha256Hex(testing::ReadTextFile(path))) << path;
+  }
 }
 
 TEST_F(ProjectReaderTest, CalibrationOnlyProjectHasNoTiles) {

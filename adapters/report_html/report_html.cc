@@ -557,13 +557,16 @@ std::string ReportHtml(const Report& report, const ReportHtmlInputs& inputs) {
 
 ReportHtmlInputs ReadReportHtmlInputs(const Report& report, const std::vector<fs::path>& dirs,
                                       const std::vector<MeasurementSpec>& measurements,
-                                      const ReportHtmlOptions& options) {
+                                      const ReportHtmlOptions& options, const StoredImage* mosaic) {
   if (const std::string problem = options.Check(); !problem.empty()) {
     throw std::invalid_argument("ReportHtmlOptions: " + problem);
   }
   ReportHtmlInputs inputs;
   inputs.measurements = measurements;
-  if (report.mosaic) {
+  if (report.mosaic && mosaic) {
+    inputs.mosaic_png =
+        EncodePreviewPng(ToGrayImage(*mosaic).pixels, options.mosaic_preview_width_px);
+  } else if (report.mosaic) {
     const fs::path path = FindNamed(report.mosaic->file, dirs);
     if (path.empty()) {
       inputs.mosaic_missing_why = "'" + report.mosaic->file + "' not found";
@@ -592,9 +595,9 @@ ReportHtmlInputs ReadReportHtmlInputs(const Report& report, const std::vector<fs
 
 void WriteReportHtml(const fs::path& path, const Report& report, const std::vector<fs::path>& dirs,
                      const std::vector<MeasurementSpec>& measurements,
-                     const ReportHtmlOptions& options) {
+                     const ReportHtmlOptions& options, const StoredImage* mosaic) {
   WriteTextFileAtomically(
-      path, ReportHtml(report, ReadReportHtmlInputs(report, dirs, measurements, options)));
+      path, ReportHtml(report, ReadReportHtmlInputs(report, dirs, measurements, options, mosaic)));
 }
 
 }  // namespace omm

@@ -32,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "pipeline/core/image.h"
 #include "pipeline/core/project.h"
 #include "pipeline/core/report.h"
 
@@ -67,11 +68,13 @@ std::string ReportHtml(const Report& report, const ReportHtmlInputs& inputs);
 // calibration extra's "residuals_plot", "uncertainty_plot", "study"."plot"),
 // each taken from the first of `dirs` that holds it (a run's staging
 // directory, then out/). A missing or unreadable file is left out, its
-// section saying so; never an error.
+// section saying so; never an error. `mosaic`, if given, is report.mosaic's
+// image already in memory: its file is then not read.
 ReportHtmlInputs ReadReportHtmlInputs(const Report& report,
                                       const std::vector<std::filesystem::path>& dirs,
                                       const std::vector<MeasurementSpec>& measurements,
-                                      const ReportHtmlOptions& options);
+                                      const ReportHtmlOptions& options,
+                                      const StoredImage* mosaic = nullptr);
 
 // ReportHtml(report, ReadReportHtmlInputs(...)) written to `path` through a
 // temporary file and a rename (a reader sees the old page or the new one).
@@ -80,6 +83,6 @@ ReportHtmlInputs ReadReportHtmlInputs(const Report& report,
 void WriteReportHtml(const std::filesystem::path& path, const Report& report,
                      const std::vector<std::filesystem::path>& dirs,
                      const std::vector<MeasurementSpec>& measurements,
-                     const ReportHtmlOptions& options = {});
+                     const ReportHtmlOptions& options = {}, const StoredImage* mosaic = nullptr);
 
 }  // namespace omm

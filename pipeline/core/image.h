@@ -1,6 +1,9 @@
 // A gray image as the pipeline sees it, whatever the file's format.
 #pragma once
 
+#include <cstdint>
+#include <vector>
+
 #include <Eigen/Core>
 
 namespace omm {
@@ -17,6 +20,19 @@ struct GrayImage {
 
   int width() const { return static_cast<int>(pixels.cols()); }
   int height() const { return static_cast<int>(pixels.rows()); }
+};
+
+// An image's gray samples as its file holds them: digital numbers of 8 or 16
+// bits. What is kept of an image between stages (1 or 2 bytes a pixel, not
+// GrayImage's 4); adapters/opencv/image_io.h converts it to a GrayImage
+// exactly as reading the file would.
+struct StoredImage {
+  int width = 0;
+  int height = 0;
+  int bit_depth = 8;  // 8 or 16
+  // Row-major, width * height * bit_depth / 8 bytes; 16-bit samples are
+  // native-endian std::uint16_t.
+  std::vector<std::uint8_t> samples;
 };
 
 }  // namespace omm

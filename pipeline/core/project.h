@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -10,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "pipeline/core/board.h"
+#include "pipeline/core/image.h"
 
 namespace omm {
 
@@ -56,6 +58,18 @@ struct CmmValue {
   double value_mm = 0.0;
 };
 
+// An image file as LoadProject read it: read once, its bytes hashed and
+// decoded, so that the stages of the same process need not read it again.
+struct LoadedImage {
+  StoredImage image;
+  std::string sha256;  // of the file's bytes, 64 lower-case hex digits
+};
+
+struct LoadedImages {
+  std::vector<LoadedImage> calib;  // parallel to Project::calib_images
+  std::vector<LoadedImage> tiles;  // parallel to Project::tiles
+};
+
 struct Project {
   std::filesystem::path dir;  // the project directory (absolute)
   std::string name;
@@ -78,6 +92,10 @@ struct Project {
   // Size shared by all images (calib/ and tiles/), px.
   int image_width_px = 0;
   int image_height_px = 0;
+
+  // The images as loaded, shared by copies of the project (read only); null:
+  // the stages read the files.
+  std::shared_ptr<const LoadedImages> images;
 
   std::filesystem::path TilePath(const std::string& image) const {
     return dir / "tiles" / image;

@@ -4,15 +4,19 @@
 
 namespace omm {
 
+MosaicReport OrthoMosaicReport(const std::filesystem::path& path, const OrthoGrid& grid) {
+  MosaicReport report;
+  report.file = path.filename().string();
+  report.gsd_mm = grid.gsd_mm;
+  report.size_px = grid.size_px;
+  report.origin_mm = grid.origin_mm;
+  return report;
+}
+
 MosaicReport WriteOrthoMosaic(const std::filesystem::path& path, const OrthoMosaic& mosaic,
                               int bit_depth) {
   WriteGrayImage(path, mosaic.pixels, bit_depth);
-  MosaicReport report;
-  report.file = path.filename().string();
-  report.gsd_mm = mosaic.grid.gsd_mm;
-  report.size_px = mosaic.grid.size_px;
-  report.origin_mm = mosaic.grid.origin_mm;
-  return report;
+  return OrthoMosaicReport(path, mosaic.grid);
 }
 
 }  // namespace omm

@@ -4,13 +4,11 @@
 // the report's calibration section. With `calibration.from`, the earlier
 // calibration is taken instead and calib/ is not read.
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <exception>
 #include <filesystem>
 #include <optional>
-#include <thread>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -25,6 +23,7 @@
 #include "pipeline/calibration/calibrate_stage.h"
 #include "pipeline/calibration/study.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/orchestration/stage.h"
 #include "pipeline/orchestration/svg_plots.h"
 
@@ -114,32 +113,25 @@ ReportValue StudyReport(const ImageCountStudy& study) {
                       {"seconds", study.seconds}};
 }
 
-// Reads the calib images, 2 at a time.
-std::vector<NamedImage> ReadCalibImages(const Project& project, const ProgressCallback& progress) {
-  std::vector<NamedImage> images(project.calib_images.size());
-  std::atomic<size_t> next{0};
-  std::atomic<int> done{0};
-  std::exception_ptr errors[2];
-  auto work = [&](std::exception_ptr* error) {
+// The calib images as gray, 2 at a time: converted from those LoadProject
+// decoded, else read from the files.
+std::vector<NamedImage> CalibImages(const Project& project, const ProgressCallback& progress) {
+  const int num_images = static_cast<int>(project.calib_images.size());
+  std::vector<NamedImage> images(num_images);
+  std::vector<std::exception_ptr> errors(num_images);
+  ParallelFor(num_images, 2, [&](int i) {
     try {
-      for (size_t i = next++; i < images.size(); i = next++) {
-        images[i].name = project.calib_images[i].filename().string();
-        images[i].image = ReadGrayImage(project.calib_images[i]);
-        ++done;
-      }
+      images[i].name = project.calib_images[i].filename().string();
+      images[i].image = project.images ? ToGrayImage(project.images->calib[i].image)
+                                       : ReadGrayImage(project.calib_images[i]);
     } catch (...) {
-      *error = std::current_exception();
-      next = images.size();
+      errors[i] = std::current_exception();
     }
-  };
-  {
-    std::jthread helper(work, &errors[1]);
-    work(&errors[0]);
-  }
+  });
   for (const std::exception_ptr& error : errors) {
     if (error) std::rethrow_exception(error);
   }
-  if (progress) progress(done, static_cast<int>(images.size()), "read calibration images");
+  if (progress) progress(num_images, num_images, "read calibration images");
   return images;
 }
 
@@ -225,7 +217,7 @@ void CalibrateFromImages(StageContext& context) {
     throw InputError((project.dir / "calib").string(),
                      "no calibration images (and no calibration.from)");
   }
-  const std::vector<NamedImage> images = ReadCalibImages(project, context.progress);
+  const std::vector<NamedImage> images = CalibImages(project, context.progress);
   CalibrationStageOptions options;
   const CalibrationStageSummary summary =
       RunCalibration(images, *project.board, project.camera, options);

@@ -1,6 +1,7 @@
 #include "pipeline/orchestration/input_hash.h"
 
 #include <fstream>
+#include <map>
 #include <vector>
 
 #include "adapters/openssl/sha256.h"
@@ -42,6 +43,14 @@ std::string HashFile(const fs::path& path) {
 }
 
 std::string HashProjectInputs(const Project& project) {
+  // The images' hashes as LoadProject took them from the bytes it decoded.
+  std::map<fs::path, std::string> loaded;
+  if (project.images) {
+    for (size_t i = 0; i < project.images->calib.size(); ++i)
+      loaded[project.calib_images[i]] = project.images->calib[i].sha256;
+    for (size_t i = 0; i < project.images->tiles.size(); ++i)
+      loaded[project.TilePath(project.tiles[i].image)] = project.images->tiles[i].sha256;
+  }
   Sha256 sha;
   for (const fs::path& file : ProjectInputFiles(project)) {
     // Files outside the project (a reused calibration) keep their absolute path.
@@ -49,7 +58,8 @@ std::string HashProjectInputs(const Project& project) {
     const bool inside = !relative.empty() && *relative.begin() != "..";
     sha.Update((inside ? relative : file).generic_string());
     sha.Update(std::string_view("\0", 1));
-    sha.Update(HashFile(file));
+    const auto it = loaded.find(file);
+    sha.Update(it != loaded.end() ? it->second : HashFile(file));
   }
   return sha.HexDigest();
 }

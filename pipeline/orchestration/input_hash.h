@@ -18,8 +18,9 @@ std::vector<std::filesystem::path> ProjectInputFiles(const Project& project);
 
 // SHA-256 over, for each input file in order: its path relative to the project
 // directory (as text), a NUL byte, and the SHA-256 of its bytes. Renaming,
-// editing, adding or removing any input changes it. Throws InputError if a
-// file cannot be read.
+// editing, adding or removing any input changes it. An image's hash is the
+// one LoadProject took of the bytes it decoded (Project::images), if loaded.
+// Throws InputError if a file cannot be read.
 std::string HashProjectInputs(const Project& project);
 
 // SHA-256 of a file's bytes, 64 hex digits.

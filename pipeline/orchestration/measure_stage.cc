@@ -130,7 +130,9 @@ void RunMeasureStage(StageContext& context) {
   }
   const MosaicReport& mosaic_report = *context.report.mosaic;
   const fs::path scene_path = context.Input(kSceneName);
-  const fs::path mosaic_path = context.Input(mosaic_report.file);
+  // This run's mosaic is in memory (its file may still be being written).
+  const fs::path mosaic_path = context.mosaic ? context.staging_dir / mosaic_report.file
+                                              : context.Input(mosaic_report.file);
   if (scene_path.empty() || mosaic_path.empty()) {
     throw InputError(context.out_dir.string(),
                      fmt::format("{} or {} is missing: run `omm mosaic` (or `omm run`) first",
@@ -144,7 +146,8 @@ void RunMeasureStage(StageContext& context) {
   const CameraModel camera{saved.lens_model, saved.scene.intrinsics, project.image_width_px,
                            project.image_height_px};
   const MrcalLensProjection lens(camera);
-  const GrayImage mosaic = ReadGrayImage(mosaic_path);
+  const GrayImage mosaic =
+      context.mosaic ? ToGrayImage(*context.mosaic) : ReadGrayImage(mosaic_path);
   const OrthoGrid grid{mosaic_report.gsd_mm, mosaic_report.origin_mm, mosaic_report.size_px};
   if (mosaic.width() != grid.size_px.x() || mosaic.height() != grid.size_px.y()) {
     throw InputError(mosaic_path.string(),

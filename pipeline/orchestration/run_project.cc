@@ -78,12 +78,12 @@ void DropSectionsFrom(Stage first, Report& report) {
 }
 
 // report.json and report.html into the staging directory; the page draws on
-// this run's files, else on those earlier runs left in out/.
-void WriteReports(const Project& project, const fs::path& staging_dir, const fs::path& out_dir,
-                  const Report& report) {
-  WriteReportJson(staging_dir / kReportName, report);
-  WriteReportHtml(staging_dir / kReportHtmlName, report, {staging_dir, out_dir},
-                  project.measurements);
+// this run's mosaic in memory and files, else on those earlier runs left in out/.
+void WriteReports(const Project& project, const StageContext& context) {
+  WriteReportJson(context.staging_dir / kReportName, context.report);
+  WriteReportHtml(context.staging_dir / kReportHtmlName, context.report,
+                  {context.staging_dir, context.out_dir}, project.measurements, {},
+                  context.mosaic.get());
 }
 
 // Moves the staged outputs into out/, report.json last.
@@ -165,7 +165,8 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
       spdlog::info("{}: done", StageName(stage));
       summary.stages_run.push_back(stage);
     }
-    WriteReports(project, staging_dir, out_dir, report);
+    for (std::future<void>& write : context.pending_writes) write.get();
+    WriteReports(project, context);
     Commit(staging_dir, out_dir);
     summary.report = std::move(report);
   } catch (...) {

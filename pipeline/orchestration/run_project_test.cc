@@ -163,13 +163,21 @@ TEST_F(RunProjectTest, InputHashSeesEveryInput) {
   const std::string hash = HashProjectInputs(project_);
   EXPECT_EQ(hash.size(), 64u);
   EXPECT_EQ(HashProjectInputs(project_), hash);  // deterministic
+  // The images' hashes LoadProject kept are those of the files.
+  Project unloaded = project_;
+  unloaded.images.reset();
+  EXPECT_EQ(HashProjectInputs(unloaded), hash);
   // 2 calib images + 4 tiles + project.yaml, table.csv, cmm.csv.
   EXPECT_EQ(ProjectInputFiles(project_).size(), 9u);
 
   testing::WriteGrayPng(project_.TilePath("Part_02.png"), 32, 24);  // same bytes
-  EXPECT_EQ(HashProjectInputs(project_), hash);
+  EXPECT_EQ(HashProjectInputs(LoadProject(project_.dir)), hash);
   WriteGrayImage(project_.TilePath("Part_02.png"), ImageF::Constant(24, 32, 0.25f), 8);
-  EXPECT_NE(HashProjectInputs(project_), hash);
+  EXPECT_NE(HashProjectInputs(LoadProject(project_.dir)), hash);
+  // A loaded project's images are hashed as the bytes it decoded: the hash
+  // names the pixels a run used, whatever happened to the file since.
+  EXPECT_EQ(HashProjectInputs(project_), hash);
+  EXPECT_NE(HashProjectInputs(unloaded), hash);
 }
 
 }  // namespace

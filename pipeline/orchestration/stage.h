@@ -9,10 +9,13 @@
 #pragma once
 
 #include <filesystem>
+#include <future>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "pipeline/core/image.h"
 #include "pipeline/core/progress.h"
 #include "pipeline/core/project.h"
 #include "pipeline/core/report.h"
@@ -55,6 +58,14 @@ struct StageContext {
   bool calibration_study = false;
   // `omm mosaic --features`: where the registration's anchors come from.
   FeatureSource mosaic_features = FeatureSource::kHarris;
+  // This run's mosaic exactly as its file holds it (set by the mosaic stage;
+  // null if it did not run): the measure stage and report.html take it from
+  // here instead of decoding the file again.
+  std::shared_ptr<const StoredImage> mosaic;
+  // Output files still being written on other threads (the mosaic's):
+  // RunProject waits for them, and rethrows their errors, before it writes
+  // the reports; destroying the context waits for them too.
+  std::vector<std::future<void>> pending_writes;
 
   // An earlier stage's output file: this run's if it wrote one, else the one
   // in out/ from an earlier run, else an empty path.
