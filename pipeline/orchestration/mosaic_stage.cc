@@ -324,7 +324,7 @@ void RunMosaicStage(StageContext& context) {
   // The samples the file will hold (WriteOrthoMosaic quantises the same way)
   // for the measure stage and report.html, while the file is encoded and
   // written on another thread: PNG encoding is single-threaded (0.27 s on the
-  // demo). RunProject waits for it before the reports name it.
+  // demo). RunProject waits for it before it commits out/.
   context.mosaic =
       std::make_shared<const StoredImage>(QuantizeImage(ortho.mosaic.pixels, kMosaicBitDepth));
   const fs::path mosaic_path = context.staging_dir / kMosaicName;

@@ -165,8 +165,8 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
       spdlog::info("{}: done", StageName(stage));
       summary.stages_run.push_back(stage);
     }
-    for (std::future<void>& write : context.pending_writes) write.get();
     WriteReports(project, context);
+    for (std::future<void>& write : context.pending_writes) write.get();
     Commit(staging_dir, out_dir);
     summary.report = std::move(report);
   } catch (...) {

@@ -1,5 +1,9 @@
 #include "pipeline/orchestration/run_project.h"
 
+#include <chrono>
+#include <future>
+#include <thread>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -102,6 +106,38 @@ TEST_F(RunProjectTest, FailureKeepsTheEarlierOutputsExactly) {
   EXPECT_EQ(testing::ReadTextFile(Out("report.json")), report_before);
   EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
   EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v1");
+  EXPECT_EQ(StagingDirs(), 0);
+}
+
+// A file a stage leaves to a background thread is in out/ once the run
+// returns, however late it is written; if its write fails, the run fails and
+// out/ keeps the earlier outputs.
+TEST_F(RunProjectTest, BackgroundWritesAreCommittedOrFailTheRun) {
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) {
+    FakeStage(stage, context, "v1");
+    if (stage != Stage::kMosaic) return;
+    const fs::path path = context.staging_dir / "mosaic.png";
+    context.pending_writes.push_back(std::async(std::launch::async, [path] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      testing::WriteTextFile(path, "written late");
+    }));
+  };
+  RunProject(project_, options);
+  EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "written late");
+  const std::string report_before = testing::ReadTextFile(Out("report.json"));
+
+  options.runner = [](Stage stage, StageContext& context) {
+    FakeStage(stage, context, "v2");
+    if (stage != Stage::kMosaic) return;
+    context.pending_writes.push_back(std::async(std::launch::async, [] {
+      throw InputError("out/mosaic.png", "cannot write image");
+    }));
+  };
+  EXPECT_THROW(RunProject(project_, options), InputError);
+  EXPECT_EQ(testing::ReadTextFile(Out("report.json")), report_before);
+  EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
+  EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "written late");
   EXPECT_EQ(StagingDirs(), 0);
 }
 

@@ -63,8 +63,8 @@ struct StageContext {
   // here instead of decoding the file again.
   std::shared_ptr<const StoredImage> mosaic;
   // Output files still being written on other threads (the mosaic's):
-  // RunProject waits for them, and rethrows their errors, before it writes
-  // the reports; destroying the context waits for them too.
+  // RunProject waits for them, and rethrows their errors, before it commits
+  // out/; destroying the context waits for them too.
   std::vector<std::future<void>> pending_writes;
 
   // An earlier stage's output file: this run's if it wrote one, else the one
