@@ -15,22 +15,28 @@ std::string LensTableOptions::Check() const {
   return "";
 }
 
+Eigen::Matrix2Xd RectangleBorderPx(const Eigen::Vector2d& min_px, const Eigen::Vector2d& max_px,
+                                   int per_side) {
+  const double x0 = min_px.x(), y0 = min_px.y(), x1 = max_px.x(), y1 = max_px.y();
+  Eigen::Matrix2Xd border(2, 4 * per_side);
+  for (int k = 0; k < per_side; ++k) {
+    const double s = static_cast<double>(k) / per_side;
+    border.col(k) = Eigen::Vector2d(x0 + s * (x1 - x0), y0);
+    border.col(per_side + k) = Eigen::Vector2d(x1, y0 + s * (y1 - y0));
+    border.col(2 * per_side + k) = Eigen::Vector2d(x1 - s * (x1 - x0), y1);
+    border.col(3 * per_side + k) = Eigen::Vector2d(x0, y1 - s * (y1 - y0));
+  }
+  return border;
+}
+
 namespace {
 
 // Range of normalised rays over the image border pushed out by margin_px.
 void RayRange(const CameraModel& camera, double margin_px, Eigen::Vector2d* u_min,
               Eigen::Vector2d* u_max) {
-  const double x0 = -margin_px, y0 = -margin_px;
-  const double x1 = camera.width_px - 1 + margin_px, y1 = camera.height_px - 1 + margin_px;
-  constexpr int kPerSide = 64;
-  Eigen::Matrix2Xd border(2, 4 * kPerSide);
-  for (int k = 0; k < kPerSide; ++k) {
-    const double s = static_cast<double>(k) / kPerSide;
-    border.col(k) = Eigen::Vector2d(x0 + s * (x1 - x0), y0);
-    border.col(kPerSide + k) = Eigen::Vector2d(x1, y0 + s * (y1 - y0));
-    border.col(2 * kPerSide + k) = Eigen::Vector2d(x1 - s * (x1 - x0), y1);
-    border.col(3 * kPerSide + k) = Eigen::Vector2d(x0, y1 - s * (y1 - y0));
-  }
+  const Eigen::Matrix2Xd border =
+      RectangleBorderPx(Eigen::Vector2d::Constant(-margin_px),
+                        {camera.width_px - 1 + margin_px, camera.height_px - 1 + margin_px}, 64);
   Eigen::Matrix3Xd v;
   const bool ok = UnprojectPixels(camera, border, &v);
   assert(ok);

@@ -23,6 +23,7 @@
 #include <Eigen/Core>
 
 #include "pipeline/core/camera.h"
+#include "pipeline/mosaic/ortho_sampling.h"
 
 namespace omm {
 
@@ -72,16 +73,6 @@ class LensTable {
   // Largest |interpolated - exact| over every cell's centre and edge midpoints, px.
   double max_error_px() const { return max_error_px_; }
 
-  // Catmull-Rom (Keys, a = -1/2) weights of the samples at -1, 0, 1, 2 for a
-  // position t in [0, 1) past sample 0.
-  static void CatmullRomWeights(double t, double w[4]) {
-    const double t2 = t * t, t3 = t2 * t;
-    w[0] = 0.5 * (-t3 + 2.0 * t2 - t);
-    w[1] = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0);
-    w[2] = 0.5 * (-3.0 * t3 + 4.0 * t2 + t);
-    w[3] = 0.5 * (t3 - t2);
-  }
-
  private:
   friend LensTable BuildLensTable(const CameraModel&, const LensTableOptions&);
 
@@ -92,6 +83,11 @@ class LensTable {
   double node_spacing_px_ = 0.0;
   double max_error_px_ = 0.0;
 };
+
+// Points along the border of the rectangle [min_px, max_px], per_side on
+// each side, evenly spaced, clockwise (x right, y down) from min_px.
+Eigen::Matrix2Xd RectangleBorderPx(const Eigen::Vector2d& min_px, const Eigen::Vector2d& max_px,
+                                   int per_side);
 
 // Builds the table over the rays of the image (plus options.margin_px): the
 // image border is unprojected to find their range. Precondition:

@@ -5,14 +5,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <functional>
 #include <numeric>
-#include <thread>
 
 #include <Eigen/Geometry>
 
 #include "adapters/mrcal/lens.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
+#include "pipeline/mosaic/ortho_sampling.h"
 
 namespace omm {
 
@@ -31,35 +31,6 @@ using Clock = std::chrono::steady_clock;
 
 double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-// Runs fn(i) for i in [0, n), interleaved over num_threads threads, and
-// returns when all are done.
-void ParallelFor(int num_threads, int n, const std::function<void(int)>& fn) {
-  num_threads = std::max(1, std::min(num_threads, n));
-  std::vector<std::thread> threads;
-  for (int k = 1; k < num_threads; ++k) {
-    threads.emplace_back([&, k] {
-      for (int i = k; i < n; i += num_threads) fn(i);
-    });
-  }
-  for (int i = 0; i < n; i += num_threads) fn(i);
-  for (std::thread& t : threads) t.join();
-}
-
-// Catmull-Rom sample of `image` at q, which must satisfy BorderDistancePx > 0.
-float SampleCatmullRom(const ImageF& image, const Eigen::Vector2d& q) {
-  const int ix = static_cast<int>(q.x()), iy = static_cast<int>(q.y());
-  double wx[4], wy[4];
-  LensTable::CatmullRomWeights(q.x() - ix, wx);
-  LensTable::CatmullRomWeights(q.y() - iy, wy);
-  double sum = 0.0;
-  for (int j = 0; j < 4; ++j) {
-    const float* row =
-        image.data() + static_cast<std::ptrdiff_t>(iy - 1 + j) * image.cols() + ix - 1;
-    sum += wy[j] * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
-  }
-  return static_cast<float>(sum);
 }
 
 float SampleBilinear(const ImageF& image, const Eigen::Vector2d& q) {
@@ -104,7 +75,7 @@ std::vector<ExposureObservation> CollectExposureObservations(const OrthoGeometry
   const ExposureOptions& eo = options.exposure;
   const int num_tiles = static_cast<int>(tiles.size());
   std::vector<ImageF> smoothed(num_tiles);
-  ParallelFor(options.num_threads, num_tiles,
+  ParallelFor(num_tiles, options.num_threads,
               [&](int i) { smoothed[i] = BoxFilter(tiles[i], eo.smoothing_radius_px); });
   const VignettingFrame& frame = geometry.vignetting;
   const int step = eo.sample_step_px;
@@ -112,7 +83,7 @@ std::vector<ExposureObservation> CollectExposureObservations(const OrthoGeometry
   const int num_cols = (geometry.grid.size_px.x() + step - 1) / step;
   const double min_border = std::max(eo.min_border_px, 1.0);
   std::vector<std::vector<ExposureObservation>> per_row(num_rows);
-  ParallelFor(options.num_threads, num_rows, [&](int sample_row) {
+  ParallelFor(num_rows, options.num_threads, [&](int sample_row) {
     const int row = sample_row * step;
     std::vector<ExposureObservation> here;
     for (int sample_col = 0; sample_col < num_cols; ++sample_col) {
@@ -160,7 +131,7 @@ void OrthoGeometry::TileRowPixels(int tile, int row, int col0, int n,
   valid->resize(n);
   double w[kStep][4];
   for (int phase = 0; phase < kStep; ++phase)
-    LensTable::CatmullRomWeights(static_cast<double>(phase) / kStep, w[phase]);
+    CatmullRomWeights(static_cast<double>(phase) / kStep, w[phase]);
   for (int k = 0; k < n; ++k) {
     const int j = k / kStep + 1, phase = k % kStep;
     const bool ok = nok[j - 1] && nok[j] && nok[j + 1] && nok[j + 2];
@@ -189,16 +160,8 @@ OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& 
   geometry.vignetting = VignettingFrame::Of(camera);
 
   // The border of the sampled region [1, W - 2] x [1, H - 2], as rays.
-  const double x0 = 1.0, y0 = 1.0, x1 = camera.width_px - 2.0, y1 = camera.height_px - 2.0;
-  constexpr int kPerSide = 32;
-  Eigen::Matrix2Xd border(2, 4 * kPerSide);
-  for (int k = 0; k < kPerSide; ++k) {
-    const double s = static_cast<double>(k) / kPerSide;
-    border.col(k) = Eigen::Vector2d(x0 + s * (x1 - x0), y0);
-    border.col(kPerSide + k) = Eigen::Vector2d(x1, y0 + s * (y1 - y0));
-    border.col(2 * kPerSide + k) = Eigen::Vector2d(x1 - s * (x1 - x0), y1);
-    border.col(3 * kPerSide + k) = Eigen::Vector2d(x0, y1 - s * (y1 - y0));
-  }
+  const Eigen::Matrix2Xd border =
+      RectangleBorderPx({1.0, 1.0}, {camera.width_px - 2.0, camera.height_px - 2.0}, 32);
   Eigen::Matrix3Xd rays;
   if (!UnprojectPixels(camera, border, &rays))
     throw InputError("camera", "cannot unproject the image border");
@@ -268,49 +231,77 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
   ImageF mosaic = ImageF::Zero(height, width);
   const VignettingFrame& frame = geometry.vignetting;
   const double band = options.blend_band_px;
-  std::vector<std::int64_t> covered(height, 0), clipped(height, 0);
 
+  // What the interpolator samples: the pixels or their B-spline coefficients.
+  std::vector<ImageF> coefficients;
+  if (options.interpolator == OrthoInterpolator::kCubicBSpline) {
+    coefficients.resize(num_tiles);
+    ParallelFor(num_tiles, options.num_threads,
+                [&](int i) { coefficients[i] = CubicBSplineCoefficients(tiles[i]); });
+  }
+  const std::vector<ImageF>& sampled = coefficients.empty() ? tiles : coefficients;
+
+  // Blocks of rows: the per-row buffers are allocated once per block.
+  constexpr int kRowsPerBlock = 16;
+  const int num_blocks = (height + kRowsPerBlock - 1) / kRowsPerBlock;
+  std::vector<std::int64_t> covered(num_blocks, 0), clipped(num_blocks, 0);
   // Tiles whose weight is below exp(-kNegligibleBands) of the best one's are
   // not sampled (they would change the result by < 1e-4 of the intensity).
   constexpr double kNegligibleBands = 10.0;
-  ParallelFor(options.num_threads, height, [&](int row) {
-    // Per tile and column: the tile pixel and its border distance (<= 0: unseen).
-    std::vector<Eigen::Vector2d> q(static_cast<size_t>(num_tiles) * width);
-    std::vector<float> dist(static_cast<size_t>(num_tiles) * width, -1.0f);
-    std::vector<float> best(width, -1.0f);
-    std::vector<Eigen::Vector2d> q_row;
-    std::vector<char> q_ok;
-    for (int i = 0; i < num_tiles; ++i) {
-      const TileOrthoMap& map = geometry.tiles[i];
-      if (row < map.min_px.y() || row > map.max_px.y()) continue;
-      geometry.TileRowPixels(i, row, map.min_px.x(), map.max_px.x() - map.min_px.x() + 1, &q_row,
-                             &q_ok);
-      for (int col = map.min_px.x(); col <= map.max_px.x(); ++col) {
-        if (!q_ok[col - map.min_px.x()]) continue;
-        const double d = geometry.BorderDistancePx(q_row[col - map.min_px.x()]);
-        if (!(d > 0.0)) continue;
-        q[static_cast<size_t>(i) * width + col] = q_row[col - map.min_px.x()];
-        dist[static_cast<size_t>(i) * width + col] = static_cast<float>(d);
-        best[col] = std::max(best[col], static_cast<float>(d));
-      }
-    }
-    for (int col = 0; col < width; ++col) {
-      if (!(best[col] > 0.0f)) continue;
-      double sum_w = 0.0, sum_wv = 0.0;
+  ParallelFor(num_blocks, options.num_threads, [&](int block) {
+    // Per tile: its tile pixels along the row's span [min_px.x, max_px.x] and
+    // their border distances (<= 0: unseen).
+    std::vector<std::vector<Eigen::Vector2d>> q(num_tiles);
+    std::vector<std::vector<char>> q_ok(num_tiles);
+    std::vector<std::vector<float>> dist(num_tiles);
+    std::vector<float> best(width);
+    std::vector<double> sum_w(width), sum_wv(width);
+    std::vector<int> active;
+    for (int row = block * kRowsPerBlock; row < std::min(height, (block + 1) * kRowsPerBlock);
+         ++row) {
+      active.clear();
+      std::fill(best.begin(), best.end(), -1.0f);
       for (int i = 0; i < num_tiles; ++i) {
-        const double d = dist[static_cast<size_t>(i) * width + col];
-        if (!(d > 0.0) || d < best[col] - kNegligibleBands * band) continue;
-        const Eigen::Vector2d& qi = q[static_cast<size_t>(i) * width + col];
-        double v = SampleCatmullRom(tiles[i], qi);
-        if (!exposure.empty()) v /= exposure[i].Factor(frame.Rho2(qi));
-        const double w = TileBlendWeight(d, best[col], band);
-        sum_w += w;
-        sum_wv += w * v;
+        const TileOrthoMap& map = geometry.tiles[i];
+        if (row < map.min_px.y() || row > map.max_px.y()) continue;
+        active.push_back(i);
+        const int n = map.max_px.x() - map.min_px.x() + 1;
+        geometry.TileRowPixels(i, row, map.min_px.x(), n, &q[i], &q_ok[i]);
+        dist[i].resize(n);
+        float* best_span = best.data() + map.min_px.x();
+        for (int k = 0; k < n; ++k) {
+          const float d =
+              q_ok[i][k] ? static_cast<float>(geometry.BorderDistancePx(q[i][k])) : -1.0f;
+          dist[i][k] = d;
+          best_span[k] = std::max(best_span[k], d);
+        }
       }
-      const double v = sum_wv / sum_w;
-      ++covered[row];
-      if (v < 0.0 || v > 1.0) ++clipped[row];
-      mosaic(row, col) = static_cast<float>(std::clamp(v, 0.0, 1.0));
+      // Tile by tile along its span (in tile order, so the sums add up as a
+      // per-pixel loop over the tiles would).
+      std::fill(sum_w.begin(), sum_w.end(), 0.0);
+      std::fill(sum_wv.begin(), sum_wv.end(), 0.0);
+      for (const int i : active) {
+        const int col0 = geometry.tiles[i].min_px.x();
+        const int n = static_cast<int>(dist[i].size());
+        for (int k = 0; k < n; ++k) {
+          const double d = dist[i][k], best_d = best[col0 + k];
+          if (!(d > 0.0) || d < best_d - kNegligibleBands * band) continue;
+          const Eigen::Vector2d& qi = q[i][k];
+          double v = SampleCubic(options.interpolator, sampled[i], qi);
+          if (!exposure.empty()) v /= exposure[i].Factor(frame.Rho2(qi));
+          const double w = TileBlendWeight(d, best_d, band);
+          sum_w[col0 + k] += w;
+          sum_wv[col0 + k] += w * v;
+        }
+      }
+      float* out = mosaic.data() + static_cast<std::ptrdiff_t>(row) * width;
+      for (int col = 0; col < width; ++col) {
+        if (!(best[col] > 0.0f)) continue;
+        const double v = sum_wv[col] / sum_w[col];
+        ++covered[block];
+        if (v < 0.0 || v > 1.0) ++clipped[block];
+        out[col] = static_cast<float>(std::clamp(v, 0.0, 1.0));
+      }
     }
   });
   if (counts) {
