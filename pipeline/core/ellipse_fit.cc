@@ -26,6 +26,10 @@ Axes AxesOf(const Eigen::Matrix2d& shape) {
   return axes;
 }
 
+Eigen::Vector2d PointOn(const Ellipse& ellipse, double t, const Axes& axes) {
+  return ellipse.centre_px + axes.major * std::cos(t) * axes.u + axes.minor * std::sin(t) * axes.v;
+}
+
 double Median(std::vector<double> values) {
   const auto mid = values.begin() + values.size() / 2;
   std::nth_element(values.begin(), mid, values.end());
@@ -134,13 +138,21 @@ double Ellipse::AngleRad() const {
   return angle;
 }
 
-Eigen::Vector2d Ellipse::PointAt(double t) const {
-  const Axes axes = AxesOf(shape);
-  return centre_px + axes.major * std::cos(t) * axes.u + axes.minor * std::sin(t) * axes.v;
-}
+Eigen::Vector2d Ellipse::PointAt(double t) const { return PointOn(*this, t, AxesOf(shape)); }
 
 Eigen::Vector2d Ellipse::NormalAt(double t) const {
   return (shape * (PointAt(t) - centre_px)).normalized();
+}
+
+void Ellipse::SampleBoundary(int count, Eigen::Matrix2Xd* points, Eigen::Matrix2Xd* normals) const {
+  const Axes axes = AxesOf(shape);
+  points->resize(2, count);
+  normals->resize(2, count);
+  for (int k = 0; k < count; ++k) {
+    const Eigen::Vector2d p = PointOn(*this, 2.0 * std::numbers::pi * k / count, axes);
+    points->col(k) = p;
+    normals->col(k) = (shape * (p - centre_px)).normalized();
+  }
 }
 
 Ellipse Ellipse::FromAxes(const Eigen::Vector2d& centre_px, double semi_major_px, double semi_minor_px,

@@ -47,6 +47,9 @@ struct Ellipse {
   // major and minor axis directions), and its unit outward normal.
   Eigen::Vector2d PointAt(double t) const;
   Eigen::Vector2d NormalAt(double t) const;
+  // PointAt and NormalAt at t_k = 2 pi k / count, k = 0..count-1, into the
+  // columns of points and normals (one eigen-decomposition for all).
+  void SampleBoundary(int count, Eigen::Matrix2Xd* points, Eigen::Matrix2Xd* normals) const;
 
   static Ellipse FromAxes(const Eigen::Vector2d& centre_px, double semi_major_px,
                           double semi_minor_px, double angle_rad);

@@ -55,7 +55,11 @@ struct LevelPlane {
   Eigen::Matrix3d normal_inverse = Eigen::Matrix3d::Zero();  // (A^T A)^-1 of the final round
   std::vector<bool> use;                                     // samples of the final round
   Eigen::Vector3d Row(const Eigen::Vector2d& p) const { return {1.0, p.x() - origin.x(), p.y() - origin.y()}; }
-  double At(const Eigen::Vector2d& p) const { return coeffs.dot(Row(p)); }
+  // Scalar form of coeffs.dot(Row(p)): the Eigen temporary went through the
+  // stack in the rays' inner loop.
+  double At(const Eigen::Vector2d& p) const {
+    return (coeffs(0) + coeffs(1) * (p.x() - origin.x())) + coeffs(2) * (p.y() - origin.y());
+  }
 };
 
 LevelPlane FitLevelPlane(const std::vector<Eigen::Vector2d>& at, const std::vector<double>& value,
@@ -64,16 +68,19 @@ LevelPlane FitLevelPlane(const std::vector<Eigen::Vector2d>& at, const std::vect
   plane.origin = origin;
   plane.use.assign(at.size(), true);
   for (int round = 0; round < 2; ++round) {
-    Eigen::Matrix3d ata = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d atb = Eigen::Vector3d::Zero();
+    // The normal equations' sums in registers: an Eigen 3x3 accumulator
+    // round-trips through memory on every sample.
+    double n = 0, sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, sv = 0, sxv = 0, syv = 0;
     for (size_t i = 0; i < at.size(); ++i) {
       if (!plane.use[i]) continue;
-      const Eigen::Vector3d row = plane.Row(at[i]);
-      ata += row * row.transpose();
-      atb += row * value[i];
+      const double x = at[i].x() - origin.x(), y = at[i].y() - origin.y(), v = value[i];
+      n += 1.0, sx += x, sy += y, sxx += x * x, sxy += x * y, syy += y * y;
+      sv += v, sxv += x * v, syv += y * v;
     }
+    Eigen::Matrix3d ata;
+    ata << n, sx, sy, sx, sxx, sxy, sy, sxy, syy;
     plane.normal_inverse = ata.ldlt().solve(Eigen::Matrix3d::Identity());
-    plane.coeffs = plane.normal_inverse * atb;
+    plane.coeffs = plane.normal_inverse * Eigen::Vector3d(sv, sxv, syv);
     if (round == 1) break;
     std::vector<double> abs_res(at.size());
     for (size_t i = 0; i < at.size(); ++i) abs_res[i] = std::abs(value[i] - plane.At(at[i]));
@@ -86,8 +93,14 @@ LevelPlane FitLevelPlane(const std::vector<Eigen::Vector2d>& at, const std::vect
 // One pass of rays and what the noise propagation needs from it.
 struct EdgePass {
   EllipseEdges edges;
-  // Per edge point: its ray's unit direction and the profile's slope
-  // df/ds > 0 there (image units per px).
+  // The rays wholly on the image (boundary point and unit normal) and the
+  // s ranges of the inside and outside plateaus along them.
+  std::vector<Eigen::Vector2d> bases, normals;
+  double in_lo = 0.0, in_hi = 0.0, out_lo = 0.0, out_hi = 0.0;
+  // Per edge point: its ray (index into bases), the root's s, its ray's unit
+  // direction and the profile's slope df/ds > 0 there (image units per px).
+  std::vector<int> ray;
+  std::vector<double> s_root;
   std::vector<Eigen::Vector2d> normal;
   std::vector<double> slope;
   double polarity = 1.0;
@@ -95,8 +108,17 @@ struct EdgePass {
   LevelPlane inside, outside;
   std::vector<Eigen::Vector2d> in_at, out_at;
   // Pixel-noise variance at each level (image units^2) from the raw pixels of
-  // the plateaus, and the levels.
+  // the plateaus, and the levels (AddEdgeStatistics).
   double var_inside = 0.0, var_outside = 0.0;
+
+  // f(s) along `ray`: rises through 0 at the edge whatever the polarity.
+  bool Profile(const ImageF& image, size_t ray_index, double s, double* f) const {
+    const Eigen::Vector2d p = bases[ray_index] + s * normals[ray_index];
+    double v;
+    if (!Interpolate(image, p.x(), p.y(), &v)) return false;
+    *f = polarity * (v - 0.5 * (inside.At(p) + outside.At(p)));
+    return true;
+  }
 };
 
 // Robust variance of the raw pixels whose centres lie within `band` (s range
@@ -121,6 +143,9 @@ double PlateauPixelVariance(const ImageF& image, const std::vector<Eigen::Vector
   return sigma * sigma;
 }
 
+// The edge points of one pass along the normals of `rough`; the blur and
+// noise statistics are left to AddEdgeStatistics (RefineEllipticalMark needs
+// them for its last pass only).
 EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOptions& options) {
   EdgePass pass;
   EllipseEdges& edges = pass.edges;
@@ -130,15 +155,19 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
   const double inner = std::min(options.ray_half_length_px, 0.5 * b);
   const double outer = options.ray_half_length_px;
   const double plateau_in = std::min(options.plateau_px, 0.5 * inner);
+  pass.in_lo = -inner, pass.in_hi = -inner + plateau_in;
+  pass.out_lo = outer - options.plateau_px, pass.out_hi = outer;
 
   // Rays (boundary point and normal) that lie wholly on the image.
-  std::vector<Eigen::Vector2d> bases, normals;
+  Eigen::Matrix2Xd boundary, boundary_normals;
+  rough.SampleBoundary(edges.num_rays, &boundary, &boundary_normals);
+  std::vector<Eigen::Vector2d>& bases = pass.bases;
+  std::vector<Eigen::Vector2d>& normals = pass.normals;
   bases.reserve(static_cast<size_t>(edges.num_rays));
   normals.reserve(static_cast<size_t>(edges.num_rays));
   std::vector<double> in_value, out_value;
   for (int k = 0; k < edges.num_rays; ++k) {
-    const double t = 2.0 * std::numbers::pi * k / edges.num_rays;
-    const Eigen::Vector2d base = rough.PointAt(t), normal = rough.NormalAt(t);
+    const Eigen::Vector2d base = boundary.col(k), normal = boundary_normals.col(k);
     double v0, v1;
     if (!Interpolate(image, base.x() - inner * normal.x(), base.y() - inner * normal.y(), &v0) ||
         !Interpolate(image, base.x() + outer * normal.x(), base.y() + outer * normal.y(), &v1)) {
@@ -147,14 +176,14 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     }
     bases.push_back(base);
     normals.push_back(normal);
-    for (double s = -inner; s <= -inner + plateau_in + 1e-9; s += options.sample_step_px) {
+    for (double s = pass.in_lo; s <= pass.in_hi + 1e-9; s += options.sample_step_px) {
       const Eigen::Vector2d p = base + s * normal;
       double v;
       Interpolate(image, p.x(), p.y(), &v);
       pass.in_at.push_back(p);
       in_value.push_back(v);
     }
-    for (double s = outer - options.plateau_px; s <= outer + 1e-9; s += options.sample_step_px) {
+    for (double s = pass.out_lo; s <= pass.out_hi + 1e-9; s += options.sample_step_px) {
       const Eigen::Vector2d p = base + s * normal;
       double v;
       Interpolate(image, p.x(), p.y(), &v);
@@ -168,25 +197,13 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
   }
   pass.inside = FitLevelPlane(pass.in_at, in_value, rough.centre_px);
   pass.outside = FitLevelPlane(pass.out_at, out_value, rough.centre_px);
-  const LevelPlane& inside = pass.inside;
-  const LevelPlane& outside = pass.outside;
-  edges.contrast = outside.coeffs(0) - inside.coeffs(0);
-  const double polarity = edges.contrast >= 0.0 ? 1.0 : -1.0;
-  pass.polarity = polarity;
-
-  // f(s) rises through 0 at the edge whatever the polarity.
-  auto profile = [&](size_t ray, double s, double* f) {
-    const Eigen::Vector2d p = bases[ray] + s * normals[ray];
-    double v;
-    if (!Interpolate(image, p.x(), p.y(), &v)) return false;
-    *f = polarity * (v - 0.5 * (inside.At(p) + outside.At(p)));
-    return true;
-  };
+  edges.contrast = pass.outside.coeffs(0) - pass.inside.coeffs(0);
+  pass.polarity = edges.contrast >= 0.0 ? 1.0 : -1.0;
+  auto profile = [&](size_t ray, double s, double* f) { return pass.Profile(image, ray, s, f); };
 
   std::vector<Eigen::Vector2d> points;
-  std::vector<double> sigmas;
   points.reserve(bases.size());
-  const double search_lo = -inner + plateau_in, search_hi = outer - options.plateau_px;
+  const double search_lo = pass.in_hi, search_hi = pass.out_lo;
   for (size_t ray = 0; ray < bases.size(); ++ray) {
     // Every upward crossing on the grid; keep the ray only if there is one.
     int crossings = 0;
@@ -233,24 +250,39 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     if (!profile(ray, s_root - kH, &f_before) || !profile(ray, s_root + kH, &f_after) || !(f_after > f_before)) {
       continue;
     }
-    const Eigen::Vector2d point = bases[ray] + s_root * normals[ray];
-    points.push_back(point);
+    points.push_back(bases[ray] + s_root * normals[ray]);
+    pass.ray.push_back(static_cast<int>(ray));
+    pass.s_root.push_back(s_root);
     pass.normal.push_back(normals[ray]);
     pass.slope.push_back((f_after - f_before) / (2.0 * kH));
-    double f_minus, f_plus;
-    if (profile(ray, s_root - 0.5, &f_minus) && profile(ray, s_root + 0.5, &f_plus) && f_plus > f_minus) {
-      const double local_contrast = std::abs(outside.At(point) - inside.At(point));
-      sigmas.push_back(local_contrast / (std::sqrt(2.0 * std::numbers::pi) * (f_plus - f_minus)));
-    }
   }
   edges.points_px.resize(2, static_cast<Eigen::Index>(points.size()));
   for (size_t i = 0; i < points.size(); ++i) edges.points_px.col(static_cast<Eigen::Index>(i)) = points[i];
-  if (!sigmas.empty()) edges.edge_sigma_px = Median(sigmas);
-  pass.var_inside = PlateauPixelVariance(image, bases, normals, -inner, -inner + plateau_in, inside);
-  pass.var_outside = PlateauPixelVariance(image, bases, normals, outer - options.plateau_px, outer, outside);
-  edges.pixel_noise_inside = std::sqrt(pass.var_inside);
-  edges.pixel_noise_outside = std::sqrt(pass.var_outside);
   return pass;
+}
+
+// The median blur of the pass's edge points and the plateaus' pixel noise.
+void AddEdgeStatistics(const ImageF& image, EdgePass* pass) {
+  EllipseEdges& edges = pass->edges;
+  if (pass->bases.size() < 8) return;
+  std::vector<double> sigmas;
+  for (size_t i = 0; i < pass->ray.size(); ++i) {
+    const size_t ray = static_cast<size_t>(pass->ray[i]);
+    const double s_root = pass->s_root[i];
+    const Eigen::Vector2d point = edges.points_px.col(static_cast<Eigen::Index>(i));
+    double f_minus, f_plus;
+    if (pass->Profile(image, ray, s_root - 0.5, &f_minus) && pass->Profile(image, ray, s_root + 0.5, &f_plus) &&
+        f_plus > f_minus) {
+      const double local_contrast = std::abs(pass->outside.At(point) - pass->inside.At(point));
+      sigmas.push_back(local_contrast / (std::sqrt(2.0 * std::numbers::pi) * (f_plus - f_minus)));
+    }
+  }
+  if (!sigmas.empty()) edges.edge_sigma_px = Median(sigmas);
+  pass->var_inside = PlateauPixelVariance(image, pass->bases, pass->normals, pass->in_lo, pass->in_hi, pass->inside);
+  pass->var_outside =
+      PlateauPixelVariance(image, pass->bases, pass->normals, pass->out_lo, pass->out_hi, pass->outside);
+  edges.pixel_noise_inside = std::sqrt(pass->var_inside);
+  edges.pixel_noise_outside = std::sqrt(pass->var_outside);
 }
 
 // Adds weight * (the interpolation weights of (x, y)) to g over its 4 x 4
@@ -343,7 +375,9 @@ std::string EllipseEdgeOptions::Check() const {
 }
 
 EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const EllipseEdgeOptions& options) {
-  return CastRays(image, rough, options).edges;
+  EdgePass pass = CastRays(image, rough, options);
+  AddEdgeStatistics(image, &pass);
+  return pass.edges;
 }
 
 std::string MarkRefinementOptions::Check() const {
@@ -363,14 +397,13 @@ MarkFit RefineEllipticalMark(const ImageF& image, const Ellipse& rough, const Ma
   // edge put one side's plateau into the blur and pull the levels; the error
   // shrinks ~10x per pass (more for sharp edges), so a few passes converge.
   for (int pass_index = 0; pass_index < options.max_passes; ++pass_index) {
-    const EdgePass pass = CastRays(image, guide, options.edges);
+    EdgePass pass = CastRays(image, guide, options.edges);
     const EllipseEdges& edges = pass.edges;
     if (edges.num_rays_off_image > 0) {
       mark.why_failed = "mark touches the image border";
       return mark;
     }
     mark.contrast = edges.contrast;
-    mark.edge_sigma_px = edges.edge_sigma_px;
     mark.num_edge_points = static_cast<int>(edges.points_px.cols());
     if (std::abs(edges.contrast) < options.min_contrast) {
       mark.why_failed = "mark contrast too low";
@@ -391,6 +424,8 @@ MarkFit RefineEllipticalMark(const ImageF& image, const Ellipse& rough, const Ma
     mark.rms_px = fit.rms_px;
     mark.num_inliers = fit.num_inliers;
     if ((pass_index > 0 && moved_px < options.converged_px) || pass_index + 1 == options.max_passes) {
+      AddEdgeStatistics(image, &pass);
+      mark.edge_sigma_px = edges.edge_sigma_px;
       mark.centre_cov_px2 = CentreCovarianceFromNoise(image, pass, fit);
       break;
     }
