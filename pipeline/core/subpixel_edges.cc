@@ -168,28 +168,32 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
   std::vector<double> in_value, out_value;
   for (int k = 0; k < edges.num_rays; ++k) {
     const Eigen::Vector2d base = boundary.col(k), normal = boundary_normals.col(k);
-    double v0, v1;
-    if (!Interpolate(image, base.x() - inner * normal.x(), base.y() - inner * normal.y(), &v0) ||
-        !Interpolate(image, base.x() + outer * normal.x(), base.y() + outer * normal.y(), &v1)) {
+    // The plateaus span the ray's ends, so the ray is on the image (a convex
+    // set for Interpolate) when all their samples are.
+    const size_t in_size = in_value.size(), out_size = out_value.size();
+    bool on_image = true;
+    for (double s = pass.in_lo; s <= pass.in_hi + 1e-9 && on_image; s += options.sample_step_px) {
+      const Eigen::Vector2d p = base + s * normal;
+      double v = 0.0;
+      on_image = Interpolate(image, p.x(), p.y(), &v);
+      pass.in_at.push_back(p);
+      in_value.push_back(v);
+    }
+    for (double s = pass.out_lo; s <= pass.out_hi + 1e-9 && on_image; s += options.sample_step_px) {
+      const Eigen::Vector2d p = base + s * normal;
+      double v = 0.0;
+      on_image = Interpolate(image, p.x(), p.y(), &v);
+      pass.out_at.push_back(p);
+      out_value.push_back(v);
+    }
+    if (!on_image) {
+      pass.in_at.resize(in_size), in_value.resize(in_size);
+      pass.out_at.resize(out_size), out_value.resize(out_size);
       ++edges.num_rays_off_image;
       continue;
     }
     bases.push_back(base);
     normals.push_back(normal);
-    for (double s = pass.in_lo; s <= pass.in_hi + 1e-9; s += options.sample_step_px) {
-      const Eigen::Vector2d p = base + s * normal;
-      double v;
-      Interpolate(image, p.x(), p.y(), &v);
-      pass.in_at.push_back(p);
-      in_value.push_back(v);
-    }
-    for (double s = pass.out_lo; s <= pass.out_hi + 1e-9; s += options.sample_step_px) {
-      const Eigen::Vector2d p = base + s * normal;
-      double v;
-      Interpolate(image, p.x(), p.y(), &v);
-      pass.out_at.push_back(p);
-      out_value.push_back(v);
-    }
   }
   if (bases.size() < 8) {
     edges.points_px.resize(2, 0);
