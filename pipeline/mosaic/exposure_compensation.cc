@@ -71,7 +71,27 @@ std::vector<double> RelativeResiduals(const std::vector<ExposureObservation>& ob
   return e;
 }
 
-double RobustSigma(const std::vector<double>& e) {
+// 1.4826 median |e|. With `near_sigma` (the previous iteration's), the
+// same value from one counting pass and a selection among the |e| within
+// 10 % of it: a selection among all observations on every iteration was half
+// of the estimation's time.
+double RobustSigma(const std::vector<double>& e, double near_sigma = 0.0) {
+  const size_t rank = e.size() / 2;  // Median's element
+  if (near_sigma > 0.0) {
+    const double lo = 0.9 * near_sigma / 1.4826, hi = 1.1 * near_sigma / 1.4826;
+    size_t below = 0;
+    std::vector<double> band;
+    for (const double x : e) {
+      const double a = std::abs(x);
+      below += a < lo;
+      if (a >= lo && a <= hi) band.push_back(a);
+    }
+    if (below <= rank && rank < below + band.size()) {
+      const auto mid = band.begin() + static_cast<std::ptrdiff_t>(rank - below);
+      std::nth_element(band.begin(), mid, band.end());
+      return 1.4826 * *mid;
+    }
+  }
   std::vector<double> a(e.size());
   for (size_t k = 0; k < e.size(); ++k) a[k] = std::abs(e[k]);
   return 1.4826 * Median(std::move(a));
@@ -134,26 +154,98 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
   summary.relative_sigma_before = RobustSigma(RelativeResiduals(obs, start, exposure, radiance));
   summary.max_pair_step_before = MaxPairStep(obs, start, exposure);
 
+  double sigma = 0.0;  // robust sigma of the last iteration's residuals
+  const int num_params = 2 * num_tiles;
   for (summary.iterations = 1; summary.iterations <= options.max_iterations; ++summary.iterations) {
-    // Per tile: I = a L - b rho^2 L, (a, b) = (g, g v), weighted least squares.
-    std::vector<Eigen::Matrix2d> normal(num_tiles, Eigen::Matrix2d::Zero());
-    std::vector<Eigen::Vector2d> rhs(num_tiles, Eigen::Vector2d::Zero());
+    // One Gauss-Newton step in (a_i, b_i) = (g_i, g_i v_i) with the
+    // radiances eliminated (variable projection): r = I - (a - b rho^2) L,
+    // and the radiances are optimal for the current exposures, so the
+    // reduced gradient is the exposures' own and the reduced normal matrix is
+    // H_xx - sum over samples of H_xL H_LL^-1 H_Lx. The alternation this
+    // replaces (exposures, then radiances) converged linearly at ~0.7 per
+    // step: 35 steps on the demo.
+    Eigen::MatrixXd h = Eigen::MatrixXd::Zero(num_params, num_params);
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(num_params);
+    std::vector<std::pair<int, double>> h_xl;  // this sample's H_xL entries
+    std::vector<double> trial_radiance;
     for (size_t s = 0; s + 1 < start.size(); ++s) {
+      const double l = radiance[s];
+      double h_ll = 0.0;
+      h_xl.clear();
       for (int k = start[s]; k < start[s + 1]; ++k) {
-        const Eigen::Vector2d x(radiance[s], -obs[k].rho2 * radiance[s]);
-        normal[obs[k].tile] += weight[k] * x * x.transpose();
-        rhs[obs[k].tile] += weight[k] * x * obs[k].value;
+        const ExposureObservation& o = obs[k];
+        const double w = weight[k], f = exposure[o.tile].Factor(o.rho2);
+        const double r = o.value - f * l;
+        const int ia = 2 * o.tile, ib = ia + 1;
+        const double ja = -l, jb = o.rho2 * l, jl = -f;  // dr/da, dr/db, dr/dL
+        h(ia, ia) += w * ja * ja, h(ib, ia) += w * jb * ja, h(ib, ib) += w * jb * jb;
+        g(ia) += w * ja * r, g(ib) += w * jb * r;
+        h_ll += w * jl * jl;
+        h_xl.emplace_back(ia, w * ja * jl);
+        h_xl.emplace_back(ib, w * jb * jl);
+      }
+      if (!(h_ll > 0.0)) continue;
+      for (const auto& [p, hp] : h_xl) {
+        for (const auto& [q, hq] : h_xl) {
+          if (q <= p) h(p, q) -= hp * hq / h_ll;
+        }
       }
     }
-    std::vector<TileExposure> next = exposure;
+    // Free: a and b of tiles with samples, except the gauge's a (the
+    // scale of g L is undetermined) and b without vignetting.
+    std::vector<int> free;
+    int gauge = -1;
     for (int i = 0; i < num_tiles; ++i) {
-      if (tile_count[i] == 0 || !(normal[i](0, 0) > 0.0)) continue;
-      if (options.estimate_vignetting) {
-        const Eigen::Vector2d ab = normal[i].ldlt().solve(rhs[i]);
-        next[i].gain = ab[0];
-        next[i].vignetting = ab[1] / ab[0];
+      if (tile_count[i] == 0) continue;
+      if (gauge < 0) {
+        gauge = i;
       } else {
-        next[i].gain = rhs[i][0] / normal[i](0, 0);
+        free.push_back(2 * i);
+      }
+      if (options.estimate_vignetting) free.push_back(2 * i + 1);
+    }
+    const int nf = static_cast<int>(free.size());
+    Eigen::MatrixXd hf(nf, nf);
+    Eigen::VectorXd gf(nf);
+    for (int p = 0; p < nf; ++p) {
+      gf(p) = g(free[p]);
+      for (int q = 0; q < nf; ++q) {
+        hf(p, q) = free[p] >= free[q] ? h(free[p], free[q]) : h(free[q], free[p]);
+      }
+    }
+    const Eigen::VectorXd step = hf.ldlt().solve(-gf);
+    // The step, halved until the weighted cost (radiances re-solved) goes
+    // down: far from the solution (exposure differences of 2x) a full step
+    // can overshoot.
+    auto cost_of = [&](const std::vector<TileExposure>& trial) {
+      SolveRadiance(obs, start, trial, weight, &trial_radiance);
+      double cost = 0.0;
+      for (size_t s = 0; s + 1 < start.size(); ++s) {
+        for (int k = start[s]; k < start[s + 1]; ++k) {
+          const double r = obs[k].value - trial[obs[k].tile].Factor(obs[k].rho2) * trial_radiance[s];
+          cost += weight[k] * r * r;
+        }
+      }
+      return cost;
+    };
+    std::vector<TileExposure> next = exposure;
+    const double current_cost = cost_of(exposure);
+    for (double scale = 1.0; step.allFinite() && scale > 1e-3; scale *= 0.5) {
+      std::vector<TileExposure> trial = exposure;
+      bool valid = true;
+      for (int i = 0; i < num_tiles; ++i) {
+        double a = exposure[i].gain, b = exposure[i].gain * exposure[i].vignetting;
+        for (int p = 0; p < nf; ++p) {
+          if (free[p] == 2 * i) a += scale * step(p);
+          if (free[p] == 2 * i + 1) b += scale * step(p);
+        }
+        valid &= a > 0.0;
+        trial[i].gain = a;
+        trial[i].vignetting = b / a;
+      }
+      if (valid && cost_of(trial) < current_cost) {
+        next = trial;
+        break;
       }
     }
     // Gauge: the brightest tile that has samples keeps gain 1.
@@ -176,7 +268,8 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
     exposure = next;
     SolveRadiance(obs, start, exposure, weight, &radiance);
     const std::vector<double> e = RelativeResiduals(obs, start, exposure, radiance);
-    const double c = options.cauchy_sigmas * std::max(RobustSigma(e), 1e-6);
+    sigma = RobustSigma(e, sigma);
+    const double c = options.cauchy_sigmas * std::max(sigma, 1e-6);
     for (size_t k = 0; k < obs.size(); ++k) weight[k] = 1.0 / (1.0 + (e[k] / c) * (e[k] / c));
     if (change < options.tolerance) break;
   }

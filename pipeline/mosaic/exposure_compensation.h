@@ -11,10 +11,13 @@
 //
 // Estimation. Each sample is a mosaic point seen by two or more tiles, with
 // its (smoothed) intensity and rho^2 in each. Unknowns: (g_i, v_i) per tile and
-// L per sample; minimise sum w (I - g_i (1 - v_i rho^2) L)^2 by alternation:
-// L in closed form per sample; per tile, I = a L - b rho^2 L is linear in
-// (a, b) = (g, g v). Robust weights (Cauchy at `cauchy_sigmas` robust sigmas of
-// the relative residual) discount points the tiles do not agree on (parallax
+// L per sample; minimise sum w (I - (a_i - b_i rho^2) L)^2, (a, b) = (g, g v),
+// by Gauss-Newton in (a, b) with the radiances eliminated (variable
+// projection, Golub & Pereyra): L in closed form per sample for the current
+// exposures, then one step on the reduced normal equations (the Schur
+// complement of the per-sample radiance blocks). Robust weights (Cauchy at
+// `cauchy_sigmas` robust sigmas of the relative residual, re-estimated every
+// step) discount points the tiles do not agree on (parallax
 // through holes, specular spots). Only the products g L are determined: the
 // scale gauge is fixed by the brightest tile's gain = 1, so no tile is scaled
 // down and intensities a tile recorded below 1 stay below 1 (up to vignetting
@@ -67,7 +70,7 @@ struct ExposureOptions {
   double min_value = 0.03;          // observations darker than this are not used
   double max_value = 0.97;          // ... nor brighter (saturation)
   bool estimate_vignetting = true;  // false: gains only (v = 0)
-  int max_iterations = 100;         // alternation steps
+  int max_iterations = 100;         // Gauss-Newton steps
   double tolerance = 1e-5;          // stop when no g or v changes more
   double cauchy_sigmas = 3.0;       // Cauchy scale in robust sigmas of the relative residual
 
