@@ -275,16 +275,17 @@ void AddEdgeStatistics(const ImageF& image, EdgePass* pass) {
     const double s_root = pass->s_root[i];
     const Eigen::Vector2d point = edges.points_px.col(static_cast<Eigen::Index>(i));
     double f_minus, f_plus;
-    if (pass->Profile(image, ray, s_root - 0.5, &f_minus) && pass->Profile(image, ray, s_root + 0.5, &f_plus) &&
-        f_plus > f_minus) {
+    if (pass->Profile(image, ray, s_root - 0.5, &f_minus) &&
+        pass->Profile(image, ray, s_root + 0.5, &f_plus) && f_plus > f_minus) {
       const double local_contrast = std::abs(pass->outside.At(point) - pass->inside.At(point));
       sigmas.push_back(local_contrast / (std::sqrt(2.0 * std::numbers::pi) * (f_plus - f_minus)));
     }
   }
   if (!sigmas.empty()) edges.edge_sigma_px = Median(sigmas);
-  pass->var_inside = PlateauPixelVariance(image, pass->bases, pass->normals, pass->in_lo, pass->in_hi, pass->inside);
-  pass->var_outside =
-      PlateauPixelVariance(image, pass->bases, pass->normals, pass->out_lo, pass->out_hi, pass->outside);
+  pass->var_inside = PlateauPixelVariance(image, pass->bases, pass->normals, pass->in_lo,
+                                          pass->in_hi, pass->inside);
+  pass->var_outside = PlateauPixelVariance(image, pass->bases, pass->normals, pass->out_lo,
+                                           pass->out_hi, pass->outside);
   edges.pixel_noise_inside = std::sqrt(pass->var_inside);
   edges.pixel_noise_outside = std::sqrt(pass->var_outside);
 }
