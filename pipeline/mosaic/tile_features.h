@@ -80,11 +80,11 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
 ImageF BSplineCoefficients(const ImageF& image);
 
 // The cubic B-spline interpolant of the image whose BSplineCoefficients are
-// `coefficients`, at (x, y) px, with its gradient; false (outputs untouched)
-// if the 4 x 4 support leaves the image.
+// `coefficients`, at (x, y) px, with its gradient (d/dx, d/dy); false
+// (outputs untouched) if the 4 x 4 support leaves the image.
 // Inline: the template matcher calls it ~10^7 times per registration.
 inline bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
-                          Eigen::Vector2d* gradient = nullptr) {
+                          double* dvalue_dx, double* dvalue_dy) {
   const double fx_floor = std::floor(x), fy_floor = std::floor(y);
   const int ix = static_cast<int>(fx_floor), iy = static_cast<int>(fy_floor);
   if (ix < 1 || iy < 1 || ix + 2 >= coefficients.cols() || iy + 2 >= coefficients.rows())
@@ -105,21 +105,29 @@ inline bool SampleBSpline(const ImageF& coefficients, double x, double y, double
   double wx[4], dwx[4], wy[4], dwy[4];
   weights(fx, wx, dwx);
   weights(fy, wy, dwy);
-  double v = 0, gx = 0, gy = 0;
-  for (int j = 0; j < 4; ++j) {
-    const float* row =
-        coefficients.data() + static_cast<size_t>(iy - 1 + j) * coefficients.cols() + (ix - 1);
-    const double rv = wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3];
-    v += wy[j] * rv;
-    if (gradient != nullptr) {
-      gx += wy[j] * (dwx[0] * row[0] + dwx[1] * row[1] + dwx[2] * row[2] + dwx[3] * row[3]);
-      gy += dwy[j] * rv;
+  // The rows combined first (wy and dwy), then the columns: independent
+  // lanes of four that vectorise, where a row-by-row dot product did not.
+  double t[4] = {0, 0, 0, 0}, dt[4] = {0, 0, 0, 0};
+  const float* row = coefficients.data() + static_cast<size_t>(iy - 1) * coefficients.cols() + (ix - 1);
+  for (int j = 0; j < 4; ++j, row += coefficients.cols()) {
+    for (int k = 0; k < 4; ++k) {
+      t[k] += wy[j] * row[k];
+      dt[k] += dwy[j] * row[k];
     }
   }
-  *value = v;
-  if (gradient != nullptr) *gradient << gx, gy;
+  *value = wx[0] * t[0] + wx[1] * t[1] + wx[2] * t[2] + wx[3] * t[3];
+  *dvalue_dx = dwx[0] * t[0] + dwx[1] * t[1] + dwx[2] * t[2] + dwx[3] * t[3];
+  *dvalue_dy = wx[0] * dt[0] + wx[1] * dt[1] + wx[2] * dt[2] + wx[3] * dt[3];
   return true;
 }
 
+// The same, the gradient optional.
+inline bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
+                          Eigen::Vector2d* gradient = nullptr) {
+  double gx, gy;
+  if (!SampleBSpline(coefficients, x, y, value, &gx, &gy)) return false;
+  if (gradient != nullptr) *gradient << gx, gy;
+  return true;
+}
 
 }  // namespace omm

@@ -561,8 +561,8 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   double gain = t_std / std::max(peak.target_std, 1e-6);
   double offset = t_mean - gain * peak.target_mean;
   bool converged = false;
-  Eigen::VectorXd sampled(n), weight = Eigen::VectorXd::Ones(n), residual(n);
-  Eigen::Matrix2Xd gradient(2, n);
+  Eigen::VectorXd sampled(n), gradient_x(n), gradient_y(n), residual(n);
+  Eigen::VectorXd weight = Eigen::VectorXd::Ones(n);
   Eigen::Matrix4d normal;
   // Phase 0: plain least squares; phase 1 (robust_tukey_c > 0) from its
   // solution: iteratively reweighted least squares with Tukey's biweight of
@@ -572,14 +572,16 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
     converged = false;
     const int max_iterations = phase == 0 ? options.max_iterations : options.max_robust_iterations;
     for (int it = 0; it < max_iterations && !converged; ++it) {
-      for (int i = 0; i < n; ++i) {
-        const Eigen::Vector2d p = q + offsets[i];
-        double v;
-        Eigen::Vector2d g;
-        if (!SampleBSpline(target_spline, p.x(), p.y(), &v, &g)) return match;
-        sampled(i) = v;
-        gradient.col(i) = g;
-        residual(i) = gain * v + offset - templ(i);
+      // Phase 1 starts where phase 0 converged: q, gain and offset, and so
+      // the samples and residuals, are those of phase 0's last iteration.
+      if (phase == 0 || it > 0) {
+        for (int i = 0; i < n; ++i) {
+          const Eigen::Vector2d p = q + offsets[i];
+          if (!SampleBSpline(target_spline, p.x(), p.y(), &sampled(i), &gradient_x(i),
+                             &gradient_y(i)))
+            return match;
+          residual(i) = gain * sampled(i) + offset - templ(i);
+        }
       }
       if (phase > 0) {
         weight = TukeyWeights(residual, options.robust_tukey_c);
@@ -598,7 +600,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       double b0 = 0, b1 = 0, b2 = 0, b3 = 0;
       for (int i = 0; i < n; ++i) {
         const double w = weight(i), v = sampled(i), e = w * residual(i);
-        const double j0 = gain * gradient(0, i), j1 = gain * gradient(1, i);
+        const double j0 = gain * gradient_x(i), j1 = gain * gradient_y(i);
         const double wj0 = w * j0, wj1 = w * j1, wv = w * v;
         n00 += wj0 * j0, n01 += wj0 * j1, n02 += wj0 * v, n03 += wj0;
         n11 += wj1 * j1, n12 += wj1 * v, n13 += wj1;
