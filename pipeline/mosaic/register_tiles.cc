@@ -645,13 +645,15 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     adjustment = AdjustPlaneScene(camera, input, config, options.bundle);
     result.input = std::move(input);
   };
-  // Drops matches whose target or anchor observation has a large residual.
+  // Drops matches whose target or anchor observation has a large residual;
+  // returns how many.
   const auto drop_outliers = [&] {
+    int dropped = 0;
     const Eigen::Matrix2Xd& res = adjustment.scene.residual_px;
     std::vector<double> norms;
     for (Eigen::Index k = 0; k < res.cols(); ++k)
       if (res.col(k).allFinite()) norms.push_back(res.col(k).norm());
-    if (norms.empty()) return;
+    if (norms.empty()) return dropped;
     std::nth_element(norms.begin(), norms.begin() + norms.size() / 2, norms.end());
     const double threshold =
         std::max(options.min_outlier_threshold_px, options.outlier_factor * norms[norms.size() / 2]);
@@ -665,9 +667,11 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       const int track = result.input.observations[o].track;
       if (bad(static_cast<int>(o)) || bad(anchor_observation[track])) {
         pair_matches[p][k].keep = false;
-        ++result.num_dropped_observations;
+        ++dropped;
       }
     }
+    result.num_dropped_observations += dropped;
+    return dropped;
   };
   // Returns the number of matches relocated.
   const auto relocate = [&] {
@@ -723,16 +727,18 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
 
   solve(false);
   if (adjustment.seed.ok) {
-    drop_outliers();
+    int dropped = drop_outliers();
     for (int pass = 0; pass < options.rematch_passes; ++pass) {
       const int relocated = relocate();
       result.num_relocated += relocated;
       if (relocated == 0) break;  // the final solve below sees the same matches
       solve(false);
       if (!adjustment.seed.ok) break;
-      drop_outliers();
+      dropped = drop_outliers();
     }
-    solve(true);
+    // Nothing dropped since the last solve: solving the same matches again
+    // would reproduce it (the demo's third solve, a third of the step).
+    if (dropped > 0 || options.compute_covariance || !adjustment.seed.ok) solve(true);
   }
   result.track_anchor_observation = anchor_observation;
   result.track_tag_id = track_tag_id;
