@@ -108,7 +108,8 @@ inline bool SampleBSpline(const ImageF& coefficients, double x, double y, double
   // The rows combined first (wy and dwy), then the columns: independent
   // lanes of four that vectorise, where a row-by-row dot product did not.
   double t[4] = {0, 0, 0, 0}, dt[4] = {0, 0, 0, 0};
-  const float* row = coefficients.data() + static_cast<size_t>(iy - 1) * coefficients.cols() + (ix - 1);
+  const float* row =
+      coefficients.data() + static_cast<size_t>(iy - 1) * coefficients.cols() + (ix - 1);
   for (int j = 0; j < 4; ++j, row += coefficients.cols()) {
     for (int k = 0; k < 4; ++k) {
       t[k] += wy[j] * row[k];
