@@ -90,35 +90,30 @@ inline bool SampleBSpline(const ImageF& coefficients, double x, double y, double
   if (ix < 1 || iy < 1 || ix + 2 >= coefficients.cols() || iy + 2 >= coefficients.rows())
     return false;
   const double fx = x - fx_floor, fy = y - fy_floor;
-  const auto weights = [](double f, double* w, double* dw) {
+  // Eigen's fixed-size arrays: packed arithmetic, where scalar loops stayed scalar.
+  const auto weights = [](double f, Eigen::Array4d* w, Eigen::Array4d* dw) {
     const double f2 = f * f, f3 = f2 * f, g = 1.0 - f;
     constexpr double kSixth = 1.0 / 6.0;  // a multiply: divisions dominated the sampling
-    w[0] = g * g * g * kSixth;
-    w[1] = (4.0 - 6.0 * f2 + 3.0 * f3) * kSixth;
-    w[2] = (1.0 + 3.0 * f + 3.0 * f2 - 3.0 * f3) * kSixth;
-    w[3] = f3 * kSixth;
-    dw[0] = -0.5 * g * g;
-    dw[1] = -2.0 * f + 1.5 * f2;
-    dw[2] = 0.5 + f - 1.5 * f2;
-    dw[3] = 0.5 * f2;
+    *w << g * g * g * kSixth, (4.0 - 6.0 * f2 + 3.0 * f3) * kSixth,
+        (1.0 + 3.0 * f + 3.0 * f2 - 3.0 * f3) * kSixth, f3 * kSixth;
+    *dw << -0.5 * g * g, -2.0 * f + 1.5 * f2, 0.5 + f - 1.5 * f2, 0.5 * f2;
   };
-  double wx[4], dwx[4], wy[4], dwy[4];
-  weights(fx, wx, dwx);
-  weights(fy, wy, dwy);
-  // The rows combined first (wy and dwy), then the columns: independent
-  // lanes of four that vectorise, where a row-by-row dot product did not.
-  double t[4] = {0, 0, 0, 0}, dt[4] = {0, 0, 0, 0};
+  Eigen::Array4d wx, dwx, wy, dwy;
+  weights(fx, &wx, &dwx);
+  weights(fy, &wy, &dwy);
+  // The rows combined first (by wy and dwy), then the columns.
   const float* row =
       coefficients.data() + static_cast<size_t>(iy - 1) * coefficients.cols() + (ix - 1);
-  for (int j = 0; j < 4; ++j, row += coefficients.cols()) {
-    for (int k = 0; k < 4; ++k) {
-      t[k] += wy[j] * row[k];
-      dt[k] += dwy[j] * row[k];
-    }
-  }
-  *value = wx[0] * t[0] + wx[1] * t[1] + wx[2] * t[2] + wx[3] * t[3];
-  *dvalue_dx = dwx[0] * t[0] + dwx[1] * t[1] + dwx[2] * t[2] + dwx[3] * t[3];
-  *dvalue_dy = wx[0] * dt[0] + wx[1] * dt[1] + wx[2] * dt[2] + wx[3] * dt[3];
+  const Eigen::Index stride = coefficients.cols();
+  const Eigen::Array4d r0 = Eigen::Map<const Eigen::Array4f>(row).cast<double>();
+  const Eigen::Array4d r1 = Eigen::Map<const Eigen::Array4f>(row + stride).cast<double>();
+  const Eigen::Array4d r2 = Eigen::Map<const Eigen::Array4f>(row + 2 * stride).cast<double>();
+  const Eigen::Array4d r3 = Eigen::Map<const Eigen::Array4f>(row + 3 * stride).cast<double>();
+  const Eigen::Array4d t = wy(0) * r0 + wy(1) * r1 + wy(2) * r2 + wy(3) * r3;
+  const Eigen::Array4d dt = dwy(0) * r0 + dwy(1) * r1 + dwy(2) * r2 + dwy(3) * r3;
+  *value = (wx * t).sum();
+  *dvalue_dx = (dwx * t).sum();
+  *dvalue_dy = (wx * dt).sum();
   return true;
 }
 
