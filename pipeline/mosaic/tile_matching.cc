@@ -99,9 +99,10 @@ double OverlapNcc(const ImageF& a, const ImageF& b, const WindowMoments& ma,
   for (int r = r0; r < r1; ++r) {
     const float* pa = a.data() + static_cast<size_t>(r) * a.cols();
     const float* pb = b.data() + static_cast<size_t>(r + dy) * b.cols() + dx;
-    float fab = 0;
-    for (int c = c0; c < c1; ++c) fab += pa[c] * pb[c];
-    sab += fab;
+    // Eigen's dot product vectorises the float sum (a plain loop cannot be
+    // reordered without -ffast-math).
+    sab += Eigen::Map<const Eigen::VectorXf>(pa + c0, c1 - c0)
+               .dot(Eigen::Map<const Eigen::VectorXf>(pb + c0, c1 - c0));
   }
   const double sa = ma.Sum(r0, r1, c0, c1), saa = ma.SumSq(r0, r1, c0, c1);
   const double sb = mb.Sum(r0 + dy, r1 + dy, c0 + dx, c1 + dx);
