@@ -50,6 +50,8 @@ std::vector<std::pair<std::string, Eigen::Vector2d>> ReadTileConfiguration(
 
 TEST(RegisterTilesReal, LscmSpeckleOffsetsAgreeWithPublishedRegistration) {
   const std::filesystem::path dir = DataDir() / "lscm_speckle_3x4_tiles";
+  // The data sits beside the repository, not in it: a clone elsewhere skips.
+  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no " << dir;
   const auto nominal = ReadTileConfiguration(dir / "TileConfiguration.txt");
   const auto registered = ReadTileConfiguration(dir / "TileConfiguration.registered.txt");
   std::map<std::string, Eigen::Vector2d> authors_by_name;
