@@ -4,75 +4,27 @@
 
 #include <nlohmann/json.hpp>
 
+#include "adapters/project_io/json_reader.h"
 #include "adapters/project_io/text_file.h"
 #include "pipeline/core/error.h"
 
 namespace omm {
-namespace {
 
 using nlohmann::json;
-
-json Vec(const Eigen::VectorXd& v) {
-  json out = json::array();
-  for (Eigen::Index i = 0; i < v.size(); ++i) out.push_back(v[i]);
-  return out;
-}
-
-// Reading: every access names the key path, so a malformed file says where.
-class Reader {
- public:
-  explicit Reader(std::string where) : where_(std::move(where)) {}
-
-  const json& At(const json& node, const std::string& key, const std::string& path) const {
-    if (!node.is_object() || !node.contains(key)) Fail(path + "." + key, "missing");
-    return node.at(key);
-  }
-  double Number(const json& node, const std::string& key, const std::string& path) const {
-    const json& v = At(node, key, path);
-    if (!v.is_number()) Fail(path + "." + key, "expected a number");
-    return v.get<double>();
-  }
-  const json& Array(const json& node, const std::string& key, const std::string& path) const {
-    const json& v = At(node, key, path);
-    if (!v.is_array()) Fail(path + "." + key, "expected an array");
-    return v;
-  }
-  Eigen::VectorXd Vector(const json& node, const std::string& key, const std::string& path,
-                         int size = -1) const {
-    const json& v = Array(node, key, path);
-    if (size >= 0 && static_cast<int>(v.size()) != size) {
-      Fail(path + "." + key, "expected " + std::to_string(size) + " numbers");
-    }
-    Eigen::VectorXd out(v.size());
-    for (size_t i = 0; i < v.size(); ++i) {
-      if (!v[i].is_number()) Fail(std::string(path).append(".").append(key), "expected numbers");
-      out[static_cast<Eigen::Index>(i)] = v[i].get<double>();
-    }
-    return out;
-  }
-  [[noreturn]] void Fail(const std::string& key, const std::string& what) const {
-    throw InputError(where_ + " key '" + key + "'", what);
-  }
-
- private:
-  std::string where_;
-};
-
-}  // namespace
 
 std::string SceneToJson(const SavedScene& saved) {
   const PlaneScene& scene = saved.scene;
   json root;
   root["format"] = kSceneFormat;
-  root["cam_from_part"] = {{"r", Vec(scene.cam_from_part_r)}, {"t", Vec(scene.cam_from_part_t_mm)}};
+  root["cam_from_part"] = {{"r", JsonArray(scene.cam_from_part_r)}, {"t", JsonArray(scene.cam_from_part_t_mm)}};
   root["table_sigma_mm"] = saved.table_sigma_mm;
   json tiles = json::array();
   for (size_t i = 0; i < scene.table_pos_mm.size(); ++i) {
     const bool held = std::find(saved.tiles_held_by_prior.begin(), saved.tiles_held_by_prior.end(),
                                 static_cast<int>(i)) != saved.tiles_held_by_prior.end();
     tiles.push_back({{"image", saved.tile_images.at(i)},
-                     {"commanded_mm", Vec(saved.commanded_table_pos_mm.at(i))},
-                     {"adjusted_mm", Vec(scene.table_pos_mm[i])},
+                     {"commanded_mm", JsonArray(saved.commanded_table_pos_mm.at(i))},
+                     {"adjusted_mm", JsonArray(scene.table_pos_mm[i])},
                      {"held_by_prior", held}});
   }
   root["tiles"] = tiles;
@@ -86,7 +38,7 @@ std::string SceneToJson(const SavedScene& saved) {
   }
   root["plates"] = plates;
   root["lens_model"] = saved.lens_model;
-  root["intrinsics"] = Vec(scene.intrinsics);
+  root["intrinsics"] = JsonArray(scene.intrinsics);
   root["intrinsics_refined"] = saved.intrinsics_refined;
   root["rms_px"] = saved.rms_px;
   if (scene.covariance.size() == 0) {
@@ -103,7 +55,7 @@ std::string SceneToJson(const SavedScene& saved) {
 }
 
 SavedScene SceneFromJson(const std::string& text, const std::string& where) {
-  const Reader in(where);
+  const JsonReader in(where);
   json root;
   try {
     root = json::parse(text);

@@ -1,8 +1,8 @@
 #include "adapters/project_io/truth_json.h"
 
-
 #include <nlohmann/json.hpp>
 
+#include "adapters/project_io/json_reader.h"
 #include "adapters/project_io/text_file.h"
 #include "pipeline/core/error.h"
 
@@ -13,19 +13,13 @@ using nlohmann::json;
 
 constexpr const char* kFormat = "omm-truth/1";
 
-json Vec(const Eigen::VectorXd& v) {
-  json out = json::array();
-  for (Eigen::Index i = 0; i < v.size(); ++i) out.push_back(v[i]);
-  return out;
-}
-
 json Pose(const Eigen::Isometry3d& pose) {
   json rows = json::array();
-  for (int r = 0; r < 3; ++r) rows.push_back(Vec(pose.linear().row(r).transpose()));
+  for (int r = 0; r < 3; ++r) rows.push_back(JsonArray(pose.linear().row(r).transpose()));
   const Eigen::AngleAxisd angle_axis(pose.linear());
   return {{"R", rows},
-          {"t", Vec(pose.translation())},
-          {"r", Vec(angle_axis.angle() * angle_axis.axis())}};
+          {"t", JsonArray(pose.translation())},
+          {"r", JsonArray(angle_axis.angle() * angle_axis.axis())}};
 }
 
 json Exposure(const ExposureTruth& exposure) {
@@ -34,76 +28,25 @@ json Exposure(const ExposureTruth& exposure) {
           {"psf_sigma_px", exposure.psf_sigma_px}};
 }
 
-// Reading: every access names the key path, so a malformed file says where.
-class Reader {
- public:
-  explicit Reader(std::string where) : where_(std::move(where)) {}
+Eigen::Isometry3d ReadPose(const JsonReader& in, const json& node, const std::string& path) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  const json& rows = in.Array(node, "R", path);
+  if (rows.size() != 3) in.Fail(path + ".R", "expected 3 rows");
+  for (int r = 0; r < 3; ++r) {
+    const json wrapped = {{"row", rows[r]}};
+    pose.linear().row(r) = in.Vector(wrapped, "row", path + ".R[" + std::to_string(r) + "]", 3);
+  }
+  pose.translation() = in.Vector(node, "t", path, 3);
+  return pose;
+}
 
-  const json& At(const json& node, const std::string& key, const std::string& path) const {
-    if (!node.is_object() || !node.contains(key)) Fail(path + "." + key, "missing");
-    return node.at(key);
-  }
-  double Number(const json& node, const std::string& key, const std::string& path) const {
-    const json& v = At(node, key, path);
-    if (!v.is_number()) Fail(path + "." + key, "expected a number");
-    return v.get<double>();
-  }
-  int Int(const json& node, const std::string& key, const std::string& path) const {
-    const json& v = At(node, key, path);
-    if (!v.is_number_integer()) Fail(path + "." + key, "expected an integer");
-    return v.get<int>();
-  }
-  std::string String(const json& node, const std::string& key, const std::string& path) const {
-    const json& v = At(node, key, path);
-    if (!v.is_string()) Fail(path + "." + key, "expected a string");
-    return v.get<std::string>();
-  }
-  const json& Array(const json& node, const std::string& key, const std::string& path) const {
-    const json& v = At(node, key, path);
-    if (!v.is_array()) Fail(path + "." + key, "expected an array");
-    return v;
-  }
-  Eigen::VectorXd Vector(const json& node, const std::string& key, const std::string& path,
-                         int size = -1) const {
-    const json& v = Array(node, key, path);
-    if (size >= 0 && static_cast<int>(v.size()) != size) {
-      Fail(path + "." + key, "expected " + std::to_string(size) + " numbers");
-    }
-    Eigen::VectorXd out(v.size());
-    for (size_t i = 0; i < v.size(); ++i) {
-      if (!v[i].is_number()) Fail(path + "." + key, "expected numbers");
-      out[static_cast<Eigen::Index>(i)] = v[i].get<double>();
-    }
-    return out;
-  }
-  Eigen::Vector2d Vec2(const json& node, const std::string& key, const std::string& path) const {
-    return Vector(node, key, path, 2);
-  }
-  Eigen::Isometry3d Pose(const json& node, const std::string& path) const {
-    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-    const json& rows = Array(node, "R", path);
-    if (rows.size() != 3) Fail(path + ".R", "expected 3 rows");
-    for (int r = 0; r < 3; ++r) {
-      const json wrapped = {{"row", rows[r]}};
-      pose.linear().row(r) = Vector(wrapped, "row", path + ".R[" + std::to_string(r) + "]", 3);
-    }
-    pose.translation() = Vector(node, "t", path, 3);
-    return pose;
-  }
-  ExposureTruth Exposure(const json& node, const std::string& path) const {
-    ExposureTruth exposure;
-    exposure.gain = Number(node, "gain", path);
-    exposure.vignetting = Number(node, "vignetting", path);
-    exposure.psf_sigma_px = Number(node, "psf_sigma_px", path);
-    return exposure;
-  }
-  [[noreturn]] void Fail(const std::string& key, const std::string& what) const {
-    throw InputError(where_ + " key '" + key + "'", what);
-  }
-
- private:
-  std::string where_;
-};
+ExposureTruth ReadExposure(const JsonReader& in, const json& node, const std::string& path) {
+  ExposureTruth exposure;
+  exposure.gain = in.Number(node, "gain", path);
+  exposure.vignetting = in.Number(node, "vignetting", path);
+  exposure.psf_sigma_px = in.Number(node, "psf_sigma_px", path);
+  return exposure;
+}
 
 }  // namespace
 
@@ -115,7 +58,7 @@ std::string TruthToJson(const SimulationTruth& truth) {
 
   const CameraModel& model = truth.camera.model;
   root["camera"] = {{"lens_model", model.lens_model},
-                    {"intrinsics", Vec(model.intrinsics)},
+                    {"intrinsics", JsonArray(model.intrinsics)},
                     {"imager_size_px", {model.width_px, model.height_px}},
                     {"pixel_pitch_um", truth.camera.pixel_pitch_um},
                     {"focal_length_mm", truth.camera.focal_length_mm},
@@ -142,16 +85,16 @@ std::string TruthToJson(const SimulationTruth& truth) {
   root["calib_images"] = calib;
 
   root["part"] = {{"cam_from_part", Pose(truth.cam_from_part)},
-                  {"outline_min_mm", Vec(truth.part_min_mm)},
-                  {"outline_max_mm", Vec(truth.part_max_mm)},
+                  {"outline_min_mm", JsonArray(truth.part_min_mm)},
+                  {"outline_max_mm", JsonArray(truth.part_max_mm)},
                   {"thickness_mm", truth.part_thickness_mm}};
 
   json tiles = json::array();
   for (const TileTruth& tile : truth.tiles) {
     tiles.push_back({{"image", tile.image},
                      {"grid", {tile.grid_row, tile.grid_col}},
-                     {"commanded_mm", Vec(tile.commanded_mm)},
-                     {"actual_mm", Vec(tile.actual_mm)},
+                     {"commanded_mm", JsonArray(tile.commanded_mm)},
+                     {"actual_mm", JsonArray(tile.actual_mm)},
                      {"exposure", Exposure(tile.exposure)}});
   }
   root["table"] = {{"sigma_mm", truth.table_sigma_mm}, {"tiles", tiles}};
@@ -159,7 +102,7 @@ std::string TruthToJson(const SimulationTruth& truth) {
   json holes = json::array();
   for (const HoleTruth& hole : truth.holes) {
     holes.push_back({{"name", hole.name},
-                     {"center_mm", Vec(hole.center_part_mm)},
+                     {"center_mm", JsonArray(hole.center_part_mm)},
                      {"diameter_mm", hole.diameter_mm},
                      {"nominal_diameter_mm", hole.nominal_diameter_mm}});
   }
@@ -168,7 +111,7 @@ std::string TruthToJson(const SimulationTruth& truth) {
   json markers = json::array();
   for (const MarkerTruth& marker : truth.markers) {
     json corners = json::array();
-    for (int k = 0; k < 4; ++k) corners.push_back(Vec(marker.corners_part_mm.col(k)));
+    for (int k = 0; k < 4; ++k) corners.push_back(JsonArray(marker.corners_part_mm.col(k)));
     markers.push_back({{"id", marker.id},
                        {"corners_mm", corners},
                        {"tag_size_mm", marker.tag_size_mm},
@@ -193,7 +136,7 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
   } catch (const json::parse_error& e) {
     throw InputError(where, std::string("not valid JSON: ") + e.what());
   }
-  const Reader in(where);
+  const JsonReader in(where);
   if (in.String(root, "format", "") != kFormat) {
     in.Fail("format", std::string("expected \"") + kFormat + "\"");
   }
@@ -249,13 +192,13 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
       in.Fail(path + ".kind", "expected full, partial or plate-absent");
     }
     image.cam_from_plate =
-        in.Pose(in.At(calib[i], "cam_from_plate", path), path + ".cam_from_plate");
-    image.exposure = in.Exposure(in.At(calib[i], "exposure", path), path + ".exposure");
+        ReadPose(in, in.At(calib[i], "cam_from_plate", path), path + ".cam_from_plate");
+    image.exposure = ReadExposure(in, in.At(calib[i], "exposure", path), path + ".exposure");
     truth.calib_images.push_back(image);
   }
 
   const json& part = in.At(root, "part", "");
-  truth.cam_from_part = in.Pose(in.At(part, "cam_from_part", "part"), "part.cam_from_part");
+  truth.cam_from_part = ReadPose(in, in.At(part, "cam_from_part", "part"), "part.cam_from_part");
   truth.part_min_mm = in.Vec2(part, "outline_min_mm", "part");
   truth.part_max_mm = in.Vec2(part, "outline_max_mm", "part");
   truth.part_thickness_mm = in.Number(part, "thickness_mm", "part");
@@ -272,7 +215,7 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
     tile.grid_col = static_cast<int>(grid[1]);
     tile.commanded_mm = in.Vec2(tiles[i], "commanded_mm", path);
     tile.actual_mm = in.Vec2(tiles[i], "actual_mm", path);
-    tile.exposure = in.Exposure(in.At(tiles[i], "exposure", path), path + ".exposure");
+    tile.exposure = ReadExposure(in, in.At(tiles[i], "exposure", path), path + ".exposure");
     truth.tiles.push_back(tile);
   }
 
@@ -305,7 +248,7 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
   }
 
   const json& plate = in.At(root, "part_from_plate", "");
-  if (!plate.is_null()) truth.part_from_plate = in.Pose(plate, "part_from_plate");
+  if (!plate.is_null()) truth.part_from_plate = ReadPose(in, plate, "part_from_plate");
 
   const json& measurements = in.Array(root, "measurements", "");
   for (size_t i = 0; i < measurements.size(); ++i) {
