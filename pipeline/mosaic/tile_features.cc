@@ -46,7 +46,14 @@ ImageF DownsampleBox(const ImageF& image, int factor) {
   return out;
 }
 
-ImageF GaussianBlur(const ImageF& image, double sigma_px) {
+namespace {
+
+// Columns per register block of the blur's passes (Eigen: packed arithmetic).
+constexpr int kBlurBlock = 16;
+using BlurBlock = Eigen::Array<float, kBlurBlock, 1>;
+
+// Normalised Gaussian taps, radius ceil(3 sigma).
+std::vector<float> GaussianKernel(double sigma_px) {
   const int radius = static_cast<int>(std::ceil(3.0 * sigma_px));
   std::vector<float> kernel(2 * radius + 1);
   float sum = 0;
@@ -55,35 +62,65 @@ ImageF GaussianBlur(const ImageF& image, double sigma_px) {
     sum += kernel[k + radius];
   }
   for (float& w : kernel) w /= sum;
+  return kernel;
+}
+
+// The horizontal pass of one row (borders clamped).
+void BlurRow(const std::vector<float>& kernel, const float* in, int cols, float* o) {
+  const int radius = static_cast<int>(kernel.size() / 2);
+  const int lo = std::min(radius, cols), hi = std::max(lo, cols - radius);
+  const auto clamped = [&](int c) {
+    float acc = 0;
+    for (int k = -radius; k <= radius; ++k)
+      acc += kernel[k + radius] * in[std::clamp(c + k, 0, cols - 1)];
+    o[c] = acc;
+  };
+  for (int c = 0; c < lo; ++c) clamped(c);
+  for (int c = hi; c < cols; ++c) clamped(c);
+  // Interior: kBlock columns' sums held in registers over the taps (they
+  // vectorise; a whole row's taps outer would load and store it per tap).
+  int c = lo;
+  for (; c + kBlurBlock <= hi; c += kBlurBlock) {
+    BlurBlock acc = BlurBlock::Zero();
+    for (int k = -radius; k <= radius; ++k) acc += kernel[k + radius] * BlurBlock::Map(in + c + k);
+    BlurBlock::Map(o + c) = acc;
+  }
+  for (; c < hi; ++c) clamped(c);
+}
+
+// The vertical pass of one output row: in[k] is the horizontally blurred
+// row at offset k - radius (rows clamped by the caller).
+void BlurColumn(const std::vector<float>& kernel, const float* const* in, int cols, float* o) {
+  // As the horizontal pass: kBlock columns' sums in registers over the taps.
+  const int taps = static_cast<int>(kernel.size());
+  int c = 0;
+  for (; c + kBlurBlock <= cols; c += kBlurBlock) {
+    BlurBlock acc = BlurBlock::Zero();
+    for (int k = 0; k < taps; ++k) acc += kernel[k] * BlurBlock::Map(in[k] + c);
+    BlurBlock::Map(o + c) = acc;
+  }
+  for (; c < cols; ++c) {
+    float acc = 0;
+    for (int k = 0; k < taps; ++k) acc += kernel[k] * in[k][c];
+    o[c] = acc;
+  }
+}
+
+}  // namespace
+
+ImageF GaussianBlur(const ImageF& image, double sigma_px) {
+  const std::vector<float> kernel = GaussianKernel(sigma_px);
   const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
   ImageF tmp(rows, cols), out(rows, cols);
+  for (int r = 0; r < rows; ++r)
+    BlurRow(kernel, image.data() + static_cast<size_t>(r) * cols, cols,
+            tmp.data() + static_cast<size_t>(r) * cols);
+  const int radius = static_cast<int>(kernel.size() / 2);
+  std::vector<const float*> in(kernel.size());
   for (int r = 0; r < rows; ++r) {
-    const float* in = image.data() + static_cast<size_t>(r) * cols;
-    float* o = tmp.data() + static_cast<size_t>(r) * cols;
-    const int lo = std::min(radius, cols), hi = std::max(lo, cols - radius);
-    const auto clamped = [&](int c) {
-      float acc = 0;
-      for (int k = -radius; k <= radius; ++k)
-        acc += kernel[k + radius] * in[std::clamp(c + k, 0, cols - 1)];
-      o[c] = acc;
-    };
-    for (int c = 0; c < lo; ++c) clamped(c);
-    for (int c = hi; c < cols; ++c) clamped(c);
-    // Interior: taps outer, columns inner (vectorises, as the vertical pass).
-    std::fill(o + lo, o + hi, 0.0f);
-    for (int k = -radius; k <= radius; ++k) {
-      const float w = kernel[k + radius];
-      for (int c = lo; c < hi; ++c) o[c] += w * in[c + k];
-    }
-  }
-  for (int r = 0; r < rows; ++r) {
-    float* o = out.data() + static_cast<size_t>(r) * cols;
-    std::fill(o, o + cols, 0.0f);
-    for (int k = -radius; k <= radius; ++k) {
-      const float* in = tmp.data() + static_cast<size_t>(std::clamp(r + k, 0, rows - 1)) * cols;
-      const float w = kernel[k + radius];
-      for (int c = 0; c < cols; ++c) o[c] += w * in[c];
-    }
+    for (int k = -radius; k <= radius; ++k)
+      in[k + radius] = tmp.data() + static_cast<size_t>(std::clamp(r + k, 0, rows - 1)) * cols;
+    BlurColumn(kernel, in.data(), cols, out.data() + static_cast<size_t>(r) * cols);
   }
   return out;
 }
@@ -103,24 +140,56 @@ std::string HarrisOptions::Check() const {
 
 std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options) {
   const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
-  ImageF ixx = ImageF::Zero(rows, cols), iyy = ImageF::Zero(rows, cols),
-         ixy = ImageF::Zero(rows, cols);
-  for (int r = 1; r + 1 < rows; ++r) {
-    for (int c = 1; c + 1 < cols; ++c) {
-      const float gx = 0.5f * (image(r, c + 1) - image(r, c - 1));
-      const float gy = 0.5f * (image(r + 1, c) - image(r - 1, c));
-      ixx(r, c) = gx * gx;
-      iyy(r, c) = gy * gy;
-      ixy(r, c) = gx * gy;
+  // The gradient products row by row, straight into the window's horizontal
+  // pass, kept in a ring of the 2 radius + 1 rows the vertical pass needs,
+  // whose output goes straight into R: no full-size product or blurred
+  // images (their allocation and memory traffic cost more than the taps).
+  const std::vector<float> kernel = GaussianKernel(options.window_sigma_px);
+  const int radius = static_cast<int>(kernel.size() / 2), ring_rows = 2 * radius + 1;
+  ImageF ring_xx(ring_rows, cols), ring_yy(ring_rows, cols), ring_xy(ring_rows, cols);
+  std::vector<float> xx(cols), yy(cols), xy(cols);
+  int next_row = 0;  // the next row to blur horizontally into the ring
+  const auto blur_rows_through = [&](int last) {
+    for (; next_row <= last; ++next_row) {
+      const int r = next_row;
+      std::fill(xx.begin(), xx.end(), 0.0f);
+      std::fill(yy.begin(), yy.end(), 0.0f);
+      std::fill(xy.begin(), xy.end(), 0.0f);
+      if (r >= 1 && r + 1 < rows) {
+        const float* row = image.data() + static_cast<size_t>(r) * cols;
+        for (int c = 1; c + 1 < cols; ++c) {
+          const float gx = 0.5f * (row[c + 1] - row[c - 1]);
+          const float gy = 0.5f * (row[c + cols] - row[c - cols]);
+          xx[c] = gx * gx;
+          yy[c] = gy * gy;
+          xy[c] = gx * gy;
+        }
+      }
+      const size_t offset = static_cast<size_t>(r % ring_rows) * cols;
+      BlurRow(kernel, xx.data(), cols, ring_xx.data() + offset);
+      BlurRow(kernel, yy.data(), cols, ring_yy.data() + offset);
+      BlurRow(kernel, xy.data(), cols, ring_xy.data() + offset);
     }
-  }
-  ixx = GaussianBlur(ixx, options.window_sigma_px);
-  iyy = GaussianBlur(iyy, options.window_sigma_px);
-  ixy = GaussianBlur(ixy, options.window_sigma_px);
+  };
   const float k = static_cast<float>(options.k);
-  ImageF response = (ixx.array() * iyy.array() - ixy.array().square() -
-                     k * (ixx.array() + iyy.array()).square())
-                        .matrix();
+  ImageF response(rows, cols);
+  std::vector<const float*> in_xx(ring_rows), in_yy(ring_rows), in_xy(ring_rows);
+  for (int r = 0; r < rows; ++r) {
+    blur_rows_through(std::min(r + radius, rows - 1));
+    for (int j = 0; j < ring_rows; ++j) {
+      const size_t offset =
+          static_cast<size_t>(std::clamp(r + j - radius, 0, rows - 1) % ring_rows) * cols;
+      in_xx[j] = ring_xx.data() + offset;
+      in_yy[j] = ring_yy.data() + offset;
+      in_xy[j] = ring_xy.data() + offset;
+    }
+    BlurColumn(kernel, in_xx.data(), cols, xx.data());
+    BlurColumn(kernel, in_yy.data(), cols, yy.data());
+    BlurColumn(kernel, in_xy.data(), cols, xy.data());
+    float* out = response.data() + static_cast<size_t>(r) * cols;
+    for (int c = 0; c < cols; ++c)
+      out[c] = xx[c] * yy[c] - xy[c] * xy[c] - k * ((xx[c] + yy[c]) * (xx[c] + yy[c]));
+  }
 
   // Local maxima inside the border.
   const int b = std::max(options.border_px, options.nms_radius_px + 1), n = options.nms_radius_px;
