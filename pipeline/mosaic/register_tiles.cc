@@ -209,7 +209,14 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   std::vector<ImageF> normalized(num_tiles), spline(num_tiles), coarse_probe(num_tiles);
   std::vector<std::vector<Corner>> corners(num_tiles);
   std::vector<std::vector<TagDetection>> tags(num_tiles);
-  ParallelFor(num_tiles, options.num_threads, [&](int i) {
+  // The tags as work items of their own, after the tiles' (longer) features:
+  // nine tiles on two threads would leave one thread idle for the last tile.
+  ParallelFor(options.use_apriltags ? 2 * num_tiles : num_tiles, options.num_threads, [&](int k) {
+    if (k >= num_tiles) {
+      tags[k - num_tiles] = DetectAprilTags36h11(tiles[k - num_tiles], options.tags);
+      return;
+    }
+    const int i = k;
     normalized[i] = NormalizeTileIntensity(tiles[i]);
     if (options.matching_blur_sigma_px > 0)
       normalized[i] = GaussianBlur(normalized[i], options.matching_blur_sigma_px);
@@ -218,7 +225,6 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       corners[i] = DetectHarrisCorners(normalized[i], options.harris);
     spline[i] = BSplineCoefficients(normalized[i]);
     coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
-    if (options.use_apriltags) tags[i] = DetectAprilTags36h11(tiles[i], options.tags);
   });
   for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());
   result.features_seconds = Seconds(t0);
