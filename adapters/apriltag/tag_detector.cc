@@ -35,9 +35,15 @@ std::vector<std::uint8_t> Stretch8(const ImageF& image, int stride) {
   const float scale = hi > lo ? 255.0f / (hi - lo) : 1.0f;
   std::vector<std::uint8_t> out(static_cast<size_t>(stride) * image.rows(), 0);
   for (Eigen::Index r = 0; r < image.rows(); ++r) {
+    const float* in = image.data() + r * image.cols();
+    std::uint8_t* o = out.data() + r * stride;
     for (Eigen::Index c = 0; c < image.cols(); ++c) {
-      const float v = std::round((image(r, c) - lo) * scale);
-      out[r * stride + c] = static_cast<std::uint8_t>(std::clamp(v, 0.0f, 255.0f));
+      // Clamped, then rounded half away from zero as std::round would (same
+      // bytes: checked for every float in [-2, 260]), but vectorised:
+      // std::round is a library call without SSE4.1.
+      const float v = std::clamp((in[c] - lo) * scale, 0.0f, 255.0f);
+      const int t = static_cast<int>(v);
+      o[c] = static_cast<std::uint8_t>(t + (v - static_cast<float>(t) >= 0.5f));
     }
   }
   return out;
