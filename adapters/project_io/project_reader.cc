@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <exception>
 #include <fstream>
 #include <iterator>
 #include <map>
@@ -655,24 +654,16 @@ Project LoadProject(const fs::path& dir_in) {
   std::vector<fs::path> all_images = project.calib_images;
   for (const TilePosition& tile : project.tiles) all_images.push_back(project.TilePath(tile.image));
   std::vector<LoadedImage> loaded(all_images.size());
-  std::vector<std::exception_ptr> errors(all_images.size());
+  // Throws for the first bad file in file-name order, whatever the threads' order.
   ParallelFor(static_cast<int>(all_images.size()), kNumThreads, [&](int i) {
-    try {
-      const fs::path& path = all_images[i];
-      std::error_code exists_ec;
-      if (!fs::is_regular_file(path, exists_ec))
-        throw InputError(path.string(), "image file not found");
-      const std::string bytes = ReadTextFile(path, "cannot read image file");
-      loaded[i].sha256 = Sha256Hex(bytes);
-      loaded[i].image = DecodeImage(bytes, path);
-    } catch (...) {
-      errors[i] = std::current_exception();
-    }
+    const fs::path& path = all_images[i];
+    std::error_code exists_ec;
+    if (!fs::is_regular_file(path, exists_ec))
+      throw InputError(path.string(), "image file not found");
+    const std::string bytes = ReadTextFile(path, "cannot read image file");
+    loaded[i].sha256 = Sha256Hex(bytes);
+    loaded[i].image = DecodeImage(bytes, path);
   });
-  // The first bad file in file-name order, whatever the threads' order.
-  for (const std::exception_ptr& error : errors) {
-    if (error) std::rethrow_exception(error);
-  }
   for (size_t i = 0; i < loaded.size(); ++i) {
     const StoredImage& image = loaded[i].image;
     if (i == 0) {

@@ -1,10 +1,14 @@
 // fn(i) for i in [0, n) on up to num_threads threads (the caller's one of
 // them), indices handed out one at a time: for a few dozen coarse work items
 // of uneven cost (tiles, pairs of tiles), where a thread pool would not pay.
+// Every item runs even when some throw; then the exception of the lowest
+// index that threw is rethrown, so the error does not depend on the threads'
+// order (e.g. the first corrupt file in file order).
 #pragma once
 
 #include <algorithm>
 #include <atomic>
+#include <exception>
 #include <thread>
 #include <vector>
 
@@ -12,14 +16,24 @@ namespace omm {
 
 template <typename Fn>
 void ParallelFor(int n, int num_threads, Fn fn) {
+  std::vector<std::exception_ptr> errors(std::max(n, 0));
   std::atomic<int> next{0};
   const auto work = [&] {
-    for (int i = next++; i < n; i = next++) fn(i);
+    for (int i = next++; i < n; i = next++) {
+      try {
+        fn(i);
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+    }
   };
   std::vector<std::thread> threads;
   for (int t = 1; t < std::min(num_threads, n); ++t) threads.emplace_back(work);
   work();
   for (std::thread& t : threads) t.join();
+  for (const std::exception_ptr& error : errors) {
+    if (error) std::rethrow_exception(error);
+  }
 }
 
 }  // namespace omm

@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <exception>
 #include <filesystem>
 #include <optional>
 
@@ -118,19 +117,11 @@ ReportValue StudyReport(const ImageCountStudy& study) {
 std::vector<NamedImage> CalibImages(const Project& project, const ProgressCallback& progress) {
   const int num_images = static_cast<int>(project.calib_images.size());
   std::vector<NamedImage> images(num_images);
-  std::vector<std::exception_ptr> errors(num_images);
   ParallelFor(num_images, 2, [&](int i) {
-    try {
-      images[i].name = project.calib_images[i].filename().string();
-      images[i].image = project.images ? ToGrayImage(project.images->calib[i].image)
-                                       : ReadGrayImage(project.calib_images[i]);
-    } catch (...) {
-      errors[i] = std::current_exception();
-    }
+    images[i].name = project.calib_images[i].filename().string();
+    images[i].image = project.images ? ToGrayImage(project.images->calib[i].image)
+                                     : ReadGrayImage(project.calib_images[i]);
   });
-  for (const std::exception_ptr& error : errors) {
-    if (error) std::rethrow_exception(error);
-  }
   if (progress) progress(num_images, num_images, "read calibration images");
   return images;
 }

@@ -6,7 +6,6 @@
 // scene as a COLMAP sparse model) and report.mosaic.
 #include <algorithm>
 #include <chrono>
-#include <exception>
 #include <filesystem>
 #include <future>
 #include <memory>
@@ -112,26 +111,18 @@ IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camer
 std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera) {
   const int num_tiles = static_cast<int>(project.tiles.size());
   std::vector<ImageF> tiles(num_tiles);
-  std::vector<std::exception_ptr> errors(num_tiles);
   ParallelFor(num_tiles, 2, [&](int i) {
-    try {
-      const fs::path path = project.TilePath(project.tiles[i].image);
-      GrayImage image =
-          project.images ? ToGrayImage(project.images->tiles[i].image) : ReadGrayImage(path);
-      if (image.width() != camera.width_px || image.height() != camera.height_px) {
-        throw InputError(path.string(), fmt::format("{}x{} px, but the calibrated camera's imager "
-                                                    "is {}x{} px",
-                                                    image.width(), image.height(), camera.width_px,
-                                                    camera.height_px));
-      }
-      tiles[i] = std::move(image.pixels);
-    } catch (...) {
-      errors[i] = std::current_exception();
+    const fs::path path = project.TilePath(project.tiles[i].image);
+    GrayImage image =
+        project.images ? ToGrayImage(project.images->tiles[i].image) : ReadGrayImage(path);
+    if (image.width() != camera.width_px || image.height() != camera.height_px) {
+      throw InputError(path.string(), fmt::format("{}x{} px, but the calibrated camera's imager "
+                                                  "is {}x{} px",
+                                                  image.width(), image.height(), camera.width_px,
+                                                  camera.height_px));
     }
+    tiles[i] = std::move(image.pixels);
   });
-  for (const std::exception_ptr& error : errors) {
-    if (error) std::rethrow_exception(error);
-  }
   return tiles;
 }
 
