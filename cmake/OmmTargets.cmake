@@ -13,6 +13,10 @@ if(OMM_SANITIZE)
   add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
                       -Wno-maybe-uninitialized)
   add_link_options(-fsanitize=address,undefined)
+  # Line tables only, compressed: sanitizer reports still name file and line,
+  # and the build tree is about a fifth of full -g's (CI's disk is not large).
+  add_compile_options(-g1 -gz)
+  add_link_options(-gz)
   # Eigen 3.4 drops its "glibc malloc is 16-byte aligned" shortcut when
   # __SANITIZE_ADDRESS__ is defined and switches to its handmade allocator,
   # which stores the real block pointer in the 8 bytes before the data. Debian's
