@@ -26,7 +26,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <ctime>
 #include <filesystem>
 #include <limits>
 #include <memory>
@@ -37,6 +36,7 @@
 #include "adapters/opencv/image_io.h"
 #include "adapters/opencv/opencv_stitcher.h"
 #include "adapters/project_io/project_reader.h"
+#include "pipeline/core/timing.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/register_tiles.h"
 #include "tests/rim_locator.h"
@@ -67,15 +67,7 @@ const Demo& GetDemo() {
   return demo;
 }
 
-double ProcessCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
 
 // A raw pixel's size on the part, mm.
 double RawPxMm(const SimulationTruth& truth) {
@@ -235,10 +227,10 @@ void BM_OmmMosaic(benchmark::State& state) {
     auto t0 = std::chrono::steady_clock::now();
     const TileRegistration registration = RegisterTiles(
         demo.tiles, commanded_mm, truth.table_sigma_mm, truth.camera.model, register_options);
-    register_s = Seconds(t0);
+    register_s = SecondsSince(t0);
     t0 = std::chrono::steady_clock::now();
     ortho = Orthorectify(truth.camera.model, registration.scene, demo.tiles, ortho_options);
-    ortho_s = Seconds(t0);
+    ortho_s = SecondsSince(t0);
     cpu_s = ProcessCpuSeconds() - cpu0;
     if (!registration.usable) state.SkipWithError(registration.brief.c_str());
     std::printf("omm: %s\n%s\n", registration.brief.c_str(), ortho.summary.brief.c_str());

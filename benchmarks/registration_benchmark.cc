@@ -4,12 +4,12 @@
 //
 // The tiles come from the tests' render cache (tests/sim_cache.h:
 // build/sim-cache/demo-1, rendered on first use).
-#include <ctime>
 #include <vector>
 
 #include <benchmark/benchmark.h>
 
 #include "adapters/opencv/image_io.h"
+#include "pipeline/core/timing.h"
 #include "pipeline/mosaic/register_tiles.h"
 #include "tests/sim_cache.h"
 
@@ -37,11 +37,6 @@ const DemoTiles& GetDemoTiles() {
   return demo;
 }
 
-double CpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 void BM_RegisterTilesDemo(benchmark::State& state) {
   const DemoTiles& demo = GetDemoTiles();
@@ -50,10 +45,10 @@ void BM_RegisterTilesDemo(benchmark::State& state) {
   options.bundle.num_threads = 2;
   double features = 0, matching = 0, adjustment = 0, cpu = 0, rms = 0;
   for (auto _ : state) {
-    const double cpu0 = CpuSeconds();
+    const double cpu0 = ProcessCpuSeconds();
     const TileRegistration reg = RegisterTiles(
         demo.tiles, demo.commanded_mm, demo.truth.table_sigma_mm, demo.truth.camera.model, options);
-    cpu += CpuSeconds() - cpu0;
+    cpu += ProcessCpuSeconds() - cpu0;
     if (!reg.usable) state.SkipWithError(reg.brief.c_str());
     features += reg.features_seconds;
     matching += reg.matching_seconds;

@@ -7,9 +7,9 @@
 // stitches. Issue 5's goal: under 3 s wall on 2 cores and 1.5 GB peak; its
 // "Checked by": at most 3x the Stitcher's time.
 //
-// The project is rendered once into $OMM_BENCHMARK_CACHE (default
-// /tmp/omm_benchmark_cache)/run_demo_seed1; each iteration copies its inputs
-// to a fresh directory. OMM_PROGRAM is the omm binary of this build.
+// The project comes from the tests' render cache (tests/sim_cache.h); each
+// iteration copies its inputs to a fresh directory. OMM_PROGRAM is the omm
+// binary of this build.
 #include <benchmark/benchmark.h>
 
 #include <spawn.h>
@@ -17,14 +17,13 @@
 #include <sys/wait.h>
 
 #include <chrono>
-#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <vector>
 
 #include "adapters/opencv/image_io.h"
 #include "adapters/opencv/opencv_stitcher.h"
-#include "pipeline/simulate/simulate_project.h"
+#include "tests/sim_cache.h"
 
 extern char** environ;
 
@@ -33,25 +32,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-fs::path CacheDir() {
-  const char* env = std::getenv("OMM_BENCHMARK_CACHE");
-  return fs::path(env ? env : "/tmp/omm_benchmark_cache") / "run_demo_seed1";
-}
-
 // The rendered demo project (rendered on first use).
 const fs::path& DemoProject() {
-  static const fs::path dir = [] {
-    const fs::path project = CacheDir() / "project";
-    if (!fs::exists(project / "project.yaml")) {
-      fs::remove_all(CacheDir());
-      fs::create_directories(CacheDir());
-      SimulationOptions options;
-      options.seed = 1;
-      options.preset = "demo";
-      SimulateProjectDirectory(options, project, CacheDir() / "truth.json", {});
-    }
-    return project;
-  }();
+  static const fs::path dir = testing::SimulatedProject("demo", 1).project_dir;
   return dir;
 }
 
@@ -83,16 +66,12 @@ ChildUsage RunChild(const std::vector<std::string>& args) {
 
 void BM_OmmRun(benchmark::State& state) {
   const fs::path source = DemoProject();
-  const fs::path work = CacheDir() / "run";
+  const fs::path work = fs::temp_directory_path() / "omm_run_benchmark";
   ChildUsage last;
   for (auto _ : state) {
     state.PauseTiming();
     fs::remove_all(work);
-    fs::create_directories(work);
-    for (const auto& entry : fs::directory_iterator(source)) {
-      if (entry.path().filename() == "out") continue;
-      fs::copy(entry.path(), work / entry.path().filename(), fs::copy_options::recursive);
-    }
+    testing::CopyProject(source, work);
     state.ResumeTiming();
     last = RunChild({OMM_PROGRAM, "run", "-q", work.string()});
     state.SetIterationTime(last.wall_s);
@@ -101,6 +80,7 @@ void BM_OmmRun(benchmark::State& state) {
       return;
     }
   }
+  fs::remove_all(work);
   state.counters["wall_s"] = last.wall_s;
   state.counters["cpu_s"] = last.cpu_s;
   state.counters["peak_rss_MB"] = last.peak_rss_mb;

@@ -21,6 +21,7 @@
 #include <tuple>
 
 #include "pipeline/core/error.h"
+#include "pipeline/core/timing.h"
 
 namespace omm {
 namespace {
@@ -32,10 +33,6 @@ using Clock = std::chrono::steady_clock;
 constexpr double kColmapPixelShift = 0.5;
 // COLMAP's kMaxNumImages: pair_id = image_id1 * kPairIdBase + image_id2.
 constexpr std::int64_t kPairIdBase = 2147483647;
-
-double Seconds(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 std::string Fixed(double value, int digits) {
   std::ostringstream out;
@@ -141,7 +138,7 @@ RunOutcome RunProcess(const std::vector<std::string>& argv, const fs::path& log,
       outcome.failure = std::string("waitpid failed: ") + std::strerror(errno);
       return outcome;
     }
-    if (Seconds(start) > timeout_seconds) {
+    if (SecondsSince(start) > timeout_seconds) {
       kill(-pid, SIGKILL);
       waitpid(pid, &status, 0);
       outcome.failure = "timed out after " + Fixed(timeout_seconds, 1) + " s";
@@ -338,7 +335,7 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
                   "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", threads,
                   "--SiftExtraction.max_num_features", std::to_string(options.max_num_features)},
                  log, options.timeout_seconds);
-  result.extraction_seconds = Seconds(start);
+  result.extraction_seconds = SecondsSince(start);
   if (!extraction.ok) return fail("feature_extractor", extraction);
 
   start = Clock::now();
@@ -348,7 +345,7 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
                   "--SiftMatching.max_error", std::to_string(options.max_error_px),
                   "--SiftMatching.min_num_inliers", std::to_string(options.min_num_inliers)},
                  log, options.timeout_seconds);
-  result.matching_seconds = Seconds(start);
+  result.matching_seconds = SecondsSince(start);
   if (!matching.ok) return fail("exhaustive_matcher", matching);
 
   start = Clock::now();
@@ -358,7 +355,7 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
     result.brief = std::string("colmap sift: reading the database failed: ") + error.what();
     return result;
   }
-  result.reading_seconds = Seconds(start);
+  result.reading_seconds = SecondsSince(start);
 
   int min_keypoints = result.matches.num_keypoints.front();
   for (int n : result.matches.num_keypoints) min_keypoints = std::min(min_keypoints, n);

@@ -13,13 +13,10 @@
 #include <opencv2/imgproc.hpp>
 
 #include "pipeline/core/error.h"
+#include "pipeline/core/timing.h"
 
 namespace omm {
 namespace {
-
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
 
 cv::Mat ToGray8(const GrayImage& image) {
   const cv::Mat as_float(image.height(), image.width(), CV_32F, const_cast<float*>(image.pixels.data()));
@@ -126,7 +123,7 @@ OpenCvCalibration OpenCvCalibrate(const std::vector<GrayImage>& images, const st
   for (int t = 1; t < options.num_threads; ++t) threads.emplace_back(worker);
   worker();
   for (std::thread& thread : threads) thread.join();
-  result.detection_seconds = Seconds(detection_start);
+  result.detection_seconds = SecondsSince(detection_start);
 
   const Eigen::Matrix3Xd plate = BoardPoints(board);
   std::vector<cv::Point3f> object;
@@ -158,7 +155,7 @@ OpenCvCalibration OpenCvCalibrate(const std::vector<GrayImage>& images, const st
   std::vector<cv::Mat> rvecs, tvecs;
   const auto solve_start = std::chrono::steady_clock::now();
   result.rms_px = cv::calibrateCamera(object_points, image_points, size, camera_matrix, dist, rvecs, tvecs, flags);
-  result.solve_seconds = Seconds(solve_start);
+  result.solve_seconds = SecondsSince(solve_start);
 
   const int n_dist = options.rational_model ? 8 : 5;
   result.camera.lens_model = model;

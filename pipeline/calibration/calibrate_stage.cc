@@ -16,15 +16,12 @@
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/timing.h"
 
 namespace omm {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 double Median(std::vector<double> values) {
   if (values.empty()) return 0.0;
