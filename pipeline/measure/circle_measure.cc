@@ -269,6 +269,7 @@ struct WedgeEdge {
   bool uncovered = false;  // touches uncovered or off-image pixels
   bool ok = false;         // a clean rim step
   bool inner_ok = false;   // ... and a resolved bottom-rim step inside it
+  bool narrow = false;     // the predicted wall is visible but too narrow to resolve
   StepFit step;
 };
 
@@ -290,8 +291,10 @@ double BottomRimOffset(const Circle& circle, const Circle& bottom, const Eigen::
 // kRamp for the rims alone, kFree to look for the bottom rim on each ray as
 // well, kFixed to take it from `bottom`. The blur is fitted per wedge,
 // `sigma` (the previous pass's median) only places the shoulder starts.
+// With kFixed, wedges whose wall is visible but narrower than `narrow_px`
+// are marked narrow (none if 0).
 EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, double sigma,
-                   Inner inner, const std::optional<Circle>& bottom,
+                   Inner inner, const std::optional<Circle>& bottom, double narrow_px,
                    const CircleMeasureOptions& options) {
   const double hw = options.profile_half_width_px;
   const int num =
@@ -440,6 +443,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
     Inner mode = inner;
     if (inner == Inner::kFixed) {
       x1 = bottom ? BottomRimOffset(circle, *bottom, n) : kNaN;
+      wedge.narrow = x1 < 0.0 && x1 > -narrow_px;
       // Beyond the window's reach (a wide wall) or no bottom rim: the ramp.
       if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;
     }
@@ -534,6 +538,47 @@ CircleFit FitCircleRobust(const Eigen::Matrix2Xd& points, const Circle& start, d
   return fit;
 }
 
+// The bottom rim as the top rim `top` scaled by k about the nadir (header):
+// the k whose circle nadir + k (c - nadir), k r fits the bottom-rim points
+// best, by Gauss-Newton on their distances to it with Huber, then Tukey
+// weights as in FitCircleRobust. nullopt unless it settles in (0, 1).
+std::optional<double> FitBottomScale(const Eigen::Matrix2Xd& points, const Circle& top,
+                                     const Eigen::Vector2d& nadir, double start, double tukey) {
+  const Eigen::Index n = points.cols();
+  const Eigen::Vector2d b = top.centre - nadir;
+  double k = start, scale = 0.0;
+  std::vector<double> abs_res(static_cast<size_t>(n));
+  Eigen::VectorXd residual(n), slope(n);
+  constexpr int kHuberIterations = 10, kIterations = 20;
+  for (int iteration = 0; iteration < kIterations; ++iteration) {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const Eigen::Vector2d u = points.col(i) - nadir - k * b;
+      const double norm = u.norm();
+      residual(i) = norm - k * top.radius;
+      slope(i) = -u.dot(b) / norm - top.radius;
+      abs_res[static_cast<size_t>(i)] = std::abs(residual(i));
+    }
+    if (iteration < kHuberIterations) scale = std::max(1.4826 * Median(abs_res), 1e-6);
+    double jwj = 0.0, jwr = 0.0;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      double w = 0.0;
+      if (iteration < kHuberIterations) {
+        const double a = std::abs(residual(i)) / (1.345 * scale);
+        w = a <= 1.0 ? 1.0 : 1.0 / a;
+      } else {
+        const double a = residual(i) / (tukey * scale);
+        w = std::abs(a) < 1.0 ? std::pow(1.0 - a * a, 2) : 0.0;
+      }
+      jwj += w * slope(i) * slope(i);
+      jwr += w * slope(i) * residual(i);
+    }
+    if (!(jwj > 0.0)) return std::nullopt;
+    k -= jwr / jwj;
+  }
+  if (!(k > 0.0 && k < 1.0)) return std::nullopt;
+  return k;
+}
+
 // The edge errors' spectral density at the circle's frequencies (0 and 1
 // per turn), per wedge: f = sum over all lags l of gamma(l), gamma the
 // autocovariance of the errors along the arc, lag in wedges. Then the fit's
@@ -616,6 +661,7 @@ std::string CircleMeasureOptions::Check() const {
   if (!(max_radius_deviation > 0.0)) why << "max_radius_deviation must be > 0; ";
   if (!(max_rms_px > 0.0)) why << "max_rms_px must be > 0; ";
   if (!(source_px > 0.0)) why << "source_px must be > 0; ";
+  if (!(min_wall_blurs >= 0.0)) why << "min_wall_blurs must be >= 0; ";
   if (max_passes < 1) why << "max_passes must be >= 1; ";
   if (!(converged_px > 0.0)) why << "converged_px must be > 0; ";
   std::string text = why.str();
@@ -636,7 +682,8 @@ std::string CircleMeasurement::Brief() const {
 }
 
 CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
-                                double nominal_radius_px, const CircleMeasureOptions& options) {
+                                double nominal_radius_px, const CircleMeasureOptions& options,
+                                const std::optional<Eigen::Vector2d>& nadir_px) {
   assert(options.Check().empty() && nominal_radius_px > 0.0);
   CircleMeasurement result;
   const double search =
@@ -645,27 +692,39 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
   Circle circle{result.coarse_centre_px, nominal_radius_px};
   double band = options.rim_band_px;
   double sigma = 1.0;
-  std::optional<Circle> bottom;
+  std::optional<Circle> bottom;        // without a nadir: a free circle
+  std::optional<double> bottom_scale;  // with one: k, the bottom rim about the nadir
+  auto bottom_of = [&](const Circle& top) -> std::optional<Circle> {
+    if (!bottom_scale) return bottom;
+    return Circle{*nadir_px + *bottom_scale * (top.centre - *nadir_px), *bottom_scale * top.radius};
+  };
   CircleFit fit;
   EdgePass pass;
   for (int p = 0; p < options.max_passes; ++p) {
     result.passes = p + 1;
     // Passes: rims alone (the blur), then with the bottom rim looked for on
     // each ray (its circle), then with the bottom rim from that circle.
-    const Inner inner = p == 0   ? Inner::kRamp
-                        : p == 1 ? Inner::kFree
-                        : bottom ? Inner::kFixed
-                                 : Inner::kRamp;
-    pass = FindEdges(image, circle, band, sigma, inner, bottom, options);
+    const Inner inner = p == 0                   ? Inner::kRamp
+                        : p == 1                 ? Inner::kFree
+                        : bottom || bottom_scale ? Inner::kFixed
+                                                 : Inner::kRamp;
+    pass = FindEdges(image, circle, band, sigma, inner, bottom_of(circle),
+                     bottom_scale ? options.min_wall_blurs * sigma : 0.0, options);
     if (std::isfinite(pass.sigma)) sigma = pass.sigma;
     const int num = static_cast<int>(pass.wedges.size());
     result.num_wedges = num;
     result.num_uncovered = 0;
+    result.num_narrow_wall = 0;
+    for (const WedgeEdge& w : pass.wedges) result.num_narrow_wall += w.narrow ? 1 : 0;
+    // Left out while the rest spans half the rim or more; else the fit
+    // keeps them (the header's limit).
+    result.narrow_wall_skipped = result.num_narrow_wall > 0 && 2 * result.num_narrow_wall <= num;
+    const int usable = num - (result.narrow_wall_skipped ? result.num_narrow_wall : 0);
     std::vector<int> index, inner_index;
     for (int k = 0; k < num; ++k) {
       const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
       if (w.uncovered) ++result.num_uncovered;
-      if (w.ok) index.push_back(k);
+      if (w.ok && !(w.narrow && result.narrow_wall_skipped)) index.push_back(k);
       if (w.inner_ok) inner_index.push_back(k);
     }
     result.num_edge_points = static_cast<int>(index.size());
@@ -676,9 +735,9 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
       result.error = text;
       return result;
     }
-    if (result.num_edge_points < options.min_found_fraction * num) {
+    if (result.num_edge_points < options.min_found_fraction * usable) {
       result.error = "not found near the expected position (clean edges on " +
-                     std::to_string(result.num_edge_points) + " of " + std::to_string(num) +
+                     std::to_string(result.num_edge_points) + " of " + std::to_string(usable) +
                      " wedges)";
       return result;
     }
@@ -698,18 +757,25 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
       std::vector<double> offsets;
       offsets.reserve(inner_index.size());
       for (int k : inner_index) offsets.push_back(pass.wedges[static_cast<size_t>(k)].step.x1);
-      const CircleFit bottom_fit =
-          FitCircleRobust(inner_points, Circle{circle.centre, circle.radius + Median(offsets)},
-                          options.tukey_sigmas);
-      // The bottom rim looks smaller than the top one and lies inside it.
-      if (bottom_fit.circle.radius > 0.0 && bottom_fit.circle.radius < circle.radius &&
-          (bottom_fit.circle.centre - circle.centre).norm() < circle.radius) {
-        bottom = bottom_fit.circle;
+      if (nadir_px) {
+        bottom_scale = FitBottomScale(inner_points, circle, *nadir_px,
+                                      1.0 + Median(offsets) / circle.radius, options.tukey_sigmas);
+      }
+      if (!bottom_scale) {
+        const CircleFit bottom_fit =
+            FitCircleRobust(inner_points, Circle{circle.centre, circle.radius + Median(offsets)},
+                            options.tukey_sigmas);
+        // The bottom rim looks smaller than the top one and lies inside it.
+        if (bottom_fit.circle.radius > 0.0 && bottom_fit.circle.radius < circle.radius &&
+            (bottom_fit.circle.centre - circle.centre).norm() < circle.radius) {
+          bottom = bottom_fit.circle;
+        }
       }
     }
     if (inner == Inner::kFree) {
       result.num_bottom_rim_points = static_cast<int>(inner_index.size());
-      result.bottom_rim_modelled = bottom.has_value();
+      result.bottom_rim_modelled = bottom.has_value() || bottom_scale.has_value();
+      result.bottom_rim_scale = bottom_scale.value_or(0.0);
     }
     fit = FitCircleRobust(points_at(index, false), circle, options.tukey_sigmas);
     fit.index = index;
@@ -735,10 +801,12 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
   result.edge_sigma_px = sigma;
   result.centre_px = circle.centre;
   result.radius_px = circle.radius + sigma * sigma / (2.0 * circle.radius);
-  const auto num = static_cast<double>(result.num_wedges);
+  // Fractions of the wedges that could give an edge.
+  const int usable = result.num_wedges - (result.narrow_wall_skipped ? result.num_narrow_wall : 0);
+  const auto num = static_cast<double>(usable);
   if (result.num_inliers < options.min_found_fraction * num) {
     result.error = "not found near the expected position (" + std::to_string(result.num_inliers) +
-                   " of " + std::to_string(result.num_wedges) + " wedges fit one circle)";
+                   " of " + std::to_string(usable) + " wedges fit one circle)";
     return result;
   }
   if (std::abs(result.radius_px / nominal_radius_px - 1.0) > options.max_radius_deviation) {
@@ -763,7 +831,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
   if (result.num_inliers < options.min_inlier_fraction * num) {
     char text[160];
     std::snprintf(text, sizeof(text), "poor fit: %d of %d wedges fit the circle, rms %.3f px",
-                  result.num_inliers, result.num_wedges, result.rms_px);
+                  result.num_inliers, usable, result.rms_px);
     result.error = text;
     return result;
   }

@@ -32,11 +32,25 @@
 //     on the rim's flank: a narrow wall merges with the rim) a fit of both
 //     steps that must explain the same pixels clearly better (RMS < 0.7x);
 //     the resolved bottom-rim points (x0 - x1 > 2 s) give the bottom rim's
-//     circle by a robust fit; (c) the wall term with x1 from that circle
-//     (else the ramp), until the circle settles. A wedge is dropped when its
-//     fit is not a clean step: contrast below `min_contrast`, RMS above
-//     `max_profile_rms_ratio` x the median, x0 more than 1 px off the coarse
-//     place, or it touches uncovered pixels.
+//     circle: given the nadir n of the tile the mosaic shows the hole from,
+//     it is the top rim scaled about n, (n + k (c - n), k r) (bore_view.h),
+//     and its one unknown k = h / (h + t) is fitted to those points (Gauss-
+//     Newton, Huber then Tukey weights); without a nadir (or if k does not
+//     settle in (0, 1)), a free circle by a robust fit; (c) the wall term
+//     with x1 from that circle (else the ramp), until the circle settles. A
+//     wedge is dropped when its fit is not a clean step: contrast below
+//     `min_contrast`, RMS above `max_profile_rms_ratio` x the median, x0 more
+//     than 1 px off the coarse place, or it touches uncovered pixels. With
+//     the nadir's circle, pass (c) also leaves out the wedges where the wall
+//     shows narrower than `min_wall_blurs` blurs (its width is
+//     (1 - k)(r - |c - n| cos a), a the angle from the direction to the
+//     nadir) if the rest span half the rim or more: such a band
+//     merges with the rim's step and its free contrast trades against x0
+//     (on texture, edges there scatter by 0.2-0.4 px and sit ~0.15 px in;
+//     a ring wall 2.0 blurs wide leaves the radius 0.020 px small, 2.3
+//     blurs 0.011 px, 2.5 blurs or wider ~0.008 px: r 200 px, 10 textures).
+//     The circle is fitted to the rest; its covariance grows with
+//     the gap (the sensitivity S below has no rows there).
 //  3. Robust circle fit to the edge points c + (r + x0) n(theta): Gauss-Newton
 //     on the radial distances, Huber then Tukey biweight IRLS with the scale
 //     from the median absolute residual.
@@ -49,7 +63,14 @@
 // ~16 mm diameter with the camera's axis within ~2 radii of its centre:
 // measured on synthetic holes, radius up to 0.17 px small (8 mm hole, axis
 // through it) and centre up to 0.07 px off, which the covariance does not
-// cover.
+// cover. Larger holes with the nadir near the rim show such a narrow arc
+// on one side: without a nadir (none given, or tiles blending over the
+// hole), or when it is more than half the rim, it stays in the fit: for a
+// 60 mm hole with the nadir 0.97 r from its centre, over 30 textures, the
+// centre 0.020 px away from the nadir and the diameter 0.023 px small
+// (0.008 and 0.010 px with the nadir). A resolved wall 2-5 px wide on a
+// textured surface leaves the radius ~0.008 px small (r 200 px, 40
+// textures), which the covariance does not cover either.
 //
 // Covariance of (cx, cy, r). The fit is linear in the edge points' radial
 // moves e: delta = S e, S = -(J'WJ)^-1 J'W (3 x n, W the final IRLS
@@ -69,6 +90,7 @@
 // border".
 #pragma once
 
+#include <optional>
 #include <string>
 
 #include <Eigen/Core>
@@ -92,9 +114,10 @@ struct CircleMeasureOptions {
   double min_inlier_fraction = 0.6;      // ... below this: poor fit
   double max_radius_deviation = 0.05;    // |r / nominal - 1| above this: not the expected hole
   double max_rms_px = 0.5;               // inlier RMS above this: not a rim (not found), px
-  double source_px = 1.0;      // size of a source (raw) pixel in image px: noise correlation floor
-  int max_passes = 5;          // edge + fit passes at most
-  double converged_px = 5e-3;  // stop when a pass moves centre and radius less, px
+  double source_px = 1.0;       // size of a source (raw) pixel in image px: noise correlation floor
+  double min_wall_blurs = 2.5;  // with a nadir: walls showing narrower, in blurs, left out
+  int max_passes = 5;           // edge + fit passes at most
+  double converged_px = 5e-3;   // stop when a pass moves centre and radius less, px
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
@@ -119,6 +142,9 @@ struct CircleMeasurement {
   double correlation_px = 0.0;       // arc length per independent edge error, px
   int num_bottom_rim_points = 0;     // wedges where the bore wall's bottom rim was resolved
   bool bottom_rim_modelled = false;  // ... enough for its circle, used in the later passes
+  double bottom_rim_scale = 0.0;  // k, the bottom rim about the nadir (0: none given or not found)
+  int num_narrow_wall = 0;  // wedges whose wall shows narrower than min_wall_blurs (nadir model)
+  bool narrow_wall_skipped = false;  // ... left out of the fit (they leave half the rim or more)
   int passes = 0;                    // edge + fit passes run
   Eigen::Vector2d coarse_centre_px = Eigen::Vector2d::Zero();  // step 1's centre
 
@@ -127,9 +153,12 @@ struct CircleMeasurement {
 
 // Measures the dark round hole of nominal radius `nominal_radius_px` whose
 // centre is expected near `expected_centre_px` (within the options' search
-// square). A data failure is a result with ok = false and `error` set.
+// square). `nadir_px`, if given, is the nadir of the camera whose picture
+// shows the hole, image px (bore_view.h): the bore's bottom rim is modelled
+// about it. A data failure is a result with ok = false and `error` set.
 // Preconditions: options.Check() is empty, nominal_radius_px > 0.
 CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
-                                double nominal_radius_px, const CircleMeasureOptions& options = {});
+                                double nominal_radius_px, const CircleMeasureOptions& options = {},
+                                const std::optional<Eigen::Vector2d>& nadir_px = std::nullopt);
 
 }  // namespace omm

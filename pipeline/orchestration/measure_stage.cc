@@ -25,6 +25,7 @@
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/measure/bore_view.h"
 #include "pipeline/measure/circle_measure.h"
 #include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/measure/scene_sensitivity.h"
@@ -62,6 +63,9 @@ struct LocatedFeature {
 
 // Hole fits run on this many threads (the 2-core machine the stages target).
 constexpr int kNumThreads = 2;
+// A hole is one tile's picture where the other tiles' blend weights sum to
+// less than this: their ghost bottom rim is under the mosaic's noise.
+constexpr double kMaxOtherTileWeight = 0.01;
 
 // Pure in its inputs: features are located concurrently.
 LocatedFeature LocateFeature(const FeatureSpec& spec, const SavedScene& saved,
@@ -86,9 +90,28 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const SavedScene& saved,
   const Eigen::Vector2d expected_px = grid.MosaicFromPart(*near_part);
   CircleMeasureOptions options;
   options.source_px = source_px;
+  // The bore's bottom rim shows scaled about the nadir of the tile the
+  // mosaic takes the hole from (bore_view.h); where tiles blend there are
+  // two such rims and the kernel fits one free circle instead.
+  const auto rendering =
+      RenderingTile(lens, saved.scene, *near_part, 0.5 * spec.diameter_mm, camera.width_px,
+                    camera.height_px, OrthoOptions{}.blend_band_px, kMaxOtherTileWeight);
+  std::optional<Eigen::Vector2d> nadir_px;
+  if (rendering) nadir_px = grid.MosaicFromPart(TileNadirMm(saved.scene, *rendering));
   const CircleMeasurement circle =
-      MeasureCircle(mosaic, expected_px, 0.5 * spec.diameter_mm / grid.gsd_mm, options);
+      MeasureCircle(mosaic, expected_px, 0.5 * spec.diameter_mm / grid.gsd_mm, options, nadir_px);
   report.extra = {{"expected_mosaic_px", Pair(expected_px)}, {"fit", circle.Brief()}};
+  std::string bore = "no bore wall resolved";
+  if (circle.bottom_rim_scale > 0.0) {
+    bore = fmt::format(
+        "bottom rim scaled by {:.4f} about {}'s nadir; wall too narrow on {} of {} wedges{}",
+        circle.bottom_rim_scale, saved.tile_images[*rendering], circle.num_narrow_wall,
+        circle.num_wedges, circle.narrow_wall_skipped ? ", left out" : "");
+  } else if (circle.bottom_rim_modelled) {
+    bore = nadir_px ? "bottom rim fitted free: its scale about the nadir did not settle"
+                    : "tiles blend over the hole: bottom rim fitted free";
+  }
+  report.extra.emplace_back("bore", bore);
   if (!circle.ok) {
     report.error = circle.error;
     return located;
