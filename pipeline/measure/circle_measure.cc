@@ -694,6 +694,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
   double sigma = 1.0;
   std::optional<Circle> bottom;        // without a nadir: a free circle
   std::optional<double> bottom_scale;  // with one: k, the bottom rim about the nadir
+  Eigen::Matrix2Xd bottom_points;      // ... fitted to these, resolved in pass (b)
   auto bottom_of = [&](const Circle& top) -> std::optional<Circle> {
     if (!bottom_scale) return bottom;
     return Circle{*nadir_px + *bottom_scale * (top.centre - *nadir_px), *bottom_scale * top.radius};
@@ -758,6 +759,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
       offsets.reserve(inner_index.size());
       for (int k : inner_index) offsets.push_back(pass.wedges[static_cast<size_t>(k)].step.x1);
       if (nadir_px) {
+        bottom_points = inner_points;
         bottom_scale = FitBottomScale(inner_points, circle, *nadir_px,
                                       1.0 + Median(offsets) / circle.radius, options.tukey_sigmas);
       }
@@ -775,13 +777,20 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
     if (inner == Inner::kFree) {
       result.num_bottom_rim_points = static_cast<int>(inner_index.size());
       result.bottom_rim_modelled = bottom.has_value() || bottom_scale.has_value();
-      result.bottom_rim_scale = bottom_scale.value_or(0.0);
     }
     fit = FitCircleRobust(points_at(index, false), circle, options.tukey_sigmas);
     fit.index = index;
     const double moved = std::max((fit.circle.centre - circle.centre).norm(),
                                   std::abs(fit.circle.radius - circle.radius));
     circle = fit.circle;
+    // k relates the bottom rim to the top rim as now placed (an early pass's
+    // rim can be off by a tenth of a px where a narrow wall merges with it).
+    if (bottom_scale) {
+      bottom_scale =
+          FitBottomScale(bottom_points, circle, *nadir_px, *bottom_scale, options.tukey_sigmas)
+              .value_or(*bottom_scale);
+    }
+    result.bottom_rim_scale = bottom_scale.value_or(0.0);
     band = std::clamp(4.0 * fit.scale, 1.0, options.rim_band_px);
     if (p >= 2 && moved < options.converged_px) break;
   }

@@ -35,22 +35,22 @@
 //     circle: given the nadir n of the tile the mosaic shows the hole from,
 //     it is the top rim scaled about n, (n + k (c - n), k r) (bore_view.h),
 //     and its one unknown k = h / (h + t) is fitted to those points (Gauss-
-//     Newton, Huber then Tukey weights); without a nadir (or if k does not
-//     settle in (0, 1)), a free circle by a robust fit; (c) the wall term
-//     with x1 from that circle (else the ramp), until the circle settles. A
-//     wedge is dropped when its fit is not a clean step: contrast below
-//     `min_contrast`, RMS above `max_profile_rms_ratio` x the median, x0 more
-//     than 1 px off the coarse place, or it touches uncovered pixels. With
-//     the nadir's circle, pass (c) also leaves out the wedges where the wall
-//     shows narrower than `min_wall_blurs` blurs (its width is
-//     (1 - k)(r - |c - n| cos a), a the angle from the direction to the
-//     nadir) if the rest span half the rim or more: such a band
-//     merges with the rim's step and its free contrast trades against x0
-//     (on texture, edges there scatter by 0.2-0.4 px and sit ~0.15 px in;
-//     a ring wall 2.0 blurs wide leaves the radius 0.020 px small, 2.3
-//     blurs 0.011 px, 2.5 blurs or wider ~0.008 px: r 200 px, 10 textures).
-//     The circle is fitted to the rest; its covariance grows with
-//     the gap (the sensitivity S below has no rows there).
+//     Newton, Huber then Tukey weights; refitted against the top rim after
+//     every pass); without a nadir (or if k does not settle in (0, 1)), a
+//     free circle by a robust fit; (c) the wall term with x1 from that
+//     circle (else the ramp), until the circle settles. A wedge is dropped
+//     when its fit is not a clean step: contrast below `min_contrast`, RMS
+//     above `max_profile_rms_ratio` x the median, x0 more than 1 px off the
+//     coarse place, or it touches uncovered pixels. With the nadir's circle,
+//     pass (c) also leaves out the wedges where the wall shows narrower than
+//     `min_wall_blurs` blurs (its width is (1 - k)(r - |c - n| cos a), a the
+//     angle from the direction to the nadir) if the rest span half the rim
+//     or more: such a band merges with the rim's step and its free contrast
+//     trades against x0 (on texture, edges there scatter by 0.2-0.4 px and
+//     sit ~0.15 px in; a ring wall 2.0 blurs wide leaves the radius 0.020
+//     px small, 2.3 blurs 0.011 px, 2.5 blurs or wider ~0.008 px: r 200 px,
+//     10 textures). The circle is fitted to the rest; its covariance grows
+//     with the gap (the sensitivity S below has no rows there).
 //  3. Robust circle fit to the edge points c + (r + x0) n(theta): Gauss-Newton
 //     on the radial distances, Huber then Tukey biweight IRLS with the scale
 //     from the median absolute residual.

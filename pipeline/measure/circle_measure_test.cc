@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -93,8 +94,10 @@ TEST(CircleMeasure, FoundFromAQuarterDiameterAway) {
 // places under the camera: the errors against the truth scatter as the
 // reported covariance says (standard deviation of error / sigma within
 // [0.8, 1.25], 200 draws: the sample standard deviation itself is good to
-// ~5 %), and are small.
-TEST(CircleMeasure, CovarianceMatchesTheScatter) {
+// ~5 %), and are small. With `given_nadir`, MeasureCircle is told the
+// camera's nadir (as the measure stage does) and models the bottom rim
+// about it.
+void ExpectScatterMatchesCovariance(bool given_nadir) {
   std::mt19937_64 rng(2024);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   std::vector<double> z[3];
@@ -110,7 +113,10 @@ TEST(CircleMeasure, CovarianceMatchesTheScatter) {
     const ImageF image = RenderSyntheticHole(hole);
     const Eigen::Vector2d guess =
         hole.centre_px + 0.2 * radius * Eigen::Vector2d(uniform(rng) - 0.5, uniform(rng) - 0.5);
-    const CircleMeasurement m = MeasureCircle(image, guess, std::round(radius));
+    // DemoHole's bottom rim: shifted by kDepthRatio of the way to the nadir.
+    std::optional<Eigen::Vector2d> nadir;
+    if (given_nadir) nadir = hole.centre_px + hole.bottom_shift_px / kDepthRatio;
+    const CircleMeasurement m = MeasureCircle(image, guess, std::round(radius), {}, nadir);
     ASSERT_TRUE(m.ok) << k << ": " << m.error;
     const Eigen::Vector3d error(m.centre_px.x() - hole.centre_px.x(),
                                 m.centre_px.y() - hole.centre_px.y(), m.radius_px - hole.radius_px);
@@ -136,6 +142,12 @@ TEST(CircleMeasure, CovarianceMatchesTheScatter) {
               radius_mean, radius_rms);
   EXPECT_LT(centre_rms, 0.02);
   EXPECT_LT(radius_rms, 0.02);
+}
+
+TEST(CircleMeasure, CovarianceMatchesTheScatter) { ExpectScatterMatchesCovariance(false); }
+
+TEST(CircleMeasure, CovarianceMatchesTheScatterGivenTheNadir) {
+  ExpectScatterMatchesCovariance(true);
 }
 
 // The bore wall inside the rim, as a ring (the camera's axis through the
