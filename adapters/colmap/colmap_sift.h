@@ -36,7 +36,10 @@ struct ColmapSiftOptions {
   std::string binary = "colmap";  // the program: a name looked up in PATH, or a path
   // Detections per image (SiftExtraction.max_num_features); each detection
   // gives up to two keypoints (two dominant orientations), so up to 2x this.
-  int max_num_features = 8192;
+  // Half COLMAP's 8192: on the demo's tiles the registration is the same
+  // (holes 0.0267 vs 0.0266 raw px RMS, matches 0.024 px), the exhaustive
+  // matching 5x faster (27 s vs 133 s on 2 cores).
+  int max_num_features = 4000;
   int num_threads = 2;  // extraction and matching threads
   // The verification RANSAC's inlier distance (SiftMatching.max_error), px.
   double max_error_px = 4.0;
