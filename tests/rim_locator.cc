@@ -8,6 +8,8 @@
 
 #include <Eigen/Dense>
 
+#include "pipeline/core/statistics.h"
+
 namespace omm::testing {
 namespace {
 
@@ -23,12 +25,6 @@ double Sample(const ImageF& image, double x, double y) {
   if (v00 == 0.0 || v01 == 0.0 || v10 == 0.0 || v11 == 0.0) return kNaN;
   const double ax = x - fx, ay = y - fy;
   return (1 - ay) * ((1 - ax) * v00 + ax * v01) + ay * ((1 - ax) * v10 + ax * v11);
-}
-
-double Median(std::vector<double> values) {
-  const size_t mid = values.size() / 2;
-  std::nth_element(values.begin(), values.begin() + static_cast<long>(mid), values.end());
-  return values[mid];
 }
 
 struct Circle {

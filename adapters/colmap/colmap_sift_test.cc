@@ -24,6 +24,7 @@
 #include "adapters/mrcal/lens.h"
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/statistics.h"
 #include "pipeline/simulate/simulation.h"
 
 namespace omm {
@@ -275,11 +276,6 @@ TEST(ColmapSiftMatches, FailingOrHangingColmapIsAReportedFailure) {
 }
 
 // ------------------------------------------------------- the real binary
-
-double Median(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 Eigen::Isometry3d TruthPose(const SimulationTruth& truth, int tile) {
   Eigen::Isometry3d pose = truth.cam_from_part;

@@ -8,16 +8,10 @@
 
 #include "adapters/mrcal/lens.h"
 #include "adapters/mrcal/mrcal_problem.h"
+#include "pipeline/core/statistics.h"
 
 namespace omm {
 namespace {
-
-double Median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  const size_t mid = values.size() / 2;
-  std::nth_element(values.begin(), values.begin() + mid, values.end());
-  return values[mid];
-}
 
 }  // namespace
 

@@ -9,6 +9,7 @@
 #include <opencv2/core.hpp>
 
 #include "adapters/opencv/image_io.h"
+#include "pipeline/core/statistics.h"
 
 namespace omm {
 namespace {
@@ -72,11 +73,6 @@ std::vector<double> DistancesToReference(const PlateObservation& o, const Eigen:
     used[static_cast<size_t>(j)] = true;
   }
   return d;
-}
-
-double Median(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
 }
 
 #define SKIP_WITHOUT_DATA()                                                       \

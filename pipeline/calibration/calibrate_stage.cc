@@ -16,20 +16,13 @@
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
 
 namespace omm {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double Median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), mid, values.end());
-  if (values.size() % 2 == 1) return *mid;
-  return 0.5 * (*mid + *std::max_element(values.begin(), mid));
-}
 
 CalibrationOptions SolveOptions(const CameraSpec& camera, int width_px, int height_px,
                                 const std::string& lens_model,

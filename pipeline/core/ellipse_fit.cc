@@ -7,6 +7,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 
+#include "pipeline/core/statistics.h"
+
 namespace omm {
 namespace {
 
@@ -28,12 +30,6 @@ Axes AxesOf(const Eigen::Matrix2d& shape) {
 
 Eigen::Vector2d PointOn(const Ellipse& ellipse, double t, const Axes& axes) {
   return ellipse.centre_px + axes.major * std::cos(t) * axes.u + axes.minor * std::sin(t) * axes.v;
-}
-
-double Median(std::vector<double> values) {
-  const auto mid = values.begin() + values.size() / 2;
-  std::nth_element(values.begin(), mid, values.end());
-  return *mid;
 }
 
 bool IsPositiveDefinite(const Eigen::Matrix2d& m) {

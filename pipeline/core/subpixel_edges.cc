@@ -7,6 +7,8 @@
 
 #include <Eigen/Cholesky>
 
+#include "pipeline/core/statistics.h"
+
 namespace omm {
 namespace {
 
@@ -39,12 +41,6 @@ bool Interpolate(const ImageF& image, double x, double y, double* value) {
   }
   *value = sum;
   return true;
-}
-
-double Median(std::vector<double> values) {
-  const auto mid = values.begin() + values.size() / 2;
-  std::nth_element(values.begin(), mid, values.end());
-  return *mid;
 }
 
 // level(p) = a + b . (p - origin), least squares with one round of rejecting

@@ -12,18 +12,13 @@
 
 #include <Eigen/Dense>
 
+#include "pipeline/core/statistics.h"
+
 namespace omm {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-double Median(std::vector<double> values) {
-  if (values.empty()) return kNaN;
-  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), mid, values.end());
-  return *mid;
-}
 
 bool Covered(const ImageF& image, Eigen::Index row, Eigen::Index col) {
   return row >= 0 && col >= 0 && row < image.rows() && col < image.cols() &&

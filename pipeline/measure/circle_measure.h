@@ -68,9 +68,16 @@
 // hole), or when it is more than half the rim, it stays in the fit: for a
 // 60 mm hole with the nadir 0.97 r from its centre, over 30 textures, the
 // centre 0.020 px away from the nadir and the diameter 0.023 px small
-// (0.008 and 0.010 px with the nadir). A resolved wall 2-5 px wide on a
-// textured surface leaves the radius ~0.008 px small (r 200 px, 40
-// textures), which the covariance does not cover either.
+// (0.008 and 0.010 px with the nadir). A resolved wall 2-5 px wide moves
+// the rim by 0.005-0.01 px, inwards or outwards with the blur's SHAPE: the
+// step model assumes a Gaussian, a real blur (pixel box, the mosaic's
+// B-spline) leaves a residual odd about the rim, and the wall model's
+// one-sided terms (outer ramp, wall step) absorb part of it where the
+// ramp-only model's two-sided ramps do not (1-D fits on exact profiles:
+// Gaussian 0, synthetic_hole's kernel -0.008 to -0.010 px, a simulated
+// tile resampled by the B-spline +0.005 to +0.007 px). Not covered by the
+// covariance either; a fix would model the blur's shape (e.g. the mean
+// residual profile of the image's ramp-only fits) at both rims.
 //
 // Covariance of (cx, cy, r). The fit is linear in the edge points' radial
 // moves e: delta = S e, S = -(J'WJ)^-1 J'W (3 x n, W the final IRLS
