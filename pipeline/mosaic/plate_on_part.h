@@ -97,6 +97,18 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
                             const CameraModel& camera, const PlaneBundleInput& registered_input,
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options);
 
+// FindPlateOnPart's first step, DetectPlate in every tile (`whole`, per tile):
+// it needs no registration, so the mosaic stage runs it beside RegisterTiles
+// and hands it to the overload below (whose `seconds` leave it out).
+std::vector<PlateObservation> DetectWholePlates(const std::vector<ImageF>& tiles,
+                                               const BoardSpec& board,
+                                               const PlateOnPartOptions& options);
+PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
+                            const CameraModel& camera, const PlaneBundleInput& registered_input,
+                            const PlaneScene& registered_scene,
+                            const std::vector<PlateObservation>& whole,
+                            const PlateOnPartOptions& options);
+
 // The calibration's information on the intrinsics: the inverse of their
 // covariance (CalibrationUncertainty::IntrinsicsCovariance, N x N). Empty
 // information (with why_held) when they cannot be refined: a parameter the
@@ -114,7 +126,9 @@ IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance)
 struct FinalAdjustmentOptions {
   PlaneBundleOptions bundle;
   bool compute_covariance = true;  // the joint covariance (PlaneScene::covariance)
-  bool plate_scale_check = true;   // the second solve, with the plate's scale free
+  // The second solve, with the plate's scale free (false: the caller runs
+  // CheckPlateScale itself).
+  bool plate_scale_check = true;
   // Plate observations whose residual exceeds this many of their sigmas are
   // dropped and the scene solved again (a mark misread, a speck on the plate).
   double plate_outlier_sigmas = 5.0;
@@ -168,6 +182,15 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
                                         const PlaneScene& registered_scene,
                                         const PlateOnPart& plate, const IntrinsicsPrior& prior,
                                         const FinalAdjustmentOptions& options);
+
+// The scale check's solve (the final one with the plate's scale free) from
+// AdjustWithPlateAndPrior's result with options.plate_scale_check false: on
+// its own so that the mosaic stage runs it beside the orthorectification,
+// which does not need it. adjusted.scale_check when there is no such solve
+// (no plate used, or its scale free in the final solve already).
+PlateScaleCheck CheckPlateScale(const CameraModel& camera, const PlateOnPart& plate,
+                                const FinalAdjustment& adjusted,
+                                const FinalAdjustmentOptions& options);
 
 // sigma of the similarity scale of `table_pos` (the scene's adjusted table
 // positions) about the commanded ones, from the scene covariance's table

@@ -266,26 +266,44 @@ void RunMosaicStage(StageContext& context) {
     if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
     sift_matches = sift.matches.pairs;
   }
+  // The whole plates on the part need no registration: detected beside it,
+  // on one thread, filling the cores its solves leave idle.
+  PlateOnPartOptions plate_options;
+  plate_options.height_mm = project.plate_height_mm;
+  double whole_plates_seconds = 0.0;
+  std::future<std::vector<PlateObservation>> whole_plates;
+  if (project.board) {
+    whole_plates = std::async(std::launch::async, [&] {
+      const auto start = std::chrono::steady_clock::now();
+      PlateOnPartOptions one_thread = plate_options;
+      one_thread.num_threads = 1;
+      std::vector<PlateObservation> whole = DetectWholePlates(tiles, *project.board, one_thread);
+      whole_plates_seconds = SecondsSince(start);
+      return whole;
+    });
+  }
   TileRegistration registration = RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera,
                                                 register_options, sift_matches);
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 
   // The final adjustment: the plate on the part, the intrinsics prior.
+  const auto plate_start = std::chrono::steady_clock::now();
   PlateOnPart plate;
   if (project.board) {
-    PlateOnPartOptions plate_options;
-    plate_options.height_mm = project.plate_height_mm;
     plate = FindPlateOnPart(tiles, *project.board, camera, registration.input, registration.scene,
-                            plate_options);
+                            whole_plates.get(), plate_options);
   } else {
     plate.brief = "no plate on the part: project.yaml has no board";
   }
+  // The wait for the whole plates included.
+  const double plate_seconds = SecondsSince(plate_start);
   spdlog::info("mosaic: {}", plate.brief);
   FinalAdjustmentOptions final_options;
   final_options.bundle = register_options.bundle;
-  const FinalAdjustment adjusted = AdjustWithPlateAndPrior(
-      camera, registration.input, registration.scene, plate, prior, final_options);
+  final_options.plate_scale_check = false;  // below, beside the orthorectification
+  FinalAdjustment adjusted = AdjustWithPlateAndPrior(camera, registration.input, registration.scene,
+                                                     plate, prior, final_options);
   spdlog::info("mosaic: final {}", adjusted.summary.brief);
   if (adjusted.observation_sigma_scale > 1.0) {
     spdlog::info(
@@ -306,7 +324,17 @@ void RunMosaicStage(StageContext& context) {
   if (context.progress) context.progress(num_tiles + 1, num_tiles + 3, "orthorectify");
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
+  // The scale check only feeds the report: its solve (on a core the
+  // exposure compensation leaves idle) beside the orthorectification.
+  double scale_check_seconds = 0.0;
+  std::future<PlateScaleCheck> scale_check = std::async(std::launch::async, [&] {
+    const auto start = std::chrono::steady_clock::now();
+    PlateScaleCheck check = CheckPlateScale(camera, plate, adjusted, final_options);
+    scale_check_seconds = SecondsSince(start);
+    return check;
+  });
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options);
+  adjusted.scale_check = scale_check.get();
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) throw StageFailedError(Stage::kMosaic, ortho.summary.brief);
 
@@ -400,9 +428,13 @@ void RunMosaicStage(StageContext& context) {
                                  {"features", registration.features_seconds},
                                  {"matching", registration.matching_seconds},
                                  {"adjustment", registration.adjustment_seconds},
-                                 {"plate_detection", plate.seconds},
+                                 // in the background during the registration
+                                 {"whole_plates", whole_plates_seconds},
+                                 {"plate_detection", plate_seconds},
                                  {"intrinsics_prior", prior_seconds},
                                  {"final_adjustment", adjusted.seconds},
+                                 // in the background during the orthorectification
+                                 {"plate_scale_check", scale_check_seconds},
                                  {"ortho_geometry", ortho.summary.geometry_seconds},
                                  {"ortho_exposure", ortho.summary.exposure_seconds},
                                  {"ortho_resample", ortho.summary.resample_seconds},
