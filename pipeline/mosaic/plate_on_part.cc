@@ -99,48 +99,27 @@ PlaneBundleInput WithPlate(const PlaneBundleInput& registered, const PlateOnPart
 
 }  // namespace
 
-std::vector<PlateObservation> DetectWholePlates(const std::vector<ImageF>& tiles,
-                                               const BoardSpec& board,
-                                               const PlateOnPartOptions& options) {
-  if (const std::string e = options.Check(); !e.empty())
-    throw InputError("", "plate on the part: " + e);
-  std::vector<PlateObservation> whole(tiles.size());
-  ParallelFor(static_cast<int>(tiles.size()), options.num_threads, [&](int i) {
-    GrayImage image;
-    image.pixels = tiles[i];
-    whole[i] = DetectPlate(image, board, options.detection);
-  });
-  return whole;
-}
-
 PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
                             const CameraModel& camera, const PlaneBundleInput& registered_input,
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options) {
-  const Clock::time_point start = Clock::now();
-  const std::vector<PlateObservation> whole = DetectWholePlates(tiles, board, options);
-  PlateOnPart result =
-      FindPlateOnPart(tiles, board, camera, registered_input, registered_scene, whole, options);
-  result.seconds = Seconds(start);
-  return result;
-}
-
-PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
-                            const CameraModel& camera, const PlaneBundleInput& registered_input,
-                            const PlaneScene& registered_scene,
-                            const std::vector<PlateObservation>& whole,
-                            const PlateOnPartOptions& options) {
   if (const std::string e = options.Check(); !e.empty())
     throw InputError("", "plate on the part: " + e);
-  if (tiles.size() != registered_scene.table_pos_mm.size() || whole.size() != tiles.size())
-    throw InputError("", "plate on the part: tiles, whole-plate detections and the scene's table "
-                         "positions differ in number");
+  if (tiles.size() != registered_scene.table_pos_mm.size())
+    throw InputError("",
+                     "plate on the part: tiles and the scene's table positions differ in number");
   const Clock::time_point start = Clock::now();
   const int num_tiles = static_cast<int>(tiles.size());
   PlateOnPart result;
   result.marks.mark_uv_mm = BoardPoints(board).topRows<2>();
   result.marks_per_tile.assign(num_tiles, 0);
 
-  // 1. Whole plates: `whole`.
+  // 1. Whole plates.
+  std::vector<PlateObservation> whole(num_tiles);
+  ParallelFor(num_tiles, options.num_threads, [&](int i) {
+    GrayImage image;
+    image.pixels = tiles[i];
+    whole[i] = DetectPlate(image, board, options.detection);
+  });
   const int num_marks = static_cast<int>(result.marks.mark_uv_mm.cols());
   // Per tile and mark: the located centre and its sigma (sigma 0: not seen).
   std::vector<Eigen::Matrix2Xd> q_px(num_tiles, Eigen::Matrix2Xd::Zero(2, num_marks));
@@ -433,7 +412,8 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
     result.scale_check.scale_minus_1_ppm = (result.scene.plates[0].scale - 1) * 1e6;
     result.scale_check.sigma_ppm = std::sqrt(std::max(0.0, result.scene.covariance(s, s))) * 1e6;
   }
-  if (options.plate_scale_check) result.scale_check = CheckPlateScale(camera, plate, result, options);
+  if (options.plate_scale_check)
+    result.scale_check = CheckPlateScale(camera, plate, result, options);
   result.seconds = Seconds(start);
   return result;
 }

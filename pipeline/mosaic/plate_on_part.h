@@ -97,18 +97,6 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
                             const CameraModel& camera, const PlaneBundleInput& registered_input,
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options);
 
-// FindPlateOnPart's first step, DetectPlate in every tile (`whole`, per tile):
-// it needs no registration, so the mosaic stage runs it beside RegisterTiles
-// and hands it to the overload below (whose `seconds` leave it out).
-std::vector<PlateObservation> DetectWholePlates(const std::vector<ImageF>& tiles,
-                                               const BoardSpec& board,
-                                               const PlateOnPartOptions& options);
-PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
-                            const CameraModel& camera, const PlaneBundleInput& registered_input,
-                            const PlaneScene& registered_scene,
-                            const std::vector<PlateObservation>& whole,
-                            const PlateOnPartOptions& options);
-
 // The calibration's information on the intrinsics: the inverse of their
 // covariance (CalibrationUncertainty::IntrinsicsCovariance, N x N). Empty
 // information (with why_held) when they cannot be refined: a parameter the

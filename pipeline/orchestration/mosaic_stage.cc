@@ -266,38 +266,21 @@ void RunMosaicStage(StageContext& context) {
     if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
     sift_matches = sift.matches.pairs;
   }
-  // The whole plates on the part need no registration: detected beside it,
-  // on one thread, filling the cores its solves leave idle.
-  PlateOnPartOptions plate_options;
-  plate_options.height_mm = project.plate_height_mm;
-  double whole_plates_seconds = 0.0;
-  std::future<std::vector<PlateObservation>> whole_plates;
-  if (project.board) {
-    whole_plates = std::async(std::launch::async, [&] {
-      const auto start = std::chrono::steady_clock::now();
-      PlateOnPartOptions one_thread = plate_options;
-      one_thread.num_threads = 1;
-      std::vector<PlateObservation> whole = DetectWholePlates(tiles, *project.board, one_thread);
-      whole_plates_seconds = SecondsSince(start);
-      return whole;
-    });
-  }
   TileRegistration registration = RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera,
                                                 register_options, sift_matches);
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 
   // The final adjustment: the plate on the part, the intrinsics prior.
-  const auto plate_start = std::chrono::steady_clock::now();
   PlateOnPart plate;
   if (project.board) {
+    PlateOnPartOptions plate_options;
+    plate_options.height_mm = project.plate_height_mm;
     plate = FindPlateOnPart(tiles, *project.board, camera, registration.input, registration.scene,
-                            whole_plates.get(), plate_options);
+                            plate_options);
   } else {
     plate.brief = "no plate on the part: project.yaml has no board";
   }
-  // The wait for the whole plates included.
-  const double plate_seconds = SecondsSince(plate_start);
   spdlog::info("mosaic: {}", plate.brief);
   FinalAdjustmentOptions final_options;
   final_options.bundle = register_options.bundle;
@@ -428,9 +411,7 @@ void RunMosaicStage(StageContext& context) {
                                  {"features", registration.features_seconds},
                                  {"matching", registration.matching_seconds},
                                  {"adjustment", registration.adjustment_seconds},
-                                 // in the background during the registration
-                                 {"whole_plates", whole_plates_seconds},
-                                 {"plate_detection", plate_seconds},
+                                 {"plate_detection", plate.seconds},
                                  {"intrinsics_prior", prior_seconds},
                                  {"final_adjustment", adjusted.seconds},
                                  // in the background during the orthorectification
