@@ -571,6 +571,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   const int num_phases = options.robust_tukey_c > 0 ? 2 : 1;
   for (int phase = 0; phase < num_phases; ++phase) {
     converged = false;
+    double last_step_px = 0.0;  // of the previous iteration (0: none yet)
     const int max_iterations = phase == 0 ? options.max_iterations : options.max_robust_iterations;
     for (int it = 0; it < max_iterations && !converged; ++it) {
       // Phase 1 starts where phase 0 converged: q, gain and offset, and so
@@ -612,12 +613,25 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       const Eigen::Vector4d step = normal.ldlt().solve(Eigen::Vector4d(b0, b1, b2, b3));
       if (!step.allFinite()) return match;
       ++match.iterations;
-      converged = step.head<2>().norm() < options.convergence_px;
+      const double step_px = step.head<2>().norm();
+      converged = step_px < options.convergence_px;
       if (converged) break;  // the samples stay those of q (within convergence_px of q + step)
       q += step.head<2>();
       gain += step(2);
       offset += step(3);
       if ((q - start).norm() > options.max_refinement_px) return match;
+      // The steps contract by ~rho = step / last step: the remaining ones sum
+      // to ~rho / (1 - rho) step. Below convergence_px this step is the last
+      // (Gauss-Newton contracts fast: one resampling of the patch fewer for
+      // two thirds of the demo's matches); the samples stay those before it,
+      // within 10 convergence_px. Only small, fast-contracting steps: a
+      // looser test accepted the slow, erratic matches of a bore's wall
+      // (plain least squares, low-texture seed 104: 371 -> 386 matches).
+      const double rho = last_step_px > 0 ? step_px / last_step_px : 1.0;
+      converged = step_px < 10 * options.convergence_px && rho < 0.5 &&
+                  rho / (1 - rho) * step_px < options.convergence_px;
+      if (converged) break;
+      last_step_px = step_px;
     }
     if (!converged) break;
   }

@@ -111,7 +111,9 @@ struct PatchMatchOptions {
   // normalised tile: robust sigmas of the tile), else it has no texture.
   double min_template_std = 0.15;
   int max_iterations = 15;            // Gauss-Newton iterations of the template match
-  double convergence_px = 1e-4;       // stop when the update is below this, px
+  // Stop when the position's remaining error is below this, px: the update,
+  // or the sum of the next ones predicted from the last two's contraction.
+  double convergence_px = 1e-4;
   double max_refinement_px = 1.5;     // the refined position may move this far from the NCC peak
   // Template pixels whose residual exceeds this many robust sigmas (1.4826
   // MAD) get no weight (Tukey's biweight, iterated from the plain
