@@ -237,9 +237,11 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
     estimate.brief = "no neighbouring tiles";
     return estimate;
   }
-  std::vector<std::vector<Level>> pyramids;
-  pyramids.reserve(tiles.size());
-  for (const ImageF& tile : tiles) pyramids.push_back(Pyramid(tile, options));
+  // The tiles' pyramids in parallel too: on one thread they were two thirds
+  // of the motion's 0.1 s (demo).
+  std::vector<std::vector<Level>> pyramids(tiles.size());
+  ParallelFor(static_cast<int>(tiles.size()), options.num_threads,
+              [&](int i) { pyramids[i] = Pyramid(tiles[i], options); });
   const int coarse_factor = pyramids[0][0].factor;
   std::vector<Eigen::Vector2d> dt_mm(num_pairs);
   for (int k = 0; k < num_pairs; ++k)

@@ -31,7 +31,7 @@ struct ImageMotionOptions {
   // below) must reach this factor, else the motion is ambiguous (not ok).
   // Measured 3.1-8.7 on the simulator's presets.
   double min_margin = 1.5;
-  int num_threads = 1;  // the pairs' surfaces on this many threads
+  int num_threads = 1;  // the tiles' pyramids and the pairs' surfaces on this many threads
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
