@@ -3,7 +3,7 @@
 // Optimisers (adapters/ceres) need q = project(p_cam; intrinsics) and its
 // Jacobians but must not depend on the adapter that implements the lens model
 // (adapters/mrcal): the stage that wires them passes an implementation of this
-// interface (pipeline/mosaic/mrcal_projection.h wraps mrcal_project).
+// interface (adapters/mrcal/mrcal_lens_projection.h wraps mrcal_project).
 #pragma once
 
 #include <Eigen/Core>

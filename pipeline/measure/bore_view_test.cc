@@ -4,8 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include "adapters/mrcal/mrcal_lens_projection.h"
 #include "pipeline/measure/scene_sensitivity.h"
-#include "pipeline/mosaic/mrcal_projection.h"
 #include "pipeline/mosaic/synthetic_plane.h"
 
 namespace omm {

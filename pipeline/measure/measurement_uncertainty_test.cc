@@ -8,8 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "adapters/mrcal/mrcal_lens_projection.h"
 #include "pipeline/measure/scene_sensitivity.h"
-#include "pipeline/mosaic/mrcal_projection.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 #include "pipeline/mosaic/synthetic_plane.h"

@@ -2,8 +2,8 @@
 
 #include "adapters/ceres/plane_bundle.h"
 #include "adapters/mrcal/lens.h"
+#include "adapters/mrcal/mrcal_lens_projection.h"
 #include "pipeline/core/error.h"
-#include "pipeline/mosaic/mrcal_projection.h"
 
 namespace omm {
 

@@ -10,10 +10,10 @@
 
 #include "adapters/ceres/plane_bundle.h"
 #include "adapters/mrcal/lens.h"
+#include "adapters/mrcal/mrcal_lens_projection.h"
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
-#include "pipeline/mosaic/mrcal_projection.h"
 #include "pipeline/mosaic/plane_seed.h"
 
 namespace omm {

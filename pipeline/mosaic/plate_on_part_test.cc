@@ -15,7 +15,7 @@
 #include <Eigen/Dense>
 
 #include "adapters/ceres/plane_bundle.h"
-#include "pipeline/mosaic/mrcal_projection.h"
+#include "adapters/mrcal/mrcal_lens_projection.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 #include "pipeline/mosaic/synthetic_plane.h"
 

@@ -21,6 +21,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "adapters/mrcal/mrcal_lens_projection.h"
 #include "adapters/opencv/image_io.h"
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
@@ -29,7 +30,6 @@
 #include "pipeline/measure/circle_measure.h"
 #include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/measure/scene_sensitivity.h"
-#include "pipeline/mosaic/mrcal_projection.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/orchestration/stage.h"
 

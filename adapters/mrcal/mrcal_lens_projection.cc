@@ -1,4 +1,4 @@
-#include "pipeline/mosaic/mrcal_projection.h"
+#include "adapters/mrcal/mrcal_lens_projection.h"
 
 #include <algorithm>
 #include <utility>
