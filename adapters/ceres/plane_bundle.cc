@@ -12,15 +12,12 @@
 #include <ceres/ceres.h>
 
 #include "adapters/ceres/plane_costs.h"
+#include "pipeline/core/timing.h"
 
 namespace omm {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 // The Ceres parameter blocks: copies of the scene's values in the layout the
 // cost functions expect (track points alias scene->track_xy_mm's columns).

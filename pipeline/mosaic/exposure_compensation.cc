@@ -9,6 +9,8 @@
 
 #include <Eigen/Dense>
 
+#include "pipeline/core/statistics.h"
+
 namespace omm {
 
 VignettingFrame VignettingFrame::Of(const CameraModel& camera) {
@@ -31,13 +33,6 @@ std::string ExposureOptions::Check() const {
 }
 
 namespace {
-
-double Median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), mid, values.end());
-  return *mid;
-}
 
 // Consensus radiance of each sample given the exposures (weighted least squares).
 void SolveRadiance(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
@@ -76,6 +71,7 @@ std::vector<double> RelativeResiduals(const std::vector<ExposureObservation>& ob
 // 10 % of it: a selection among all observations on every iteration was half
 // of the estimation's time.
 double RobustSigma(const std::vector<double>& e, double near_sigma = 0.0) {
+  if (e.empty()) return 0.0;
   const size_t rank = e.size() / 2;  // Median's element
   if (near_sigma > 0.0) {
     const double lo = 0.9 * near_sigma / 1.4826, hi = 1.1 * near_sigma / 1.4826;

@@ -12,6 +12,7 @@
 #include "adapters/mrcal/lens.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/timing.h"
 #include "pipeline/mosaic/ortho_sampling.h"
 
 namespace omm {
@@ -28,10 +29,6 @@ std::string OrthoOptions::Check() const {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 float SampleBilinear(const ImageF& image, const Eigen::Vector2d& q) {
   const int ix = static_cast<int>(q.x()), iy = static_cast<int>(q.y());

@@ -14,6 +14,7 @@
 #include "pipeline/calibration/perspective_bias.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/timing.h"
 #include "pipeline/mosaic/plane_seed.h"
 
 namespace omm {
@@ -39,10 +40,6 @@ std::string FinalAdjustmentOptions::Check() const {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double Seconds(Clock::time_point since) {
-  return std::chrono::duration<double>(Clock::now() - since).count();
-}
 
 // cam_from_plate with the table at table_pos_mm (plane_scene.h's plate model
 // with s = 1: plate (u, v, w) -> (x, y, h) + [M(theta) 0; 0 -1] (u, v, w)).
@@ -135,7 +132,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
   }
   if (result.whole_in_tiles.empty()) {
     result.brief = "no plate on the part: the whole plate is in no tile";
-    result.seconds = Seconds(start);
+    result.seconds = SecondsSince(start);
     return result;
   }
 
@@ -158,7 +155,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
         SeedPlaneScene(camera, WithPlate(registered_input, whole_only), &seeded);
     if (!seed.ok) {
       result.brief = "plate on the part not used: seeding its pose failed: " + seed.why_failed;
-      result.seconds = Seconds(start);
+      result.seconds = SecondsSince(start);
       return result;
     }
     result.initial_pose = seeded.plates[0];
@@ -251,7 +248,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
         << result.observations.size() << " marks in " << num_seen << " tile(s); height "
         << result.height_source;
   result.brief = brief.str();
-  result.seconds = Seconds(start);
+  result.seconds = SecondsSince(start);
   return result;
 }
 
@@ -386,7 +383,7 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
     FinalAdjustment without = AdjustWithPlateAndPrior(camera, registered_input, registered_scene,
                                                       PlateOnPart{}, prior, options);
     without.plate_not_used = why_not_used;
-    without.seconds = Seconds(start);
+    without.seconds = SecondsSince(start);
     return without;
   }
   // Ceres' diagonal blocks are symmetric to rounding only; the saved matrix
@@ -414,7 +411,7 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   }
   if (options.plate_scale_check)
     result.scale_check = CheckPlateScale(camera, plate, result, options);
-  result.seconds = Seconds(start);
+  result.seconds = SecondsSince(start);
   return result;
 }
 

@@ -14,6 +14,7 @@
 #include "adapters/mrcal/lens.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/timing.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 
 namespace omm {
@@ -51,10 +52,6 @@ std::string RegisterTilesOptions::Check() const {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double Seconds(Clock::time_point since) {
-  return std::chrono::duration<double>(Clock::now() - since).count();
-}
 
 // Homography b ~ H a by the normalised DLT (Hartley & Zisserman, alg. 4.2).
 Eigen::Matrix3d FitHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b) {
@@ -227,7 +224,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
   });
   for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());
-  result.features_seconds = Seconds(t0);
+  result.features_seconds = SecondsSince(t0);
 
   // 2. Image motion per table mm from nearest-neighbour pairs.
   t0 = Clock::now();
@@ -264,7 +261,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       EstimateImageMotion(normalized, commanded_table_pos_mm, neighbour_pairs, motion_options);
   result.motion_brief = motion.brief;
   if (!motion.ok) {
-    result.matching_seconds = Seconds(t0);
+    result.matching_seconds = SecondsSince(t0);
     result.tiles_held_by_prior.resize(num_tiles);
     for (int i = 0; i < num_tiles; ++i) result.tiles_held_by_prior[i] = i;
     result.brief = "registration UNUSABLE: " + motion.brief;
@@ -569,7 +566,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     pair.usable = pair.num_inliers + pair.num_tag_corners >= options.min_pair_matches;
     if (!pair.usable) pair_matches[p].clear();
   }
-  result.matching_seconds = Seconds(t0);
+  result.matching_seconds = SecondsSince(t0);
 
   // A tile without a usable pair is placed by nothing but table.csv: only
   // acceptable when its image does not contradict it.
@@ -751,7 +748,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   result.scene = adjustment.scene;
   result.seed = adjustment.seed;
   result.bundle = adjustment.summary;
-  result.adjustment_seconds = Seconds(t0);
+  result.adjustment_seconds = SecondsSince(t0);
 
   // Summary.
   const Eigen::Matrix2Xd& res = result.scene.residual_px;

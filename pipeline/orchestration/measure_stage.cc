@@ -26,6 +26,7 @@
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/timing.h"
 #include "pipeline/measure/bore_view.h"
 #include "pipeline/measure/circle_measure.h"
 #include "pipeline/measure/measurement_uncertainty.h"
@@ -41,10 +42,6 @@ namespace fs = std::filesystem;
 constexpr const char* kSceneName = "mosaic/scene.json";
 // A deviation from the CMM beyond this many sigmas is flagged.
 constexpr double kFlagSigmas = 3.0;
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.y()}; }
 

@@ -24,6 +24,7 @@
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/timing.h"
 #include "pipeline/mosaic/ortho_file.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/plate_on_part.h"
@@ -41,10 +42,6 @@ constexpr const char* kSceneName = "mosaic/scene.json";
 constexpr const char* kColmapDirName = "colmap";
 constexpr const char* kSolveRecordName = "calibration/solve.json";
 constexpr int kMosaicBitDepth = 16;
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.y()}; }
 
