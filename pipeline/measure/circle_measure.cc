@@ -470,6 +470,25 @@ struct CircleFit {
   Eigen::Matrix3Xd sensitivity;  // d (cx, cy, r) / d (radial move of point i)
 };
 
+// IRLS weights of a residual: Huber's (k = 1.345 robust sigmas) and Tukey's
+// biweight (cut-off `tukey` robust sigmas), `scale` the robust sigma.
+double HuberWeight(double residual, double scale) {
+  const double a = std::abs(residual) / (1.345 * scale);
+  return a <= 1.0 ? 1.0 : 1.0 / a;
+}
+double TukeyWeight(double residual, double tukey, double scale) {
+  const double a = residual / (tukey * scale);
+  return std::abs(a) < 1.0 ? std::pow(1.0 - a * a, 2) : 0.0;
+}
+
+// 1.4826 median |residual|, at least 1e-6 (an exact fit).
+double RobustScale(const Eigen::VectorXd& residual) {
+  std::vector<double> abs_res(static_cast<size_t>(residual.size()));
+  for (Eigen::Index i = 0; i < residual.size(); ++i)
+    abs_res[static_cast<size_t>(i)] = std::abs(residual(i));
+  return std::max(1.4826 * Median(std::move(abs_res)), 1e-6);
+}
+
 // Step 3: IRLS circle fit, Huber then Tukey, starting from `start`.
 CircleFit FitCircleRobust(const Eigen::Matrix2Xd& points, const Circle& start, double tukey) {
   const Eigen::Index n = points.cols();
@@ -487,12 +506,6 @@ CircleFit FitCircleRobust(const Eigen::Matrix2Xd& points, const Circle& start, d
       jac.row(i) << -u.x() / norm, -u.y() / norm, -1.0;
     }
   };
-  auto robust_scale = [&]() {
-    std::vector<double> abs_res(static_cast<size_t>(n));
-    for (Eigen::Index i = 0; i < n; ++i)
-      abs_res[static_cast<size_t>(i)] = std::abs(fit.residual(i));
-    return std::max(1.4826 * Median(abs_res), 1e-6);
-  };
   auto solve = [&]() {
     const Eigen::MatrixXd jw = fit.weight.asDiagonal() * jac;
     const Eigen::Vector3d step =
@@ -504,29 +517,22 @@ CircleFit FitCircleRobust(const Eigen::Matrix2Xd& points, const Circle& start, d
   linearise();
   // Huber (k = 1.345 sigma) with the scale re-estimated, then Tukey with it held.
   for (int iteration = 0; iteration < 10; ++iteration) {
-    fit.scale = robust_scale();
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const double a = std::abs(fit.residual(i)) / (1.345 * fit.scale);
-      fit.weight(i) = a <= 1.0 ? 1.0 : 1.0 / a;
-    }
+    fit.scale = RobustScale(fit.residual);
+    for (Eigen::Index i = 0; i < n; ++i) fit.weight(i) = HuberWeight(fit.residual(i), fit.scale);
     const double moved = solve();
     linearise();
     if (moved < 1e-7) break;
   }
-  fit.scale = robust_scale();
+  fit.scale = RobustScale(fit.residual);
   for (int iteration = 0; iteration < 30; ++iteration) {
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const double a = fit.residual(i) / (tukey * fit.scale);
-      fit.weight(i) = std::abs(a) < 1.0 ? std::pow(1.0 - a * a, 2) : 0.0;
-    }
+    for (Eigen::Index i = 0; i < n; ++i)
+      fit.weight(i) = TukeyWeight(fit.residual(i), tukey, fit.scale);
     const double moved = solve();
     linearise();
     if (moved < 1e-9) break;
   }
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const double a = fit.residual(i) / (tukey * fit.scale);
-    fit.weight(i) = std::abs(a) < 1.0 ? std::pow(1.0 - a * a, 2) : 0.0;
-  }
+  for (Eigen::Index i = 0; i < n; ++i)
+    fit.weight(i) = TukeyWeight(fit.residual(i), tukey, fit.scale);
   // delta = -(J'WJ)^-1 J'W delta_residual; a point moving out by e raises its residual by e.
   const Eigen::MatrixXd jw = fit.weight.asDiagonal() * jac;
   fit.sensitivity = -(jac.transpose() * jw).ldlt().solve(jw.transpose());
@@ -542,7 +548,6 @@ std::optional<double> FitBottomScale(const Eigen::Matrix2Xd& points, const Circl
   const Eigen::Index n = points.cols();
   const Eigen::Vector2d b = top.centre - nadir;
   double k = start, scale = 0.0;
-  std::vector<double> abs_res(static_cast<size_t>(n));
   Eigen::VectorXd residual(n), slope(n);
   constexpr int kHuberIterations = 10, kIterations = 20;
   for (int iteration = 0; iteration < kIterations; ++iteration) {
@@ -551,19 +556,12 @@ std::optional<double> FitBottomScale(const Eigen::Matrix2Xd& points, const Circl
       const double norm = u.norm();
       residual(i) = norm - k * top.radius;
       slope(i) = -u.dot(b) / norm - top.radius;
-      abs_res[static_cast<size_t>(i)] = std::abs(residual(i));
     }
-    if (iteration < kHuberIterations) scale = std::max(1.4826 * Median(abs_res), 1e-6);
+    if (iteration < kHuberIterations) scale = RobustScale(residual);
     double jwj = 0.0, jwr = 0.0;
     for (Eigen::Index i = 0; i < n; ++i) {
-      double w = 0.0;
-      if (iteration < kHuberIterations) {
-        const double a = std::abs(residual(i)) / (1.345 * scale);
-        w = a <= 1.0 ? 1.0 : 1.0 / a;
-      } else {
-        const double a = residual(i) / (tukey * scale);
-        w = std::abs(a) < 1.0 ? std::pow(1.0 - a * a, 2) : 0.0;
-      }
+      const double w = iteration < kHuberIterations ? HuberWeight(residual(i), scale)
+                                                    : TukeyWeight(residual(i), tukey, scale);
       jwj += w * slope(i) * slope(i);
       jwr += w * slope(i) * residual(i);
     }

@@ -9,6 +9,7 @@
 #include <Eigen/Dense>
 
 #include "adapters/mrcal/lens.h"
+#include "pipeline/core/statistics.h"
 
 namespace omm {
 namespace {
@@ -127,9 +128,7 @@ PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInpu
     PairEquations(pairs[n], &rows, &rhs);
     errors[n] = (rows * vec_k - rhs).norm();
   }
-  std::vector<double> sorted = errors;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double threshold = 5.0 * sorted[sorted.size() / 2];
+  const double threshold = 5.0 * Median(errors);
   for (size_t n = 0; n < pairs.size(); ++n) keep[n] = errors[n] <= threshold;
   vec_k = SolveK(pairs, keep);
 

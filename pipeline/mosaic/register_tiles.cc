@@ -14,6 +14,7 @@
 #include "adapters/mrcal/lens.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 
@@ -657,9 +658,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     for (Eigen::Index k = 0; k < res.cols(); ++k)
       if (res.col(k).allFinite()) norms.push_back(res.col(k).norm());
     if (norms.empty()) return dropped;
-    std::nth_element(norms.begin(), norms.begin() + norms.size() / 2, norms.end());
     const double threshold =
-        std::max(options.min_outlier_threshold_px, options.outlier_factor * norms[norms.size() / 2]);
+        std::max(options.min_outlier_threshold_px, options.outlier_factor * Median(norms));
     const auto bad = [&](int o) {
       return !res.col(o).allFinite() || res.col(o).norm() > threshold;
     };

@@ -24,6 +24,7 @@
 #include <gtest/gtest.h>
 
 #include "adapters/opencv/image_io.h"
+#include "pipeline/core/statistics.h"
 
 namespace omm {
 namespace {
@@ -112,8 +113,7 @@ TEST(RegisterTilesReal, LscmSpeckleOffsetsAgreeWithPublishedRegistration) {
     for (int k = 0; k < 2; ++k) {
       std::vector<double> v;
       for (const Eigen::Vector2d& d : s) v.push_back(d(k));
-      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-      median(k) = v[v.size() / 2];
+      median(k) = Median(std::move(v));
     }
     const Eigen::Vector2d fiji = registered[pair.tile_a].second - registered[pair.tile_b].second;
     const Eigen::Vector2d dic = authors[pair.tile_a] - authors[pair.tile_b];

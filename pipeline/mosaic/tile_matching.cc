@@ -10,6 +10,7 @@
 #include <Eigen/Dense>
 
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/statistics.h"
 #include "pipeline/mosaic/tile_features.h"
 
 namespace omm {
@@ -47,8 +48,7 @@ namespace {
 Eigen::VectorXd TukeyWeights(const Eigen::VectorXd& residual, double c) {
   std::vector<double> magnitude(residual.size());
   for (Eigen::Index i = 0; i < residual.size(); ++i) magnitude[i] = std::abs(residual(i));
-  std::nth_element(magnitude.begin(), magnitude.begin() + magnitude.size() / 2, magnitude.end());
-  const double cut = c * 1.4826 * magnitude[magnitude.size() / 2];
+  const double cut = c * 1.4826 * Median(std::move(magnitude));
   if (!(cut > 0)) return Eigen::VectorXd::Ones(residual.size());
   return (1 - (residual.array() / cut).square()).max(0.0).square();
 }
@@ -564,6 +564,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   double gain = t_std / std::max(peak.target_std, 1e-6);
   double offset = t_mean - gain * peak.target_mean;
   bool converged = false;
+  bool samples_at_q = false;  // the samples are those of q, gain and offset
   Eigen::VectorXd sampled(n), gradient_x(n), gradient_y(n), residual(n);
   Eigen::VectorXd weight = Eigen::VectorXd::Ones(n);
   Eigen::Matrix4d normal;
@@ -576,9 +577,9 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
     double last_step_px = 0.0;  // of the previous iteration (0: none yet)
     const int max_iterations = phase == 0 ? options.max_iterations : options.max_robust_iterations;
     for (int it = 0; it < max_iterations && !converged; ++it) {
-      // Phase 1 starts where phase 0 converged: q, gain and offset, and so
-      // the samples and residuals, are those of phase 0's last iteration.
-      if (phase == 0 || it > 0) {
+      // Phase 1 starts where phase 0 converged: when phase 0 stopped before
+      // applying its last step, the samples and residuals are those of q.
+      if (!samples_at_q) {
         for (int i = 0; i < n; ++i) {
           const Eigen::Vector2d p = q + offsets[i];
           if (!SampleBSpline(target_spline, p.x(), p.y(), &sampled(i), &gradient_x(i),
@@ -587,6 +588,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
           residual(i) = gain * sampled(i) + offset - templ(i);
         }
       }
+      samples_at_q = false;
       if (phase > 0) {
         weight = TukeyWeights(residual, options.robust_tukey_c);
         // No pixel beyond the cut at the plain solution: its content agrees
@@ -617,7 +619,10 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       ++match.iterations;
       const double step_px = step.head<2>().norm();
       converged = step_px < options.convergence_px;
-      if (converged) break;  // the samples stay those of q (within convergence_px of q + step)
+      if (converged) {  // the samples stay those of q (within convergence_px of q + step)
+        samples_at_q = true;
+        break;
+      }
       q += step.head<2>();
       gain += step(2);
       offset += step(3);
