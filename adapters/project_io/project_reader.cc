@@ -582,8 +582,9 @@ Project LoadProject(const fs::path& dir_in) {
       const std::string where = fmt::format("{}:{}", table_file.string(), row.line);
       const std::string& image = row.fields[0];
       CheckName(image, where, "image");
-      const Eigen::Vector2d pos(CsvNumber(table_file, row, 1, "x_mm"),
-                                CsvNumber(table_file, row, 2, "y_mm"));
+      // x before y: a row with both wrong names its first bad column.
+      const double x_mm = CsvNumber(table_file, row, 1, "x_mm");
+      const Eigen::Vector2d pos(x_mm, CsvNumber(table_file, row, 2, "y_mm"));
       if (!positions.emplace(image, pos).second) {
         throw InputError(where, fmt::format("tile '{}' is listed twice", image));
       }

@@ -322,6 +322,11 @@ TEST_F(ProjectReaderTest, TableNonNumericValue) {
   ExpectError({"table.csv:3", "column 'x_mm'", "'108.6x'"});
 }
 
+TEST_F(ProjectReaderTest, TableRowWithTwoBadValuesNamesTheFirst) {
+  Replace("table.csv", "Part_02.png,108.6,0", "Part_02.png,b,c");
+  ExpectError({"table.csv:3", "column 'x_mm'", "got 'b'"});
+}
+
 TEST_F(ProjectReaderTest, TableDuplicateTile) {
   Replace("table.csv", "Part_02.png,108.6,0", "Part_01.png,108.6,0");
   ExpectError({"table.csv:3", "'Part_01.png' is listed twice"});
