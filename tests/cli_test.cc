@@ -100,7 +100,8 @@ TEST_F(CliTest, PlainImagesFailCalibrationWithTheirReasons) {
   const auto result = Omm("run " + Quoted(project_.dir));
   EXPECT_EQ(result.exit_code, 1) << result.output;
   EXPECT_THAT(result.output, HasSubstr("stage 'calibrate' failed"));
-  EXPECT_THAT(result.output, HasSubstr("calib_01.png: plate not found"));
+  // One line per reason, not per image.
+  EXPECT_THAT(result.output, HasSubstr("; plate not found: calib_01.png, calib_02.png"));
   EXPECT_FALSE(fs::exists(project_.OutDir()));
   // No calibrated camera: the mosaic stage says which stage must run first.
   const auto mosaic = Omm("mosaic " + Quoted(project_.dir));

@@ -8,8 +8,12 @@
 #include <cmath>
 #include <filesystem>
 #include <optional>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include "adapters/mrcal/calibrate.h"
@@ -220,8 +224,23 @@ void CalibrateFromImages(StageContext& context) {
   for (const RejectedImage& r : rejected)
     spdlog::info("calibrate: rejected {}: {}", r.image, r.why);
   if (!summary.usable) {
+    // Grouped by reason: twenty blank images make one line, not twenty.
+    std::vector<std::pair<std::string, std::vector<std::string>>> by_reason;
+    for (const RejectedImage& r : rejected) {
+      auto it = std::find_if(by_reason.begin(), by_reason.end(),
+                             [&](const auto& group) { return group.first == r.why; });
+      if (it == by_reason.end()) it = by_reason.insert(by_reason.end(), {r.why, {}});
+      it->second.push_back(r.image);
+    }
+    constexpr size_t kNamesShown = 3;
     std::string why = summary.brief;
-    for (const RejectedImage& r : rejected) why += fmt::format("; {}: {}", r.image, r.why);
+    for (const auto& [reason, group_images] : by_reason) {
+      const size_t shown = std::min(group_images.size(), kNamesShown);
+      const std::vector<std::string> names(group_images.begin(), group_images.begin() + shown);
+      why += fmt::format("; {}: {}", reason, fmt::join(names, ", "));
+      if (group_images.size() > shown)
+        why += fmt::format(" and {} more", group_images.size() - shown);
+    }
     throw StageFailedError(Stage::kCalibrate, why);
   }
   spdlog::info("calibrate: {}", summary.lens.why);
