@@ -1,9 +1,11 @@
 #include "pipeline/measure/bore_view.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
 #include "pipeline/measure/scene_sensitivity.h"
+#include "pipeline/mosaic/orthorectify.h"
 
 namespace omm {
 
@@ -32,6 +34,28 @@ std::optional<int> RenderingTile(const LensProjection& lens, const PlaneScene& s
     if (!dominated) return std::nullopt;
   }
   return rendering;
+}
+
+std::vector<int> TilesSeeingDisc(const LensProjection& lens, const PlaneScene& scene,
+                                 const Eigen::Vector2d& centre_mm, double radius_mm, int width_px,
+                                 int height_px, double min_border_px) {
+  constexpr int kRimPoints = 32;
+  std::vector<std::pair<double, int>> seeing;  // (-least border distance, tile)
+  for (int tile = 0; tile < static_cast<int>(scene.table_pos_mm.size()); ++tile) {
+    double least = INFINITY;
+    for (int m = -1; m < kRimPoints && least >= min_border_px; ++m) {
+      const double angle = 2.0 * std::numbers::pi * m / kRimPoints;
+      const Eigen::Vector2d p = centre_mm + (m < 0 ? 0.0 : radius_mm) *
+                                                Eigen::Vector2d(std::cos(angle), std::sin(angle));
+      const auto q = TilePixelOfPartPoint(lens, scene, tile, p);
+      least = q ? std::min(least, TileBorderDistancePx(*q, width_px, height_px)) : -INFINITY;
+    }
+    if (least >= min_border_px) seeing.emplace_back(-least, tile);
+  }
+  std::sort(seeing.begin(), seeing.end());
+  std::vector<int> tiles;
+  for (const auto& [distance, tile] : seeing) tiles.push_back(tile);
+  return tiles;
 }
 
 }  // namespace omm

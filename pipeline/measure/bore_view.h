@@ -13,6 +13,7 @@
 #pragma once
 
 #include <optional>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -33,5 +34,12 @@ Eigen::Vector2d TileNadirMm(const PlaneScene& scene, int tile);
 std::optional<int> RenderingTile(const LensProjection& lens, const PlaneScene& scene,
                                  const Eigen::Vector2d& centre_mm, double radius_mm, int width_px,
                                  int height_px, double band_px, double max_other_weight);
+
+// The tiles that see the whole disc (centre_mm, radius_mm): the border
+// distance of its pixel (TileBorderDistancePx) is >= min_border_px at the
+// centre and at 32 points of the rim. Best first: by that distance's minimum.
+std::vector<int> TilesSeeingDisc(const LensProjection& lens, const PlaneScene& scene,
+                                 const Eigen::Vector2d& centre_mm, double radius_mm, int width_px,
+                                 int height_px, double min_border_px);
 
 }  // namespace omm

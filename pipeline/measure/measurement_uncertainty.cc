@@ -2,6 +2,9 @@
 
 #include <cassert>
 #include <cmath>
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <numbers>
 #include <utility>
 
@@ -19,26 +22,142 @@ double QuadraticForm(const Eigen::RowVectorXd& a, const Eigen::MatrixXd& covaria
 
 double Sqrt(double variance) { return std::sqrt(std::max(variance, 0.0)); }
 
-}  // namespace
-
-std::optional<Eigen::MatrixXd> CircleSceneSensitivity(
-    const LensProjection& lens, const PlaneScene& scene, const Eigen::Vector2d& centre_mm,
-    double diameter_mm, int width_px, int height_px, double blend_band_px, int num_rim_points) {
+// G from S at the centre and num_rim_points rim points (header comment);
+// point_sensitivity(P) is S(P) or nullopt.
+template <typename PointSensitivity>
+std::optional<Eigen::MatrixXd> CircleSensitivity(const PointSensitivity& point_sensitivity,
+                                                 const Eigen::Vector2d& centre_mm,
+                                                 double diameter_mm, int num_rim_points) {
   assert(num_rim_points >= 3);
-  const auto centre =
-      BlendedSceneSensitivity(lens, scene, centre_mm, width_px, height_px, blend_band_px);
+  const std::optional<Eigen::MatrixXd> centre = point_sensitivity(centre_mm);
   if (!centre) return std::nullopt;
   Eigen::MatrixXd g = Eigen::MatrixXd::Zero(3, centre->cols());
   g.topRows<2>() = *centre;
   for (int m = 0; m < num_rim_points; ++m) {
     const double angle = 2.0 * std::numbers::pi * m / num_rim_points;
     const Eigen::Vector2d direction(std::cos(angle), std::sin(angle));
-    const auto rim = BlendedSceneSensitivity(lens, scene, centre_mm + 0.5 * diameter_mm * direction,
-                                             width_px, height_px, blend_band_px);
+    const auto rim = point_sensitivity(centre_mm + 0.5 * diameter_mm * direction);
     if (!rim) return std::nullopt;
     g.row(2) += (2.0 / num_rim_points) * direction.transpose() * *rim;
   }
   return g;
+}
+
+}  // namespace
+
+std::optional<Eigen::MatrixXd> CircleSceneSensitivity(
+    const LensProjection& lens, const PlaneScene& scene, const Eigen::Vector2d& centre_mm,
+    double diameter_mm, int width_px, int height_px, double blend_band_px, int num_rim_points) {
+  return CircleSensitivity(
+      [&](const Eigen::Vector2d& p) {
+        return BlendedSceneSensitivity(lens, scene, p, width_px, height_px, blend_band_px);
+      },
+      centre_mm, diameter_mm, num_rim_points);
+}
+
+std::optional<Eigen::MatrixXd> TileCircleSceneSensitivity(const LensProjection& lens,
+                                                          const PlaneScene& scene, int tile,
+                                                          const Eigen::Vector2d& centre_mm,
+                                                          double diameter_mm, int num_rim_points) {
+  return CircleSensitivity(
+      [&](const Eigen::Vector2d& p) { return SceneSensitivity(lens, scene, tile, p); }, centre_mm,
+      diameter_mm, num_rim_points);
+}
+
+double ChiSquareQuantile(double p, int dof) {
+  assert(p > 0.97575 && p < 1.0 && dof >= 1);
+  // The normal quantile by Acklam's rational approximation of its upper tail
+  // (p > 0.97575; relative error < 1.2e-9), then Wilson-Hilferty.
+  const double t = std::sqrt(-2.0 * std::log(1.0 - p));
+  const double z = -(((((-7.784894002430293e-03 * t - 3.223964580411365e-01) * t -
+                        2.400758277161838e+00) * t - 2.549732539343734e+00) * t +
+                      4.374664141464968e+00) * t + 2.938163982698783e+00) /
+                   ((((7.784695709041462e-03 * t + 3.224671290700398e-01) * t +
+                      2.445134137142996e+00) * t + 3.754408661907416e+00) * t + 1.0);
+  const double a = 2.0 / (9.0 * dof);
+  return dof * std::pow(1.0 - a + z * std::sqrt(a), 3);
+}
+
+CombinedCircle CombineCircleViews(const std::vector<CircleFeatureValue>& views,
+                                  const Eigen::MatrixXd& scene_covariance,
+                                  double shared_edge_fraction, double consistency_probability) {
+  assert(!views.empty());
+  assert(shared_edge_fraction >= 0.0 && shared_edge_fraction < 1.0);
+  const int n = static_cast<int>(views.size());
+  const Eigen::Index num_theta = views[0].scene_sensitivity.cols();
+  // The views stacked: values, edge covariance (header comment), scene sensitivity.
+  Eigen::VectorXd x(3 * n);
+  Eigen::MatrixXd edge(3 * n, 3 * n), g(3 * n, num_theta);
+  std::vector<Eigen::Matrix3d> roots(n);  // L_v L_v' = C_v
+  for (int v = 0; v < n; ++v) {
+    x.segment<3>(3 * v) << views[v].centre_mm, views[v].diameter_mm;
+    g.middleRows(3 * v, 3) = views[v].scene_sensitivity;
+    roots[v] = views[v].edge_covariance.llt().matrixL();
+  }
+  for (int v = 0; v < n; ++v) {
+    for (int u = 0; u < n; ++u) {
+      edge.block<3, 3>(3 * v, 3 * u) = u == v ? views[v].edge_covariance
+                                              : Eigen::Matrix3d(shared_edge_fraction * roots[v] *
+                                                                roots[u].transpose());
+    }
+  }
+  // x = A x_stack, A_v = (sum_u C_u^-1)^-1 C_v^-1.
+  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
+  for (const CircleFeatureValue& view : views) information += view.edge_covariance.inverse();
+  const Eigen::Matrix3d inverse_information = information.inverse();
+  Eigen::MatrixXd a(3, 3 * n);
+  for (int v = 0; v < n; ++v)
+    a.middleCols<3>(3 * v) = inverse_information * views[v].edge_covariance.inverse();
+  CombinedCircle combined;
+  CircleFeatureValue& value = combined.value;
+  const Eigen::Vector3d mean = a * x;
+  value.centre_mm = mean.head<2>();
+  value.diameter_mm = mean.z();
+  value.edge_covariance = a * edge * a.transpose();
+  value.scene_sensitivity = a * g;
+  if (n == 1) return combined;
+
+  // The differences from view 0, D x_stack, and their covariance (header comment).
+  const int m = 3 * (n - 1);
+  Eigen::MatrixXd diff = Eigen::MatrixXd::Zero(m, 3 * n);
+  for (int v = 1; v < n; ++v) {
+    diff.block<3, 3>(3 * (v - 1), 0) = -Eigen::Matrix3d::Identity();
+    diff.block<3, 3>(3 * (v - 1), 3 * v) = Eigen::Matrix3d::Identity();
+  }
+  const Eigen::VectorXd d = diff * x;
+  Eigen::MatrixXd cov = diff * edge * diff.transpose();
+  if (scene_covariance.size() > 0) {
+    const Eigen::MatrixXd dg = diff * g;
+    cov += dg * scene_covariance * dg.transpose();
+  }
+  // Centres and diameters apart: their disagreements have different causes
+  // (the tiles' relative registration; the rim's edges), and one should not
+  // inflate the other.
+  const auto test = [&](const std::vector<int>& components) {
+    ViewAgreement agreement;
+    std::vector<Eigen::Index> rows;
+    for (int v = 1; v < n; ++v)
+      for (const int c : components) rows.push_back(3 * (v - 1) + c);
+    const Eigen::VectorXd dv = d(rows);
+    agreement.dof = static_cast<int>(rows.size());
+    agreement.chi2 = dv.dot(cov(rows, rows).ldlt().solve(dv));
+    agreement.consistent =
+        agreement.chi2 <= ChiSquareQuantile(consistency_probability, agreement.dof);
+    // Views that disagree beyond their covariances carry an error none of
+    // them models (registration off between the tiles, a texture flaw on one
+    // rim): the mean stays, as no view can be singled out, and the edge
+    // covariance grows by the observed scatter (the Birge ratio chi2 / dof),
+    // so the sigma covers the disagreement instead of hiding it.
+    if (!agreement.consistent) agreement.inflation = agreement.chi2 / agreement.dof;
+    return agreement;
+  };
+  combined.centre = test({0, 1});
+  combined.diameter = test({2});
+  const Eigen::Vector3d scale(std::sqrt(combined.centre.inflation),
+                              std::sqrt(combined.centre.inflation),
+                              std::sqrt(combined.diameter.inflation));
+  value.edge_covariance = scale.asDiagonal() * value.edge_covariance * scale.asDiagonal();
+  return combined;
 }
 
 MeasurementPropagation::MeasurementPropagation(std::vector<CircleFeatureValue> features,

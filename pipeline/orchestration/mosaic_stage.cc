@@ -103,26 +103,6 @@ IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camer
   return IntrinsicsPriorFromCovariance(uncertainty->IntrinsicsCovariance());
 }
 
-// The tiles as gray, 2 at a time: converted from those LoadProject decoded,
-// else read from the files.
-std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera) {
-  const int num_tiles = static_cast<int>(project.tiles.size());
-  std::vector<ImageF> tiles(num_tiles);
-  ParallelFor(num_tiles, 2, [&](int i) {
-    const fs::path path = project.TilePath(project.tiles[i].image);
-    GrayImage image =
-        project.images ? ToGrayImage(project.images->tiles[i].image) : ReadGrayImage(path);
-    if (image.width() != camera.width_px || image.height() != camera.height_px) {
-      throw InputError(path.string(), fmt::format("{}x{} px, but the calibrated camera's imager "
-                                                  "is {}x{} px",
-                                                  image.width(), image.height(), camera.width_px,
-                                                  camera.height_px));
-    }
-    tiles[i] = std::move(image.pixels);
-  });
-  return tiles;
-}
-
 // Why a tile kept no feature: its pairs' fates.
 std::string WhyHeld(const TileRegistration& registration, int tile) {
   int num_pairs = 0, num_usable = 0;

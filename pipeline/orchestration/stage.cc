@@ -1,5 +1,11 @@
 #include "pipeline/orchestration/stage.h"
 
+#include <fmt/format.h>
+
+#include "adapters/opencv/image_io.h"
+#include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
+
 namespace omm {
 
 const char* StageName(Stage stage) {
@@ -12,6 +18,24 @@ const char* StageName(Stage stage) {
 }
 
 std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stage::kMeasure}; }
+
+std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera) {
+  const int num_tiles = static_cast<int>(project.tiles.size());
+  std::vector<ImageF> tiles(num_tiles);
+  ParallelFor(num_tiles, 2, [&](int i) {
+    const std::filesystem::path path = project.TilePath(project.tiles[i].image);
+    GrayImage image =
+        project.images ? ToGrayImage(project.images->tiles[i].image) : ReadGrayImage(path);
+    if (image.width() != camera.width_px || image.height() != camera.height_px) {
+      throw InputError(path.string(), fmt::format("{}x{} px, but the calibrated camera's imager "
+                                                  "is {}x{} px",
+                                                  image.width(), image.height(), camera.width_px,
+                                                  camera.height_px));
+    }
+    tiles[i] = std::move(image.pixels);
+  });
+  return tiles;
+}
 
 std::filesystem::path StageContext::Input(const std::string& name) const {
   std::error_code ec;

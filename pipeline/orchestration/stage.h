@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "pipeline/core/camera.h"
 #include "pipeline/core/image.h"
 #include "pipeline/core/progress.h"
 #include "pipeline/core/project.h"
@@ -71,6 +72,11 @@ struct StageContext {
   // in out/ from an earlier run, else an empty path.
   std::filesystem::path Input(const std::string& name) const;
 };
+
+// The project's tiles as gray images, in its tile order, 2 at a time:
+// converted from those LoadProject decoded, else read from the files. Throws
+// InputError for a tile whose size is not the camera's.
+std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera);
 
 // The runners, one per stage. Each throws InputError for bad input,
 // StageFailedError for a data failure.
