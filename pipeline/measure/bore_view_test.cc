@@ -1,11 +1,15 @@
 #include "pipeline/measure/bore_view.h"
 
+#include <algorithm>
 #include <cmath>
+#include <numbers>
+#include <vector>
 
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/mrcal_lens_projection.h"
 #include "pipeline/measure/scene_sensitivity.h"
+#include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/synthetic_plane.h"
 
 namespace omm {
@@ -51,6 +55,47 @@ TEST(BoreView, RenderingTileOnlyAwayFromSeams) {
   }
   ASSERT_NE(seam, inside);
   EXPECT_FALSE(RenderingTile(lens, scene, seam, 5.0, 1600, 1200, kBandPx, 0.01).has_value());
+}
+
+// The tiles that see a disc whole, against the least border distance over
+// the disc's centre and 360 rim points: a tile clearly inside (>= 1 px) is
+// listed, one clearly outside (< -1 px) is not, best first; a margin no
+// tile has leaves none. Discs inside the centre tile and in overlaps.
+TEST(BoreView, TilesSeeingDiscWholeBestFirst) {
+  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
+  PlaneScene scene = s.truth;
+  scene.intrinsics = s.camera.intrinsics;
+  const MrcalLensProjection lens(s.camera);
+  size_t most = 0;
+  // Where the centre tile sees its middle, a side and two corners.
+  for (const Eigen::Vector2d q : {Eigen::Vector2d(800.0, 600.0), Eigen::Vector2d(1400.0, 600.0),
+                                  Eigen::Vector2d(1400.0, 1000.0), Eigen::Vector2d(200.0, 200.0)}) {
+    const Eigen::Vector2d centre = *PartPointOfTilePixel(lens, scene, 4, q);
+    for (const double radius : {5.0, 30.0}) {
+      const std::vector<int> tiles = TilesSeeingDisc(lens, scene, centre, radius, 1600, 1200, 0.0);
+      std::vector<double> least(9, INFINITY);
+      for (int tile = 0; tile < 9; ++tile) {
+        for (int m = -1; m < 360; ++m) {
+          const double a = m * std::numbers::pi / 180.0;
+          const Eigen::Vector2d p =
+              centre + (m < 0 ? 0.0 : radius) * Eigen::Vector2d(std::cos(a), std::sin(a));
+          least[tile] = std::min(least[tile],
+                                 TileBorderDistancePx(*TilePixelOfPartPoint(lens, scene, tile, p),
+                                                      1600, 1200));
+        }
+        const bool listed = std::find(tiles.begin(), tiles.end(), tile) != tiles.end();
+        if (least[tile] >= 1.0) EXPECT_TRUE(listed) << tile;
+        if (least[tile] < -1.0) EXPECT_FALSE(listed) << tile;
+      }
+      for (size_t i = 1; i < tiles.size(); ++i)
+        EXPECT_GE(least[tiles[i - 1]], least[tiles[i]] - 0.5);
+      ASSERT_FALSE(tiles.empty());
+      EXPECT_TRUE(
+          TilesSeeingDisc(lens, scene, centre, radius, 1600, 1200, least[tiles[0]] + 1.0).empty());
+      most = std::max(most, tiles.size());
+    }
+  }
+  EXPECT_GE(most, 3u);  // some disc lies where three tiles overlap
 }
 
 }  // namespace

@@ -227,3 +227,155 @@ TEST(MeasurementPropagation, SigmaMatchesTheScatterOfAdjustments) {
 
 }  // namespace
 }  // namespace omm
+
+namespace omm {
+namespace {
+
+// Two or three views of a known hole, drawn many times: edge errors with the
+// views' covariances and the shared part rho, a scene error through each
+// view's G. The combination's mean is the truth, its scatter its edge
+// covariance plus its G's scene part, and the views' chi-squares hold their
+// degrees of freedom (0.1 % flagged).
+void CheckCombinationAgainstScatter(int num_views, double rho) {
+  std::mt19937 rng(11 + num_views);
+  std::normal_distribution<double> normal;
+  const Eigen::Vector3d truth(12.0, -4.0, 20.0);
+  constexpr int kTheta = 4;
+  const Eigen::MatrixXd scene_cov = [&] {
+    Eigen::MatrixXd m = Eigen::MatrixXd::Random(kTheta, kTheta) * 1e-3;
+    return Eigen::MatrixXd(m * m.transpose());
+  }();
+  std::vector<CircleFeatureValue> views(num_views);
+  for (int v = 0; v < num_views; ++v) {
+    // Sigmas 1-3 um, correlated between the components.
+    Eigen::Matrix3d l = Eigen::Matrix3d::Random() * 1e-3;
+    l.diagonal() += Eigen::Vector3d(1.0 + v, 1.5, 0.8 + 0.5 * v) * 1e-3;
+    views[v].edge_covariance = l * l.transpose();
+    views[v].scene_sensitivity = Eigen::MatrixXd::Random(3, kTheta);
+  }
+  const Eigen::MatrixXd scene_root = scene_cov.llt().matrixL();
+  constexpr int kDraws = 20000;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d sum_sq = Eigen::Matrix3d::Zero();
+  double chi2_centre = 0.0, chi2_diameter = 0.0;
+  int flagged = 0;
+  CombinedCircle combined;
+  for (int draw = 0; draw < kDraws; ++draw) {
+    Eigen::VectorXd theta(kTheta);
+    for (int k = 0; k < kTheta; ++k) theta[k] = normal(rng);
+    theta = scene_root * theta;
+    Eigen::Vector3d shared;
+    for (int k = 0; k < 3; ++k) shared[k] = normal(rng);
+    for (int v = 0; v < num_views; ++v) {
+      Eigen::Vector3d own;
+      for (int k = 0; k < 3; ++k) own[k] = normal(rng);
+      const Eigen::Matrix3d root = views[v].edge_covariance.llt().matrixL();
+      const Eigen::Vector3d x = truth + views[v].scene_sensitivity * theta +
+                                root * (std::sqrt(rho) * shared + std::sqrt(1.0 - rho) * own);
+      views[v].centre_mm = x.head<2>();
+      views[v].diameter_mm = x.z();
+    }
+    combined = CombineCircleViews(views, scene_cov, rho, 0.999);
+    const Eigen::Vector3d error =
+        Eigen::Vector3d(combined.value.centre_mm.x(), combined.value.centre_mm.y(),
+                        combined.value.diameter_mm) -
+        truth;
+    sum += error;
+    sum_sq += error * error.transpose();
+    chi2_centre += combined.centre.chi2;
+    chi2_diameter += combined.diameter.chi2;
+    flagged += combined.centre.consistent && combined.diameter.consistent ? 0 : 1;
+  }
+  // The covariances do not depend on the draw.
+  const Eigen::Matrix3d predicted =
+      combined.value.edge_covariance +
+      combined.value.scene_sensitivity * scene_cov * combined.value.scene_sensitivity.transpose();
+  const Eigen::Vector3d mean = sum / kDraws;
+  const Eigen::Matrix3d scatter = sum_sq / kDraws - mean * mean.transpose();
+  for (int k = 0; k < 3; ++k) {
+    // Mean within 4 standard errors; variance within 5 % (its standard
+    // error sqrt(2 / 20000) = 1 %).
+    EXPECT_LT(std::abs(mean[k]), 4.0 * std::sqrt(predicted(k, k) / kDraws)) << k;
+    EXPECT_NEAR(scatter(k, k) / predicted(k, k), 1.0, 0.05) << k;
+  }
+  EXPECT_EQ(combined.centre.dof, 2 * (num_views - 1));
+  EXPECT_EQ(combined.diameter.dof, num_views - 1);
+  EXPECT_NEAR(chi2_centre / kDraws / combined.centre.dof, 1.0, 0.04);
+  EXPECT_NEAR(chi2_diameter / kDraws / combined.diameter.dof, 1.0, 0.04);
+  // 2 x 0.1 % of the draws expected (two tests), up to ~3 % off through the quantile.
+  EXPECT_LT(flagged, 0.004 * kDraws);
+  std::cout << num_views << " views, rho " << rho << ": scatter / predicted "
+            << (scatter.diagonal().array() / predicted.diagonal().array()).transpose()
+            << ", flagged " << flagged << "\n";
+}
+
+TEST(CombineCircleViews, MeanAndCovarianceMatchTheScatter) {
+  CheckCombinationAgainstScatter(2, 0.0);
+  CheckCombinationAgainstScatter(2, 0.3);
+  CheckCombinationAgainstScatter(3, 0.2);
+}
+
+// One view is itself; views 10 sigma apart in diameter only are flagged
+// there, their diameter's edge sigma scaled by sqrt(chi2 / dof), the centre
+// untouched.
+TEST(CombineCircleViews, DisagreementInflatesThatPartOnly) {
+  CircleFeatureValue a;
+  a.centre_mm = {1.0, 2.0};
+  a.diameter_mm = 10.0;
+  a.edge_covariance = Eigen::Vector3d(4e-6, 4e-6, 2e-6).asDiagonal();
+  a.scene_sensitivity = Eigen::MatrixXd::Zero(3, 0);
+  const CombinedCircle one = CombineCircleViews({a}, Eigen::MatrixXd(), 0.2, 0.999);
+  EXPECT_EQ(one.value.centre_mm, a.centre_mm);
+  EXPECT_EQ(one.value.diameter_mm, a.diameter_mm);
+  EXPECT_TRUE(one.value.edge_covariance.isApprox(a.edge_covariance, 1e-12));
+  EXPECT_EQ(one.centre.dof + one.diameter.dof, 0);
+
+  CircleFeatureValue b = a;
+  const double sigma_d = std::sqrt(2.0 * 2e-6 * (1.0 - 0.2));  // of the difference
+  b.diameter_mm += 10.0 * sigma_d;
+  const CombinedCircle two = CombineCircleViews({a, b}, Eigen::MatrixXd(), 0.2, 0.999);
+  EXPECT_NEAR(two.value.diameter_mm, a.diameter_mm + 5.0 * sigma_d, 1e-12);
+  EXPECT_TRUE(two.centre.consistent);
+  EXPECT_NEAR(two.centre.chi2, 0.0, 1e-12);
+  EXPECT_FALSE(two.diameter.consistent);
+  EXPECT_NEAR(two.diameter.chi2, 100.0, 1e-9);
+  EXPECT_NEAR(two.diameter.inflation, 100.0, 1e-9);
+  // Equal views with rho: (1 + rho) / 2 of one view's variance, x inflation.
+  EXPECT_NEAR(two.value.edge_covariance(2, 2), 100.0 * 0.6 * 2e-6, 1e-15);
+  EXPECT_NEAR(two.value.edge_covariance(0, 0), 0.6 * 4e-6, 1e-15);
+}
+
+// Where one tile draws the circle, the mosaic's G is that tile's; in
+// an overlap the tiles' G differ (their table positions enter), and the
+// blend's lies between.
+TEST(TileCircleSceneSensitivity, IsTheMosaicsWhereTheTileAloneSees) {
+  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
+  PlaneScene scene = s.truth;
+  scene.intrinsics = s.camera.intrinsics;
+  const MrcalLensProjection lens(s.camera);
+  // The middle of the centre tile: the other tiles that see it weigh
+  // exp(-(its border distance - theirs) / band), < 1e-9 here.
+  const Eigen::Vector2d centre = *PartPointOfTilePixel(lens, scene, 4, {800.0, 600.0});
+  for (const auto& [tile, weight] : MosaicBlendAt(lens, scene, centre, 1600, 1200, 12.0))
+    ASSERT_TRUE(tile == 4 || weight < 1e-9) << tile << " " << weight;
+  const auto blended = CircleSceneSensitivity(lens, scene, centre, 10.0, 1600, 1200, 12.0);
+  const auto alone = TileCircleSceneSensitivity(lens, scene, 4, centre, 10.0);
+  ASSERT_TRUE(blended && alone);
+  EXPECT_TRUE(alone->isApprox(*blended, 1e-8));
+  const auto other = TileCircleSceneSensitivity(lens, scene, 5, centre, 10.0);
+  ASSERT_TRUE(other.has_value());
+  EXPECT_GT((*other - *alone).norm(), 0.1 * alone->norm());
+}
+
+// Against the exact quantiles (scipy.stats.chi2.ppf(0.999, dof)): closed
+// forms for 1 and 2 dof, Wilson-Hilferty from 3.
+TEST(ChiSquareQuantile, MatchesTheExactOnesAtTheGuardsProbability) {
+  const double exact[] = {10.828, 13.816, 16.266, 18.467, 20.515, 22.458};
+  for (int dof = 1; dof <= 6; ++dof) {
+    EXPECT_NEAR(ChiSquareQuantile(0.999, dof) / exact[dof - 1], 1.0, dof <= 2 ? 1e-4 : 0.02)
+        << dof;
+  }
+}
+
+}  // namespace
+}  // namespace omm

@@ -430,7 +430,6 @@ void RunMeasureStage(StageContext& context) {
   } else {
     spdlog::warn("measure: tiles/ is not the mosaic scene's tiles: holes measured in the mosaic");
   }
-  const auto tiles_start = std::chrono::steady_clock::now();
   if (geometry) {
     tiles = TileImages(project, camera);
     inputs.geometry = &*geometry;
@@ -438,7 +437,6 @@ void RunMeasureStage(StageContext& context) {
     inputs.exposure = TileExposures(mosaic_report, saved.tile_images);
   }
 
-  spdlog::debug("measure: tiles in {:.3f} s", SecondsSince(tiles_start));
   const int num_features = static_cast<int>(project.features.size());
   std::vector<LocatedFeature> located(num_features);
   std::mutex progress_mutex;
@@ -449,7 +447,6 @@ void RunMeasureStage(StageContext& context) {
     const std::lock_guard lock(progress_mutex);
     if (context.progress) context.progress(++num_located, num_features + 1, "located " + spec.name);
   });
-  spdlog::debug("measure: features located at {:.3f} s", SecondsSince(stage_start));
   std::vector<CircleFeatureValue> values;
   std::map<std::string, int> by_name;
   for (int i = 0; i < num_features; ++i) {
