@@ -5,6 +5,7 @@
 #include <cmath>
 #include <iostream>
 #include <random>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -225,11 +226,6 @@ TEST(MeasurementPropagation, SigmaMatchesTheScatterOfAdjustments) {
   EXPECT_GT(z_calibration_share.front(), 0.5);
 }
 
-}  // namespace
-}  // namespace omm
-
-namespace omm {
-namespace {
 
 // Two or three views of a known hole, drawn many times: edge errors with the
 // views' covariances and the shared part rho, a scene error through each
