@@ -235,6 +235,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
   const int width_px = in.camera.width_px, height_px = in.camera.height_px;
 
   std::vector<HoleFit> fits;  // in the tiles that see the hole whole
+  int num_seeing = 0;         // such tiles
   std::optional<HoleFit> mosaic_fit;
   if (in.geometry) {
     const double search_px = options.search_fraction * 2.0 * radius_px + options.search_margin_px;
@@ -255,9 +256,10 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
       const double fitted_mm = found->circle.radius_px * grid.gsd_mm;
       for (const int t : TilesSeeingDisc(in.lens, saved.scene, grid.PartFromMosaic(centre_px),
                                          fitted_mm + reach_mm, width_px, height_px, 0.0)) {
+        ++num_seeing;
         HoleFit fit = found->tile == t ? std::move(*found)
-                                       : FitInTile(in, t, centre_px, found->circle.radius_px,
-                                                   options, options.search_margin_px);
+                                       : FitInTile(in, t, centre_px, radius_px, options,
+                                                   options.search_margin_px);
         if (fit.circle.ok) fits.push_back(std::move(fit));
       }
     }
@@ -268,7 +270,11 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
                              : FitInMosaic(in, *near_part, radius_mm, expected_px);
     report.extra.emplace_back("fit", fit.circle.Brief());
     report.extra.emplace_back("bore", BoreNote(fit, saved));
-    report.extra.emplace_back("views", "measured in the mosaic: no tile sees the hole whole");
+    report.extra.emplace_back(
+        "views", num_seeing == 0 ? std::string("measured in the mosaic: no tile sees the hole whole")
+                                 : fmt::format("measured in the mosaic: not found in the {} tile{} "
+                                               "that see it whole",
+                                               num_seeing, num_seeing > 1 ? "s" : ""));
     if (!fit.circle.ok) {
       report.error = fit.circle.error;
       return located;
