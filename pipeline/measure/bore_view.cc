@@ -45,8 +45,8 @@ std::vector<int> TilesSeeingDisc(const LensProjection& lens, const PlaneScene& s
     double least = INFINITY;
     for (int m = -1; m < kRimPoints && least >= min_border_px; ++m) {
       const double angle = 2.0 * std::numbers::pi * m / kRimPoints;
-      const Eigen::Vector2d p = centre_mm + (m < 0 ? 0.0 : radius_mm) *
-                                                Eigen::Vector2d(std::cos(angle), std::sin(angle));
+      const Eigen::Vector2d p =
+          centre_mm + (m < 0 ? 0.0 : radius_mm) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
       const auto q = TilePixelOfPartPoint(lens, scene, tile, p);
       least = q ? std::min(least, TileBorderDistancePx(*q, width_px, height_px)) : -INFINITY;
     }

@@ -68,8 +68,9 @@ TEST(BoreView, TilesSeeingDiscWholeBestFirst) {
   const MrcalLensProjection lens(s.camera);
   size_t most = 0;
   // Where the centre tile sees its middle, a side and two corners.
-  for (const Eigen::Vector2d q : {Eigen::Vector2d(800.0, 600.0), Eigen::Vector2d(1400.0, 600.0),
-                                  Eigen::Vector2d(1400.0, 1000.0), Eigen::Vector2d(200.0, 200.0)}) {
+  for (const Eigen::Vector2d& q :
+       {Eigen::Vector2d(800.0, 600.0), Eigen::Vector2d(1400.0, 600.0),
+        Eigen::Vector2d(1400.0, 1000.0), Eigen::Vector2d(200.0, 200.0)}) {
     const Eigen::Vector2d centre = *PartPointOfTilePixel(lens, scene, 4, q);
     for (const double radius : {5.0, 30.0}) {
       const std::vector<int> tiles = TilesSeeingDisc(lens, scene, centre, radius, 1600, 1200, 0.0);
@@ -79,13 +80,17 @@ TEST(BoreView, TilesSeeingDiscWholeBestFirst) {
           const double a = m * std::numbers::pi / 180.0;
           const Eigen::Vector2d p =
               centre + (m < 0 ? 0.0 : radius) * Eigen::Vector2d(std::cos(a), std::sin(a));
-          least[tile] = std::min(least[tile],
-                                 TileBorderDistancePx(*TilePixelOfPartPoint(lens, scene, tile, p),
-                                                      1600, 1200));
+          least[tile] = std::min(
+              least[tile],
+              TileBorderDistancePx(*TilePixelOfPartPoint(lens, scene, tile, p), 1600, 1200));
         }
         const bool listed = std::find(tiles.begin(), tiles.end(), tile) != tiles.end();
-        if (least[tile] >= 1.0) EXPECT_TRUE(listed) << tile;
-        if (least[tile] < -1.0) EXPECT_FALSE(listed) << tile;
+        if (least[tile] >= 1.0) {
+          EXPECT_TRUE(listed) << tile;
+        }
+        if (least[tile] < -1.0) {
+          EXPECT_FALSE(listed) << tile;
+        }
       }
       for (size_t i = 1; i < tiles.size(); ++i)
         EXPECT_GE(least[tiles[i - 1]], least[tiles[i]] - 0.5);

@@ -2,11 +2,12 @@
 
 #include <cassert>
 #include <cmath>
-
-#include <Eigen/Cholesky>
-#include <Eigen/LU>
 #include <numbers>
 #include <utility>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 
 #include "pipeline/measure/scene_sensitivity.h"
 
@@ -48,10 +49,16 @@ std::optional<Eigen::MatrixXd> CircleSensitivity(const PointSensitivity& point_s
 double NormalUpperQuantile(double p) {
   const double t = std::sqrt(-2.0 * std::log(1.0 - p));
   return -(((((-7.784894002430293e-03 * t - 3.223964580411365e-01) * t - 2.400758277161838e+00) *
-                 t - 2.549732539343734e+00) * t + 4.374664141464968e+00) * t +
+                 t -
+             2.549732539343734e+00) *
+                t +
+            4.374664141464968e+00) *
+               t +
            2.938163982698783e+00) /
          ((((7.784695709041462e-03 * t + 3.224671290700398e-01) * t + 2.445134137142996e+00) * t +
-           3.754408661907416e+00) * t + 1.0);
+           3.754408661907416e+00) *
+              t +
+          1.0);
 }
 
 }  // namespace
@@ -93,17 +100,18 @@ CombinedCircle CombineCircleViews(const std::vector<CircleFeatureValue>& views,
   // The views stacked: values, edge covariance (header comment), scene sensitivity.
   Eigen::VectorXd x(3 * n);
   Eigen::MatrixXd edge(3 * n, 3 * n), g(3 * n, num_theta);
-  std::vector<Eigen::Matrix3d> roots(n);  // L_v L_v' = C_v
+  std::vector<Eigen::Matrix3d> roots(n);  // C_v^1/2
   for (int v = 0; v < n; ++v) {
     x.segment<3>(3 * v) << views[v].centre_mm, views[v].diameter_mm;
     g.middleRows(3 * v, 3) = views[v].scene_sensitivity;
-    roots[v] = views[v].edge_covariance.llt().matrixL();
+    roots[v] =
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(views[v].edge_covariance).operatorSqrt();
   }
   for (int v = 0; v < n; ++v) {
     for (int u = 0; u < n; ++u) {
-      edge.block<3, 3>(3 * v, 3 * u) = u == v ? views[v].edge_covariance
-                                              : Eigen::Matrix3d(shared_edge_fraction * roots[v] *
-                                                                roots[u].transpose());
+      edge.block<3, 3>(3 * v, 3 * u) =
+          u == v ? views[v].edge_covariance
+                 : Eigen::Matrix3d(shared_edge_fraction * roots[v] * roots[u]);
     }
   }
   // x = A x_stack, A_v = (sum_u C_u^-1)^-1 C_v^-1.

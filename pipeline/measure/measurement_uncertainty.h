@@ -55,11 +55,11 @@ std::optional<Eigen::MatrixXd> TileCircleSceneSensitivity(const LensProjection& 
                                                           int num_rim_points = 8);
 
 // One circle measured in several pictures (tiles), combined. Each view v is
-// x_v = (cx, cy, D) with edge covariance C_v = L_v L_v' and scene
-// sensitivity G_v. The pictures' noise and sampling are independent, but
-// they show the same surface: the texture at the rim moves every view's
-// edges alike. So the views' edge errors are modelled as correlated by
-// a `shared_edge_fraction` rho: Cov(e_u, e_v) = rho L_u L_v' (u != v). The
+// x_v = (cx, cy, D) with edge covariance C_v and scene sensitivity G_v.
+// The pictures' noise and sampling are independent, but they show the same
+// surface: the texture at the rim moves every view's edges alike. So the
+// views' edge errors are modelled as correlated by a `shared_edge_fraction`
+// rho: Cov(e_u, e_v) = rho C_u^1/2 C_v^1/2 (u != v; symmetric roots). The
 // combination
 //     x = sum_v A_v x_v,   A_v = (sum_u C_u^-1)^-1 C_v^-1
 // has edge covariance A Cov(e) A' ((sum_u C_u^-1)^-1 for rho = 0) and scene

@@ -1,5 +1,6 @@
 // The geometric half of the measurements' uncertainty against exact answers
-// and against the scatter of real adjustments.
+// and against the scatter of real adjustments; the combination of a hole's
+// views against the scatter of drawn ones.
 #include "pipeline/measure/measurement_uncertainty.h"
 
 #include <cmath>
@@ -7,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/mrcal_lens_projection.h"
@@ -226,7 +228,6 @@ TEST(MeasurementPropagation, SigmaMatchesTheScatterOfAdjustments) {
   EXPECT_GT(z_calibration_share.front(), 0.5);
 }
 
-
 // Two or three views of a known hole, drawn many times: edge errors with the
 // views' covariances and the shared part rho, a scene error through each
 // view's G. The combination's mean is the truth, its scatter its edge
@@ -265,7 +266,8 @@ void CheckCombinationAgainstScatter(int num_views, double rho) {
     for (int v = 0; v < num_views; ++v) {
       Eigen::Vector3d own;
       for (int k = 0; k < 3; ++k) own[k] = normal(rng);
-      const Eigen::Matrix3d root = views[v].edge_covariance.llt().matrixL();
+      const Eigen::Matrix3d root =
+          Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(views[v].edge_covariance).operatorSqrt();
       const Eigen::Vector3d x = truth + views[v].scene_sensitivity * theta +
                                 root * (std::sqrt(rho) * shared + std::sqrt(1.0 - rho) * own);
       views[v].centre_mm = x.head<2>();
@@ -368,8 +370,7 @@ TEST(TileCircleSceneSensitivity, IsTheMosaicsWhereTheTileAloneSees) {
 TEST(ChiSquareQuantile, MatchesTheExactOnesAtTheGuardsProbability) {
   const double exact[] = {10.828, 13.816, 16.266, 18.467, 20.515, 22.458};
   for (int dof = 1; dof <= 6; ++dof) {
-    EXPECT_NEAR(ChiSquareQuantile(0.999, dof) / exact[dof - 1], 1.0, dof <= 2 ? 1e-4 : 0.02)
-        << dof;
+    EXPECT_NEAR(ChiSquareQuantile(0.999, dof) / exact[dof - 1], 1.0, dof <= 2 ? 1e-4 : 0.02) << dof;
   }
 }
 

@@ -32,8 +32,10 @@ OrthoPatch RenderTilePatch(const OrthoGeometry& geometry, int tile, const ImageF
   std::vector<char> row_ok;
   Eigen::Vector2d q_min = Eigen::Vector2d::Constant(INFINITY);
   Eigen::Vector2d q_max = Eigen::Vector2d::Constant(-INFINITY);
-  const int col_lo = std::max(lo.x(), map.min_px.x()), col_hi = std::min(hi.x() - 1, map.max_px.x());
-  const int row_lo = std::max(lo.y(), map.min_px.y()), row_hi = std::min(hi.y() - 1, map.max_px.y());
+  const int col_lo = std::max(lo.x(), map.min_px.x()),
+            col_hi = std::min(hi.x() - 1, map.max_px.x());
+  const int row_lo = std::max(lo.y(), map.min_px.y()),
+            row_hi = std::min(hi.y() - 1, map.max_px.y());
   const int col0 = map.min_px.x() + (col_lo - map.min_px.x()) / kStep * kStep;
   for (int row = row_lo; row <= row_hi && col_lo <= col_hi; ++row) {
     geometry.TileRowPixels(tile, row, col0, col_hi - col0 + 1, &row_q, &row_ok);

@@ -74,7 +74,8 @@ TEST(OrthoPatch, IsTheMosaicOfThatTileAlone) {
       bool others = false;
       for (int t = 0; t < 9; ++t) {
         Eigen::Vector2d q;
-        if (t != kTile && geometry.TilePixel(t, col, row, &q) && geometry.BorderDistancePx(q) > -1.0)
+        if (t != kTile && geometry.TilePixel(t, col, row, &q) &&
+            geometry.BorderDistancePx(q) > -1.0)
           others = true;
       }
       if (others) continue;

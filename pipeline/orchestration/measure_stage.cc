@@ -58,7 +58,7 @@ ReportValue BreakdownReport(const SigmaBreakdown& sigma) {
 struct LocatedFeature {
   FeatureReport report;
   std::optional<CircleFeatureValue> value;  // none if not found
-  int value_index = -1;  // into the propagation's features; -1 if not found
+  int value_index = -1;                     // into the propagation's features; -1 if not found
 };
 
 // A number member (a JSON number may come back as an integer), else `otherwise`.
@@ -173,14 +173,14 @@ HoleFit FitInTile(const MeasureInputs& in, int tile, const Eigen::Vector2d& expe
 HoleFit FitInMosaic(const MeasureInputs& in, const Eigen::Vector2d& centre_mm, double radius_mm,
                     const Eigen::Vector2d& expected_px) {
   HoleFit fit;
-  fit.nadir_tile = RenderingTile(in.lens, in.saved.scene, centre_mm, radius_mm,
-                                 in.camera.width_px, in.camera.height_px,
-                                 OrthoOptions{}.blend_band_px, kMaxOtherTileWeight);
+  fit.nadir_tile =
+      RenderingTile(in.lens, in.saved.scene, centre_mm, radius_mm, in.camera.width_px,
+                    in.camera.height_px, OrthoOptions{}.blend_band_px, kMaxOtherTileWeight);
   std::optional<Eigen::Vector2d> nadir_px;
   if (fit.nadir_tile)
     nadir_px = in.grid.MosaicFromPart(TileNadirMm(in.saved.scene, *fit.nadir_tile));
-  fit.circle = MeasureCircle(in.mosaic, expected_px, radius_mm / in.grid.gsd_mm, FitOptions(in),
-                             nadir_px);
+  fit.circle =
+      MeasureCircle(in.mosaic, expected_px, radius_mm / in.grid.gsd_mm, FitOptions(in), nadir_px);
   return fit;
 }
 
@@ -266,15 +266,16 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
   }
 
   if (fits.empty()) {
-    HoleFit fit = mosaic_fit ? std::move(*mosaic_fit)
-                             : FitInMosaic(in, *near_part, radius_mm, expected_px);
+    HoleFit fit =
+        mosaic_fit ? std::move(*mosaic_fit) : FitInMosaic(in, *near_part, radius_mm, expected_px);
     report.extra.emplace_back("fit", fit.circle.Brief());
     report.extra.emplace_back("bore", BoreNote(fit, saved));
     report.extra.emplace_back(
-        "views", num_seeing == 0 ? std::string("measured in the mosaic: no tile sees the hole whole")
-                                 : fmt::format("measured in the mosaic: not found in the {} tile{} "
-                                               "that see it whole",
-                                               num_seeing, num_seeing > 1 ? "s" : ""));
+        "views", num_seeing == 0
+                     ? std::string("measured in the mosaic: no tile sees the hole whole")
+                     : fmt::format("measured in the mosaic: not found in the {} tile{} "
+                                   "that see it whole",
+                                   num_seeing, num_seeing > 1 ? "s" : ""));
     if (!fit.circle.ok) {
       report.error = fit.circle.error;
       return located;
@@ -295,9 +296,8 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
     const auto sensitivity =
         fit.tile ? TileCircleSceneSensitivity(in.lens, saved.scene, *fit.tile, value.centre_mm,
                                               value.diameter_mm)
-                 : CircleSceneSensitivity(in.lens, saved.scene, value.centre_mm,
-                                          value.diameter_mm, width_px, height_px,
-                                          OrthoOptions{}.blend_band_px);
+                 : CircleSceneSensitivity(in.lens, saved.scene, value.centre_mm, value.diameter_mm,
+                                          width_px, height_px, OrthoOptions{}.blend_band_px);
     if (!sensitivity) {
       report.error = "the circle is not seen whole by the tiles";
       return located;
@@ -305,8 +305,8 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
     value.scene_sensitivity = *sensitivity;
     views.push_back(std::move(value));
   }
-  const CombinedCircle combined = CombineCircleViews(views, saved.scene.covariance, kSharedEdgeFraction,
-                                                     kConsistencyProbability);
+  const CombinedCircle combined = CombineCircleViews(views, saved.scene.covariance,
+                                                     kSharedEdgeFraction, kConsistencyProbability);
   CircleFeatureValue value = combined.value;
   const Eigen::Vector2d centre_px = grid.MosaicFromPart(value.centre_mm);
   const double combined_radius_px = 0.5 * value.diameter_mm / grid.gsd_mm;
@@ -319,19 +319,19 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
     sum_squares += fit.circle.num_inliers * fit.circle.rms_px * fit.circle.rms_px;
   }
   if (fits[0].tile) {
-    std::string views_note = fmt::format("measured in {} tile{}:", fits.size(),
-                                         fits.size() > 1 ? "s" : "");
+    std::string views_note =
+        fmt::format("measured in {} tile{}:", fits.size(), fits.size() > 1 ? "s" : "");
     std::string bore_note;
     ReportObject tile_fits;
     for (size_t i = 0; i < fits.size(); ++i) {
       const HoleFit& fit = fits[i];
       const std::string& name = saved.tile_images[*fit.tile];
-      views_note += fmt::format(
-          "{} {} ({})", i > 0 ? "," : "", name,
-          fit.circle.bottom_rim_scale > 0.0
-              ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
-              : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
-                                                           : "no bore wall resolved"));
+      views_note +=
+          fmt::format("{} {} ({})", i > 0 ? "," : "", name,
+                      fit.circle.bottom_rim_scale > 0.0
+                          ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
+                          : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
+                                                                       : "no bore wall resolved"));
       bore_note += (i > 0 ? "; " : "") + name + ": " + BoreNote(fit, saved);
       tile_fits.emplace_back(name, fit.circle.Brief());
     }
@@ -339,10 +339,10 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
       const Eigen::Matrix3d cov_px =
           to_mm.inverse() * value.edge_covariance * to_mm.inverse().transpose();
       const auto agreement = [](const char* what, const ViewAgreement& a) {
-        std::string note = fmt::format(
-            "{} {}: chi2 {:.1f} for {} dof ({:.1f} % bound {:.1f})", what,
-            a.consistent ? "agree" : "disagree", a.chi2, a.dof, 100.0 * kConsistencyProbability,
-            ChiSquareQuantile(kConsistencyProbability, a.dof));
+        std::string note = fmt::format("{} {}: chi2 {:.1f} for {} dof ({:.1f} % bound {:.1f})",
+                                       what, a.consistent ? "agree" : "disagree", a.chi2, a.dof,
+                                       100.0 * kConsistencyProbability,
+                                       ChiSquareQuantile(kConsistencyProbability, a.dof));
         if (!a.consistent) note += fmt::format(", edge sigma x{:.2f}", std::sqrt(a.inflation));
         return note;
       };
@@ -351,11 +351,11 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
       if (!combined.centre.consistent || !combined.diameter.consistent)
         spdlog::warn("measure: {}: {}", spec.name, views_note);
       report.extra.emplace_back(
-          "fit", fmt::format("combined: centre ({:.3f}, {:.3f}) px, r {:.3f} px, sigma ({:.4f}, "
-                             "{:.4f}, {:.4f}) px",
-                             centre_px.x(), centre_px.y(), combined_radius_px,
-                             std::sqrt(cov_px(0, 0)), std::sqrt(cov_px(1, 1)),
-                             std::sqrt(cov_px(2, 2))));
+          "fit",
+          fmt::format("combined: centre ({:.3f}, {:.3f}) px, r {:.3f} px, sigma ({:.4f}, "
+                      "{:.4f}, {:.4f}) px",
+                      centre_px.x(), centre_px.y(), combined_radius_px, std::sqrt(cov_px(0, 0)),
+                      std::sqrt(cov_px(1, 1)), std::sqrt(cov_px(2, 2))));
     } else {
       report.extra.emplace_back("fit", fits[0].circle.Brief());
     }
@@ -387,8 +387,8 @@ void RunMeasureStage(StageContext& context) {
   const MosaicReport& mosaic_report = *context.report.mosaic;
   const fs::path scene_path = context.Input(kSceneName);
   // This run's mosaic is in memory (its file may still be being written).
-  const fs::path mosaic_path = context.mosaic ? context.staging_dir / mosaic_report.file
-                                              : context.Input(mosaic_report.file);
+  const fs::path mosaic_path =
+      context.mosaic ? context.staging_dir / mosaic_report.file : context.Input(mosaic_report.file);
   if (scene_path.empty() || mosaic_path.empty()) {
     throw InputError(context.out_dir.string(),
                      fmt::format("{} or {} is missing: run `omm mosaic` (or `omm run`) first",
