@@ -202,9 +202,9 @@ std::string BoreNote(const HoleFit& fit, const SavedScene& saved) {
 // Pure in its inputs: features are located concurrently.
 //
 // A hole that some tiles see whole (with the fit's reach) is measured in
-// each of them alone (ortho_patch.h): independent pictures, each with its
-// own bottom rim about its own nadir, combined by their edge covariances
-// (CombineCircleViews). The first fit is in the tile that sees the expected
+// each of them alone (ortho_patch.h): pictures with their own noise, each
+// with one bottom rim about its own nadir, combined by their edge
+// covariances (CombineCircleViews). The first fit is in the tile that sees the expected
 // disc best, searched as widely as in the mosaic; its circle then says which
 // tiles see the hole whole, and those are fitted about it. The blended
 // mosaic is measured only where no tile sees the hole whole.
