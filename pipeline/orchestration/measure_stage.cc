@@ -199,15 +199,113 @@ std::string BoreNote(const HoleFit& fit, const SavedScene& saved) {
   return "no bore wall resolved";
 }
 
+// The fits of a hole in the tiles that see it whole (LocateFeature).
+struct TileFits {
+  std::vector<HoleFit> fits;          // the tiles' fits that succeeded
+  int num_seeing = 0;                 // tiles that see the hole whole
+  std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole first
+};
+
+// The first fit is in the tile that sees the expected disc best, searched as
+// widely as in the mosaic; its circle then says which tiles see the hole
+// whole, and those are fitted about it.
+TileFits FitInTiles(const MeasureInputs& in, const Eigen::Vector2d& near_part,
+                    const Eigen::Vector2d& expected_px, double radius_mm) {
+  TileFits result;
+  if (!in.geometry) return result;
+  const SavedScene& saved = in.saved;
+  const OrthoGrid& grid = in.grid;
+  const CircleMeasureOptions options = FitOptions(in);
+  const double radius_px = radius_mm / grid.gsd_mm;
+  const double reach_mm = FitReachPx(options) * grid.gsd_mm;
+  const int width_px = in.camera.width_px, height_px = in.camera.height_px;
+  const double search_px = options.search_fraction * 2.0 * radius_px + options.search_margin_px;
+  const std::vector<int> first = TilesSeeingDisc(in.lens, saved.scene, near_part,
+                                                 radius_mm + reach_mm, width_px, height_px, 0.0);
+  std::optional<HoleFit> found;
+  if (!first.empty()) {
+    found = FitInTile(in, first[0], expected_px, radius_px, options, search_px);
+    if (!found->circle.ok) found.reset();
+  }
+  if (!found) {
+    result.mosaic_fit = FitInMosaic(in, near_part, radius_mm, expected_px);
+    if (result.mosaic_fit->circle.ok) found = *result.mosaic_fit;
+  }
+  if (!found) return result;
+  // Centres agree to well within a pixel: a small search about it.
+  const Eigen::Vector2d centre_px = found->circle.centre_px;
+  const double fitted_mm = found->circle.radius_px * grid.gsd_mm;
+  for (const int t : TilesSeeingDisc(in.lens, saved.scene, grid.PartFromMosaic(centre_px),
+                                     fitted_mm + reach_mm, width_px, height_px, 0.0)) {
+    ++result.num_seeing;
+    HoleFit fit = found->tile == t
+                      ? std::move(*found)
+                      : FitInTile(in, t, centre_px, radius_px, options, options.search_margin_px);
+    if (fit.circle.ok) result.fits.push_back(std::move(fit));
+  }
+  return result;
+}
+
+// The report's notes on a hole measured in tiles: which tiles, their bores
+// and fits, and whether the views agree.
+void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& combined,
+                      const Eigen::Matrix3d& to_mm, const MeasureInputs& in,
+                      const std::string& name_of_feature, FeatureReport* report) {
+  const SavedScene& saved = in.saved;
+  const CircleFeatureValue& value = combined.value;
+  std::string views_note =
+      fmt::format("measured in {} tile{}:", fits.size(), fits.size() > 1 ? "s" : "");
+  std::string bore_note;
+  ReportObject tile_fits;
+  for (size_t i = 0; i < fits.size(); ++i) {
+    const HoleFit& fit = fits[i];
+    const std::string& name = saved.tile_images[*fit.tile];
+    views_note +=
+        fmt::format("{} {} ({})", i > 0 ? "," : "", name,
+                    fit.circle.bottom_rim_scale > 0.0
+                        ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
+                        : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
+                                                                     : "no bore wall resolved"));
+    bore_note += (i > 0 ? "; " : "") + name + ": " + BoreNote(fit, saved);
+    tile_fits.emplace_back(name, fit.circle.Brief());
+  }
+  if (fits.size() > 1) {
+    const Eigen::Matrix3d cov_px =
+        to_mm.inverse() * value.edge_covariance * to_mm.inverse().transpose();
+    const Eigen::Vector2d centre_px = in.grid.MosaicFromPart(value.centre_mm);
+    const auto agreement = [](const char* what, const ViewAgreement& a) {
+      std::string note = fmt::format("{} {}: chi2 {:.1f} for {} dof ({:.1f} % bound {:.1f})", what,
+                                     a.consistent ? "agree" : "disagree", a.chi2, a.dof,
+                                     100.0 * kConsistencyProbability,
+                                     ChiSquareQuantile(kConsistencyProbability, a.dof));
+      if (!a.consistent) note += fmt::format(", edge sigma x{:.2f}", std::sqrt(a.inflation));
+      return note;
+    };
+    views_note += "; " + agreement("centres", combined.centre) + "; " +
+                  agreement("diameters", combined.diameter);
+    if (!combined.centre.consistent || !combined.diameter.consistent)
+      spdlog::warn("measure: {}: {}", name_of_feature, views_note);
+    report->extra.emplace_back(
+        "fit",
+        fmt::format("combined: centre ({:.3f}, {:.3f}) px, r {:.3f} px, sigma ({:.4f}, "
+                    "{:.4f}, {:.4f}) px",
+                    centre_px.x(), centre_px.y(), 0.5 * value.diameter_mm / in.grid.gsd_mm,
+                    std::sqrt(cov_px(0, 0)), std::sqrt(cov_px(1, 1)), std::sqrt(cov_px(2, 2))));
+  } else {
+    report->extra.emplace_back("fit", fits[0].circle.Brief());
+  }
+  report->extra.emplace_back("bore", bore_note);
+  report->extra.emplace_back("views", views_note);
+  report->extra.emplace_back("tile_fits", std::move(tile_fits));
+}
+
 // Pure in its inputs: features are located concurrently.
 //
 // A hole that some tiles see whole (with the fit's reach) is measured in
-// each of them alone (ortho_patch.h): pictures with their own noise, each
-// with one bottom rim about its own nadir, combined by their edge
-// covariances (CombineCircleViews). The first fit is in the tile that sees the expected
-// disc best, searched as widely as in the mosaic; its circle then says which
-// tiles see the hole whole, and those are fitted about it. The blended
-// mosaic is measured only where no tile sees the hole whole.
+// each of them alone (ortho_patch.h, FitInTiles): pictures with their own
+// noise, each with one bottom rim about its own nadir, combined by their
+// edge covariances (CombineCircleViews). The blended mosaic is measured only
+// where no tile sees the hole whole.
 LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
   const SavedScene& saved = in.saved;
   const OrthoGrid& grid = in.grid;
@@ -229,45 +327,14 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
   }
   const Eigen::Vector2d expected_px = grid.MosaicFromPart(*near_part);
   report.extra = {{"expected_mosaic_px", Pair(expected_px)}};
-  const CircleMeasureOptions options = FitOptions(in);
-  const double radius_mm = 0.5 * spec.diameter_mm, radius_px = radius_mm / grid.gsd_mm;
-  const double reach_mm = FitReachPx(options) * grid.gsd_mm;
-  const int width_px = in.camera.width_px, height_px = in.camera.height_px;
+  const double radius_mm = 0.5 * spec.diameter_mm;
 
-  std::vector<HoleFit> fits;  // in the tiles that see the hole whole
-  int num_seeing = 0;         // such tiles
-  std::optional<HoleFit> mosaic_fit;
-  if (in.geometry) {
-    const double search_px = options.search_fraction * 2.0 * radius_px + options.search_margin_px;
-    const std::vector<int> first = TilesSeeingDisc(in.lens, saved.scene, *near_part,
-                                                   radius_mm + reach_mm, width_px, height_px, 0.0);
-    std::optional<HoleFit> found;
-    if (!first.empty()) {
-      found = FitInTile(in, first[0], expected_px, radius_px, options, search_px);
-      if (!found->circle.ok) found.reset();
-    }
-    if (!found) {
-      mosaic_fit = FitInMosaic(in, *near_part, radius_mm, expected_px);
-      if (mosaic_fit->circle.ok) found = *mosaic_fit;
-    }
-    if (found) {
-      // Centres agree to well within a pixel: a small search about it.
-      const Eigen::Vector2d centre_px = found->circle.centre_px;
-      const double fitted_mm = found->circle.radius_px * grid.gsd_mm;
-      for (const int t : TilesSeeingDisc(in.lens, saved.scene, grid.PartFromMosaic(centre_px),
-                                         fitted_mm + reach_mm, width_px, height_px, 0.0)) {
-        ++num_seeing;
-        HoleFit fit = found->tile == t ? std::move(*found)
-                                       : FitInTile(in, t, centre_px, radius_px, options,
-                                                   options.search_margin_px);
-        if (fit.circle.ok) fits.push_back(std::move(fit));
-      }
-    }
-  }
-
+  TileFits tile_fits = FitInTiles(in, *near_part, expected_px, radius_mm);
+  std::vector<HoleFit>& fits = tile_fits.fits;
   if (fits.empty()) {
-    HoleFit fit =
-        mosaic_fit ? std::move(*mosaic_fit) : FitInMosaic(in, *near_part, radius_mm, expected_px);
+    HoleFit fit = tile_fits.mosaic_fit ? std::move(*tile_fits.mosaic_fit)
+                                       : FitInMosaic(in, *near_part, radius_mm, expected_px);
+    const int num_seeing = tile_fits.num_seeing;
     report.extra.emplace_back("fit", fit.circle.Brief());
     report.extra.emplace_back("bore", BoreNote(fit, saved));
     report.extra.emplace_back(
@@ -297,7 +364,8 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
         fit.tile ? TileCircleSceneSensitivity(in.lens, saved.scene, *fit.tile, value.centre_mm,
                                               value.diameter_mm)
                  : CircleSceneSensitivity(in.lens, saved.scene, value.centre_mm, value.diameter_mm,
-                                          width_px, height_px, OrthoOptions{}.blend_band_px);
+                                          in.camera.width_px, in.camera.height_px,
+                                          OrthoOptions{}.blend_band_px);
     if (!sensitivity) {
       report.error = "the circle is not seen whole by the tiles";
       return located;
@@ -318,51 +386,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
     num_inliers += fit.circle.num_inliers;
     sum_squares += fit.circle.num_inliers * fit.circle.rms_px * fit.circle.rms_px;
   }
-  if (fits[0].tile) {
-    std::string views_note =
-        fmt::format("measured in {} tile{}:", fits.size(), fits.size() > 1 ? "s" : "");
-    std::string bore_note;
-    ReportObject tile_fits;
-    for (size_t i = 0; i < fits.size(); ++i) {
-      const HoleFit& fit = fits[i];
-      const std::string& name = saved.tile_images[*fit.tile];
-      views_note +=
-          fmt::format("{} {} ({})", i > 0 ? "," : "", name,
-                      fit.circle.bottom_rim_scale > 0.0
-                          ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
-                          : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
-                                                                       : "no bore wall resolved"));
-      bore_note += (i > 0 ? "; " : "") + name + ": " + BoreNote(fit, saved);
-      tile_fits.emplace_back(name, fit.circle.Brief());
-    }
-    if (fits.size() > 1) {
-      const Eigen::Matrix3d cov_px =
-          to_mm.inverse() * value.edge_covariance * to_mm.inverse().transpose();
-      const auto agreement = [](const char* what, const ViewAgreement& a) {
-        std::string note = fmt::format("{} {}: chi2 {:.1f} for {} dof ({:.1f} % bound {:.1f})",
-                                       what, a.consistent ? "agree" : "disagree", a.chi2, a.dof,
-                                       100.0 * kConsistencyProbability,
-                                       ChiSquareQuantile(kConsistencyProbability, a.dof));
-        if (!a.consistent) note += fmt::format(", edge sigma x{:.2f}", std::sqrt(a.inflation));
-        return note;
-      };
-      views_note += "; " + agreement("centres", combined.centre) + "; " +
-                    agreement("diameters", combined.diameter);
-      if (!combined.centre.consistent || !combined.diameter.consistent)
-        spdlog::warn("measure: {}: {}", spec.name, views_note);
-      report.extra.emplace_back(
-          "fit",
-          fmt::format("combined: centre ({:.3f}, {:.3f}) px, r {:.3f} px, sigma ({:.4f}, "
-                      "{:.4f}, {:.4f}) px",
-                      centre_px.x(), centre_px.y(), combined_radius_px, std::sqrt(cov_px(0, 0)),
-                      std::sqrt(cov_px(1, 1)), std::sqrt(cov_px(2, 2))));
-    } else {
-      report.extra.emplace_back("fit", fits[0].circle.Brief());
-    }
-    report.extra.emplace_back("bore", bore_note);
-    report.extra.emplace_back("views", views_note);
-    report.extra.emplace_back("tile_fits", std::move(tile_fits));
-  }
+  if (fits[0].tile) AddTileViewNotes(fits, combined, to_mm, in, spec.name, &report);
   report.centre_mm = value.centre_mm;
   report.diameter_mm = value.diameter_mm;
   report.extra.emplace_back("num_views", static_cast<int>(fits.size()));
