@@ -53,6 +53,17 @@ Eigen::VectorXd TukeyWeights(const Eigen::VectorXd& residual, double c) {
   return (1 - (residual.array() / cut).square()).max(0.0).square();
 }
 
+// Whether TukeyWeights(residual, c) is positive everywhere, by counting
+// instead of a median (most templates end their robust phase here):
+// max |e| < c 1.4826 median |e| when at most n / 2 of the |e| lie at or below
+// max |e| / (c 1.4826) (Median takes the element n / 2); or the median is 0.
+bool TukeyKeepsAll(const Eigen::VectorXd& residual, double c) {
+  const Eigen::ArrayXd magnitude = residual.array().abs();
+  const double level = magnitude.maxCoeff() / (c * 1.4826);
+  const Eigen::Index half = residual.size() / 2;
+  return (magnitude <= level).count() <= half || (magnitude == 0.0).count() > half;
+}
+
 // Summed-area tables of an image's values and squares (double): the sum and
 // the sum of squares over any rectangle in O(1).
 class WindowMoments {
@@ -590,15 +601,14 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       }
       samples_at_q = false;
       if (phase > 0) {
-        weight = TukeyWeights(residual, options.robust_tukey_c);
         // No pixel beyond the cut at the plain solution: its content agrees
-        // with the warp and that solution stands (half the matching time on
-        // the demo, whose templates rarely have one).
-        if (it == 0 && (weight.array() > 0).all()) {
-          weight.setOnes();
+        // with the warp and that solution stands, its weights all ones (half
+        // the matching time on the demo, whose templates rarely have one).
+        if (it == 0 && TukeyKeepsAll(residual, options.robust_tukey_c)) {
           converged = true;
           break;
         }
+        weight = TukeyWeights(residual, options.robust_tukey_c);
       }
       // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain, doffset).
       double n00 = 0, n01 = 0, n02 = 0, n03 = 0, n11 = 0, n12 = 0, n13 = 0, n22 = 0, n23 = 0,
