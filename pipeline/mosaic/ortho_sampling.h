@@ -34,22 +34,26 @@ enum class OrthoInterpolator {
   kCubicBSpline,  // B-spline coefficients (CubicBSplineCoefficients), B-spline weights
 };
 
-// Weights of the samples at -1, 0, 1, 2 for a position t in [0, 1) past sample 0.
-inline void CatmullRomWeights(double t, double w[4]) {
-  const double t2 = t * t, t3 = t2 * t;
-  w[0] = 0.5 * (-t3 + 2.0 * t2 - t);
-  w[1] = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0);
-  w[2] = 0.5 * (-3.0 * t3 + 4.0 * t2 + t);
-  w[3] = 0.5 * (t3 - t2);
+// Weights of the samples at -1, 0, 1, 2 for a position t in [0, 1) past
+// sample 0 (T: double, or float where SampleCubic packs them).
+template <typename T>
+inline void CatmullRomWeights(T t, T w[4]) {
+  const T t2 = t * t, t3 = t2 * t, half = 0.5;
+  w[0] = half * (-t3 + 2 * t2 - t);
+  w[1] = half * (3 * t3 - 5 * t2 + 2);
+  w[2] = half * (-3 * t3 + 4 * t2 + t);
+  w[3] = half * (t3 - t2);
 }
-inline void CubicBSplineWeights(double t, double w[4]) {
-  const double s = 1.0 - t, t2 = t * t, t3 = t2 * t;
-  w[0] = s * s * s / 6.0;
-  w[1] = (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0;
-  w[2] = (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0;
-  w[3] = t3 / 6.0;
+template <typename T>
+inline void CubicBSplineWeights(T t, T w[4]) {
+  const T s = 1 - t, t2 = t * t, t3 = t2 * t, sixth = T{1} / 6;
+  w[0] = s * s * s * sixth;
+  w[1] = (3 * t3 - 6 * t2 + 4) * sixth;
+  w[2] = (-3 * t3 + 3 * t2 + 3 * t + 1) * sixth;
+  w[3] = t3 * sixth;
 }
-inline void CubicWeights(OrthoInterpolator kind, double t, double w[4]) {
+template <typename T>
+inline void CubicWeights(OrthoInterpolator kind, T t, T w[4]) {
   if (kind == OrthoInterpolator::kCatmullRom)
     CatmullRomWeights(t, w);
   else
@@ -65,18 +69,17 @@ ImageF CubicBSplineCoefficients(const ImageF& image);
 // and the weights of `kind` at q's fraction: the interpolated value when
 // `image` holds what `kind` samples (the pixels or their B-spline
 // coefficients). Precondition: q in [1, W - 2] x [1, H - 2].
+// In float, like the image: four weights or pixels per SSE register.
 inline float SampleCubic(OrthoInterpolator kind, const ImageF& image, const Eigen::Vector2d& q) {
   const int ix = static_cast<int>(q.x()), iy = static_cast<int>(q.y());
-  double wx[4], wy[4];
-  CubicWeights(kind, q.x() - ix, wx);
-  CubicWeights(kind, q.y() - iy, wy);
-  double sum = 0.0;
-  for (int j = 0; j < 4; ++j) {
-    const float* row =
-        image.data() + static_cast<std::ptrdiff_t>(iy - 1 + j) * image.cols() + ix - 1;
-    sum += wy[j] * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
-  }
-  return static_cast<float>(sum);
+  Eigen::Array4f wx, wy;
+  CubicWeights(kind, static_cast<float>(q.x() - ix), wx.data());
+  CubicWeights(kind, static_cast<float>(q.y() - iy), wy.data());
+  const float* row = image.data() + static_cast<std::ptrdiff_t>(iy - 1) * image.cols() + ix - 1;
+  const Eigen::Index stride = image.cols();
+  const Eigen::Map<const Eigen::Array4f> r0(row), r1(row + stride), r2(row + 2 * stride),
+      r3(row + 3 * stride);
+  return (wx * (wy(0) * r0 + wy(1) * r1 + wy(2) * r2 + wy(3) * r3)).sum();
 }
 
 }  // namespace omm

@@ -129,13 +129,15 @@ void OrthoGeometry::TileRowPixels(int tile, int row, int col0, int n,
   double w[kStep][4];
   for (int phase = 0; phase < kStep; ++phase)
     CatmullRomWeights(static_cast<double>(phase) / kStep, w[phase]);
-  for (int k = 0; k < n; ++k) {
-    const int j = k / kStep + 1, phase = k % kStep;
+  // Segment by segment: pixel k lies between nodes j and j + 1, j = k / kStep + 1.
+  for (int j = 1, k0 = 0; k0 < n; ++j, k0 += kStep) {
+    const int k1 = std::min(n, k0 + kStep);
     const bool ok = nok[j - 1] && nok[j] && nok[j + 1] && nok[j + 2];
-    (*valid)[k] = ok;
-    if (ok) {
-      (*q_px)[k] = w[phase][0] * nq[j - 1] + w[phase][1] * nq[j] + w[phase][2] * nq[j + 1] +
-                   w[phase][3] * nq[j + 2];
+    std::fill(valid->begin() + k0, valid->begin() + k1, ok);
+    if (!ok) continue;
+    for (int k = k0; k < k1; ++k) {
+      const double* wk = w[k - k0];
+      (*q_px)[k] = wk[0] * nq[j - 1] + wk[1] * nq[j] + wk[2] * nq[j + 1] + wk[3] * nq[j + 2];
     }
   }
 }
