@@ -81,44 +81,18 @@ ImageF BSplineCoefficients(const ImageF& image);
 
 // The cubic B-spline interpolant of the image whose BSplineCoefficients are
 // `coefficients`, at (x, y) px, with its gradient (d/dx, d/dy); false
-// (outputs untouched) if the 4 x 4 support leaves the image.
-// Inline: the template matcher calls it ~10^7 times per registration. In
-// float, like the coefficients (a few float epsilons of the values' scale):
-// an SSE register holds four floats but two doubles, which halved the packed
-// arithmetic.
-inline bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
-                          double* dvalue_dx, double* dvalue_dy) {
-  // floor(x) in [1, cols - 3] (false for NaN), then truncation is floor (SSE2
-  // has no rounding instruction: std::floor took a dozen).
-  if (!(x >= 1.0 && y >= 1.0 && x < coefficients.cols() - 2.0 && y < coefficients.rows() - 2.0))
-    return false;
-  const int ix = static_cast<int>(x), iy = static_cast<int>(y);
-  // The four weights and their derivatives as packed polynomials in the
-  // fraction f (Horner): w = ((a3 f + a2) f + a1) f + a0, dw = (b2 f + b1) f + b0.
-  const auto weights = [](float f, Eigen::Array4f* w, Eigen::Array4f* dw) {
-    constexpr float k6 = 1.0f / 6.0f;
-    const Eigen::Array4f a0(k6, 4 * k6, k6, 0), a1(-0.5f, 0, 0.5f, 0),
-        a2(0.5f, -1, 0.5f, 0), a3(-k6, 0.5f, -0.5f, k6);
-    const Eigen::Array4f b0(-0.5f, 0, 0.5f, 0), b1(1, -2, 1, 0), b2(-0.5f, 1.5f, -1.5f, 0.5f);
-    *w = ((a3 * f + a2) * f + a1) * f + a0;
-    *dw = (b2 * f + b1) * f + b0;
-  };
-  Eigen::Array4f wx, dwx, wy, dwy;
-  weights(static_cast<float>(x - ix), &wx, &dwx);
-  weights(static_cast<float>(y - iy), &wy, &dwy);
-  // The rows combined first (by wy and dwy), then the columns.
-  const float* row =
-      coefficients.data() + static_cast<size_t>(iy - 1) * coefficients.cols() + (ix - 1);
-  const Eigen::Index stride = coefficients.cols();
-  const Eigen::Map<const Eigen::Array4f> r0(row), r1(row + stride), r2(row + 2 * stride),
-      r3(row + 3 * stride);
-  const Eigen::Array4f t = wy(0) * r0 + wy(1) * r1 + wy(2) * r2 + wy(3) * r3;
-  const Eigen::Array4f dt = dwy(0) * r0 + dwy(1) * r1 + dwy(2) * r2 + dwy(3) * r3;
-  *value = (wx * t).sum();
-  *dvalue_dx = (dwx * t).sum();
-  *dvalue_dy = (wx * dt).sum();
-  return true;
-}
+// (outputs untouched) if the 4 x 4 support leaves the image. In float, like
+// the coefficients (a few float epsilons of the values' scale).
+bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
+                   double* dvalue_dx, double* dvalue_dy);
+
+// SampleBSpline at p0 + offsets[i] for every i into value, dvalue_dx and
+// dvalue_dy (resized); false if any support leaves the image. The template
+// matcher's inner loop (~2e7 samples per registration), with the point
+// sampler inlined.
+bool SampleBSplinePatch(const ImageF& coefficients, const Eigen::Vector2d& p0,
+                        const std::vector<Eigen::Vector2d>& offsets, Eigen::VectorXd* value,
+                        Eigen::VectorXd* dvalue_dx, Eigen::VectorXd* dvalue_dy);
 
 // The same, the gradient optional.
 inline bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,

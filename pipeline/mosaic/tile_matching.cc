@@ -496,15 +496,14 @@ NccPeak SearchNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int
   for (int dy = -rad; dy <= rad; ++dy) {
     for (int dx = -rad; dx <= rad; ++dx) {
       // The cross term against the zero-mean template: float sums per row
-      // (<= a few hundred terms of normalised intensities), double across rows.
+      // (<= a few hundred terms of normalised intensities; Eigen's dot
+      // product vectorises them), double across rows.
       double st = 0;
       for (int r = 0; r < side; ++r) {
         const float* row = target.data() + static_cast<size_t>(cy + dy - h + r) * target.cols() +
                            (cx + dx - h);
-        const float* tr = t0.data() + r * side;
-        float fst = 0;
-        for (int c = 0; c < side; ++c) fst += row[c] * tr[c];
-        st += fst;
+        st += Eigen::Map<const Eigen::VectorXf>(row, side)
+                  .dot(Eigen::Map<const Eigen::VectorXf>(t0.data() + r * side, side));
       }
       const double s = box(sum, dy + rad, dx + rad), ss = box(sum_sq, dy + rad, dx + rad);
       const double var = ss - s * s / n;
@@ -591,13 +590,9 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
       // Phase 1 starts where phase 0 converged: when phase 0 stopped before
       // applying its last step, the samples and residuals are those of q.
       if (!samples_at_q) {
-        for (int i = 0; i < n; ++i) {
-          const Eigen::Vector2d p = q + offsets[i];
-          if (!SampleBSpline(target_spline, p.x(), p.y(), &sampled(i), &gradient_x(i),
-                             &gradient_y(i)))
-            return match;
-          residual(i) = gain * sampled(i) + offset - templ(i);
-        }
+        if (!SampleBSplinePatch(target_spline, q, offsets, &sampled, &gradient_x, &gradient_y))
+          return match;
+        residual = (gain * sampled.array() + offset - templ.array()).matrix();
       }
       samples_at_q = false;
       if (phase > 0) {
@@ -610,21 +605,37 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
         }
         weight = TukeyWeights(residual, options.robust_tukey_c);
       }
-      // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain, doffset).
-      double n00 = 0, n01 = 0, n02 = 0, n03 = 0, n11 = 0, n12 = 0, n13 = 0, n22 = 0, n23 = 0,
-             n33 = 0;
-      double b0 = 0, b1 = 0, b2 = 0, b3 = 0;
-      for (int i = 0; i < n; ++i) {
-        const double w = weight(i), v = sampled(i), e = w * residual(i);
-        const double j0 = gain * gradient_x(i), j1 = gain * gradient_y(i);
-        const double wj0 = w * j0, wj1 = w * j1, wv = w * v;
+      // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain,
+      // doffset) and the right side, pixel pairs in the two lanes of packed
+      // doubles (SSE2 does two per instruction; the scalar sums could not be
+      // reordered without -ffast-math). An odd last pixel pairs with weight 0.
+      using Pair = Eigen::Array2d;
+      Pair n00 = Pair::Zero(), n01 = n00, n02 = n00, n03 = n00, n11 = n00, n12 = n00, n13 = n00,
+           n22 = n00, n23 = n00, n33 = n00, b0 = n00, b1 = n00, b2 = n00, b3 = n00;
+      const auto add = [&](const Pair& w, const Pair& v, const Pair& r, const Pair& gx,
+                           const Pair& gy) {
+        const Pair e = w * r, j0 = gain * gx, j1 = gain * gy;
+        const Pair wj0 = w * j0, wj1 = w * j1, wv = w * v;
         n00 += wj0 * j0, n01 += wj0 * j1, n02 += wj0 * v, n03 += wj0;
         n11 += wj1 * j1, n12 += wj1 * v, n13 += wj1;
         n22 += wv * v, n23 += wv, n33 += w;
         b0 -= j0 * e, b1 -= j1 * e, b2 -= v * e, b3 -= e;
+      };
+      int i = 0;
+      for (; i + 1 < n; i += 2) {
+        add(weight.segment<2>(i), sampled.segment<2>(i), residual.segment<2>(i),
+            gradient_x.segment<2>(i), gradient_y.segment<2>(i));
       }
-      normal << n00, n01, n02, n03, n01, n11, n12, n13, n02, n12, n22, n23, n03, n13, n23, n33;
-      const Eigen::Vector4d step = normal.ldlt().solve(Eigen::Vector4d(b0, b1, b2, b3));
+      if (i < n) {
+        add(Pair(weight(i), 0), Pair(sampled(i), 0), Pair(residual(i), 0),
+            Pair(gradient_x(i), 0), Pair(gradient_y(i), 0));
+      }
+      const double s01 = n01.sum(), s02 = n02.sum(), s03 = n03.sum(), s12 = n12.sum(),
+                   s13 = n13.sum(), s23 = n23.sum();
+      normal << n00.sum(), s01, s02, s03, s01, n11.sum(), s12, s13, s02, s12, n22.sum(), s23, s03,
+          s13, s23, n33.sum();
+      const Eigen::Vector4d rhs(b0.sum(), b1.sum(), b2.sum(), b3.sum());
+      const Eigen::Vector4d step = normal.ldlt().solve(rhs);
       if (!step.allFinite()) return match;
       ++match.iterations;
       const double step_px = step.head<2>().norm();
