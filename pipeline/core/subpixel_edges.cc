@@ -7,38 +7,28 @@
 
 #include <Eigen/Cholesky>
 
+#include "pipeline/core/cubic_weights.h"
 #include "pipeline/core/statistics.h"
 
 namespace omm {
 namespace {
 
-// Keys' cubic convolution (a = -1/2) weights of the four samples around a
-// point at fraction t past the second one (T: double, or float where
-// Interpolate packs them).
-template <typename T>
-inline void KeysWeights(T t, T w[4]) {
-  const T t2 = t * t, t3 = t2 * t, half = 0.5, three_halves = 1.5, five_halves = 2.5;
-  w[0] = -half * t3 + t2 - half * t;
-  w[1] = three_halves * t3 - five_halves * t2 + 1;
-  w[2] = -three_halves * t3 + 2 * t2 + half * t;
-  w[3] = half * t3 - half * t2;
-}
-
 // Interpolated value at (x, y); false if the 4x4 neighbourhood leaves the
 // image. Cubic rather than bilinear: at a blurred edge linear interpolation
 // errs by t(1-t)(1-2t)/6 f''' (t the pixel phase), ~0.03 px of edge position
 // for a 0.75 px blur, and these phase errors do not average out fully over
-// one mark's perimeter; cubic convolution is exact for quadratics. In float,
-// like the image (a few float epsilons of its scale): four weights or pixels
-// per SSE register, where the rays sample it ~10^7 times per project.
+// one mark's perimeter; Keys' cubic convolution (CatmullRomWeights) is exact
+// for quadratics. In float, like the image (a few float epsilons of its
+// scale): four weights or pixels per SSE register, where the rays sample it
+// ~10^7 times per project.
 bool Interpolate(const ImageF& image, double x, double y, double* value) {
   // floor(x) in [1, cols - 3] (false for NaN), then truncation is floor (SSE2
   // has no rounding instruction: std::floor took a dozen).
   if (!(x >= 1.0 && y >= 1.0 && x < image.cols() - 2.0 && y < image.rows() - 2.0)) return false;
   const Eigen::Index c = static_cast<Eigen::Index>(x), r = static_cast<Eigen::Index>(y);
   Eigen::Array4f wx, wy;
-  KeysWeights(static_cast<float>(x - c), wx.data());
-  KeysWeights(static_cast<float>(y - r), wy.data());
+  CatmullRomWeights(static_cast<float>(x - c), wx.data());
+  CatmullRomWeights(static_cast<float>(y - r), wy.data());
   const float* row = &image(r - 1, c - 1);
   const Eigen::Index stride = image.cols();
   const Eigen::Map<const Eigen::Array4f> r0(row), r1(row + stride), r2(row + 2 * stride),
@@ -296,8 +286,8 @@ void AddInterpolationWeights(double x, double y, const Eigen::Vector2d& weight, 
                              Eigen::Index width, std::vector<Eigen::Vector2d>* g) {
   const double fx = std::floor(x), fy = std::floor(y);
   double wx[4], wy[4];
-  KeysWeights(x - fx, wx);
-  KeysWeights(y - fy, wy);
+  CatmullRomWeights(x - fx, wx);
+  CatmullRomWeights(y - fy, wy);
   const Eigen::Index c = static_cast<Eigen::Index>(fx) - 1 - x0, r = static_cast<Eigen::Index>(fy) - 1 - y0;
   for (int i = 0; i < 4; ++i) {
     for (int j = 0; j < 4; ++j) (*g)[static_cast<size_t>((r + i) * width + c + j)] += wy[i] * wx[j] * weight;

@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 
+#include "pipeline/core/cubic_weights.h"
 #include "pipeline/core/image.h"
 
 namespace omm {
@@ -34,24 +35,7 @@ enum class OrthoInterpolator {
   kCubicBSpline,  // B-spline coefficients (CubicBSplineCoefficients), B-spline weights
 };
 
-// Weights of the samples at -1, 0, 1, 2 for a position t in [0, 1) past
-// sample 0 (T: double, or float where SampleCubic packs them).
-template <typename T>
-inline void CatmullRomWeights(T t, T w[4]) {
-  const T t2 = t * t, t3 = t2 * t, half = 0.5;
-  w[0] = half * (-t3 + 2 * t2 - t);
-  w[1] = half * (3 * t3 - 5 * t2 + 2);
-  w[2] = half * (-3 * t3 + 4 * t2 + t);
-  w[3] = half * (t3 - t2);
-}
-template <typename T>
-inline void CubicBSplineWeights(T t, T w[4]) {
-  const T s = 1 - t, t2 = t * t, t3 = t2 * t, sixth = T{1} / 6;
-  w[0] = s * s * s * sixth;
-  w[1] = (3 * t3 - 6 * t2 + 4) * sixth;
-  w[2] = (-3 * t3 + 3 * t2 + 3 * t + 1) * sixth;
-  w[3] = t3 * sixth;
-}
+// The weights of `kind` (pipeline/core/cubic_weights.h).
 template <typename T>
 inline void CubicWeights(OrthoInterpolator kind, T t, T w[4]) {
   if (kind == OrthoInterpolator::kCatmullRom)
