@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 
+#include "pipeline/core/cubic_bspline.h"
 #include "pipeline/core/cubic_weights.h"
 #include "pipeline/core/image.h"
 
@@ -43,11 +44,6 @@ inline void CubicWeights(OrthoInterpolator kind, T t, T w[4]) {
   else
     CubicBSplineWeights(t, w);
 }
-
-// The B-spline coefficients of an image (at least 2 x 2): the cubic spline
-// through its pixels, mirrored at the borders (exactly for sides of >= 16 px,
-// where the recursion's start has converged to float precision).
-ImageF CubicBSplineCoefficients(const ImageF& image);
 
 // sum_ij wy[j] wx[i] image(iy - 1 + j, ix - 1 + i) with (ix, iy) = floor(q)
 // and the weights of `kind` at q's fraction: the interpolated value when

@@ -12,6 +12,7 @@
 #include <Eigen/Dense>
 
 #include "adapters/mrcal/lens.h"
+#include "pipeline/core/cubic_bspline.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
@@ -221,7 +222,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     // On the matching image, so that the texture test sees the templates.
     if (options.features != FeatureSource::kSift)
       corners[i] = DetectHarrisCorners(normalized[i], options.harris);
-    spline[i] = BSplineCoefficients(normalized[i]);
+    spline[i] = CubicBSplineCoefficients(normalized[i]);
     coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
   });
   for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());

@@ -283,46 +283,6 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
 
 namespace {
 
-// In-place cubic B-spline prefilter along n samples at stride `stride`, of
-// `lanes` sequences at once, lane l starting at data + l lane_stride: the
-// column pass walks rows of a block of adjacent columns (cache-friendly,
-// vectorisable), the row pass a block of rows, whose independent recursions
-// hide each other's latency (one row at a time, the recursion's dependency
-// chain set the pace).
-void BSplinePrefilter1D(float* data, int n, int stride, int lanes, int lane_stride,
-                        std::vector<double>* work) {
-  if (n < 2) return;
-  const double z = std::sqrt(3.0) - 2.0;
-  std::vector<double>& c = *work;
-  c.assign(static_cast<size_t>(n) * lanes, 0.0);
-  const auto at = [&](int k) { return data + static_cast<size_t>(k) * stride; };
-  // Causal initialisation: mirrored sum truncated where z^k < 1e-9.
-  const int horizon = std::min(n, 16);
-  double zk = 1;
-  for (int k = 0; k < horizon; ++k, zk *= z) {
-    const float* x = at(k);
-    for (int l = 0; l < lanes; ++l) c[l] += zk * x[l * lane_stride];
-  }
-  for (int k = 1; k < n; ++k) {
-    const float* x = at(k);
-    double* ck = &c[static_cast<size_t>(k) * lanes];
-    const double* prev = ck - lanes;
-    for (int l = 0; l < lanes; ++l) ck[l] = x[l * lane_stride] + z * prev[l];
-  }
-  double* last = &c[static_cast<size_t>(n - 1) * lanes];
-  for (int l = 0; l < lanes; ++l) last[l] = (z / (z * z - 1.0)) * (last[l] + z * last[l - lanes]);
-  for (int k = n - 2; k >= 0; --k) {
-    double* ck = &c[static_cast<size_t>(k) * lanes];
-    const double* next = ck + lanes;
-    for (int l = 0; l < lanes; ++l) ck[l] = z * (next[l] - ck[l]);
-  }
-  for (int k = 0; k < n; ++k) {
-    float* x = at(k);
-    const double* ck = &c[static_cast<size_t>(k) * lanes];
-    for (int l = 0; l < lanes; ++l) x[l * lane_stride] = static_cast<float>(6.0 * ck[l]);
-  }
-}
-
 // SampleBSpline's body. In float: an SSE register holds four floats but two
 // doubles, which halved the packed arithmetic. Forced inline: GCC otherwise
 // calls it from SampleBSplinePatch's loop, reloading its constants per pixel.
@@ -361,19 +321,6 @@ void BSplinePrefilter1D(float* data, int n, int stride, int lanes, int lane_stri
 }
 
 }  // namespace
-
-ImageF BSplineCoefficients(const ImageF& image) {
-  ImageF c = image;
-  const int rows = static_cast<int>(c.rows()), cols = static_cast<int>(c.cols());
-  std::vector<double> work;
-  constexpr int kRowBlock = 8, kColBlock = 32;
-  for (int r = 0; r < rows; r += kRowBlock)
-    BSplinePrefilter1D(c.data() + static_cast<size_t>(r) * cols, cols, 1,
-                       std::min(kRowBlock, rows - r), cols, &work);
-  for (int col = 0; col < cols; col += kColBlock)
-    BSplinePrefilter1D(c.data() + col, rows, cols, std::min(kColBlock, cols - col), 1, &work);
-  return c;
-}
 
 bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
                    double* dvalue_dx, double* dvalue_dy) {

@@ -70,19 +70,15 @@ struct Corner {
 // Precondition: options.Check() is empty.
 std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options);
 
-// Cubic B-spline coefficients of an image (Unser 1999: the causal and
-// anti-causal recursive filters with pole sqrt(3) - 2, mirrored borders), so
-// that SampleBSpline interpolates the pixels exactly. Interpolating with
-// them instead of Keys' cubic convolution matters for sub-pixel matching:
-// Keys' kernel smooths by an amount that depends on the fractional position
-// and biased template matches periodically by up to ~0.045 px on the
-// simulator's tiles ("pixel locking"); the B-spline's bias is far smaller.
-ImageF BSplineCoefficients(const ImageF& image);
-
-// The cubic B-spline interpolant of the image whose BSplineCoefficients are
-// `coefficients`, at (x, y) px, with its gradient (d/dx, d/dy); false
-// (outputs untouched) if the 4 x 4 support leaves the image. In float, like
-// the coefficients (a few float epsilons of the values' scale).
+// The cubic B-spline interpolant of the image whose CubicBSplineCoefficients
+// (pipeline/core/cubic_bspline.h) are `coefficients`, at (x, y) px, with its
+// gradient (d/dx, d/dy); false (outputs untouched) if the 4 x 4 support
+// leaves the image. In float, like the coefficients (a few float epsilons of
+// the values' scale). The B-spline rather than Keys' cubic convolution for
+// sub-pixel matching: Keys' kernel smooths by an amount that depends on the
+// fractional position and biased template matches periodically by up to
+// ~0.045 px on the simulator's tiles ("pixel locking"); the B-spline's bias
+// is far smaller.
 bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
                    double* dvalue_dx, double* dvalue_dy);
 

@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "pipeline/core/cubic_bspline.h"
+
 namespace omm {
 namespace {
 
@@ -93,7 +95,7 @@ TEST(BSpline, InterpolatesThePixelsExactly) {
   std::uniform_real_distribution<float> u(-2.0f, 2.0f);
   ImageF image(40, 50);
   for (Eigen::Index i = 0; i < image.size(); ++i) image.data()[i] = u(rng);
-  const ImageF coefficients = BSplineCoefficients(image);
+  const ImageF coefficients = CubicBSplineCoefficients(image);
   double max_error = 0;
   for (int r = 1; r + 2 < image.rows(); ++r) {
     for (int c = 1; c + 2 < image.cols(); ++c) {
@@ -115,7 +117,7 @@ TEST(BSpline, ReproducesALinearRampAndItsGradient) {
   ImageF image(60, 60);
   for (int r = 0; r < 60; ++r)
     for (int c = 0; c < 60; ++c) image(r, c) = static_cast<float>(0.3 + 0.02 * c - 0.015 * r);
-  const ImageF coefficients = BSplineCoefficients(image);
+  const ImageF coefficients = CubicBSplineCoefficients(image);
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(20.0, 40.0);
   for (int k = 0; k < 100; ++k) {
@@ -134,7 +136,7 @@ TEST(BSpline, GradientMatchesFiniteDifferences) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   ImageF image(30, 30);
   for (Eigen::Index i = 0; i < image.size(); ++i) image.data()[i] = u(rng);
-  const ImageF coefficients = BSplineCoefficients(image);
+  const ImageF coefficients = CubicBSplineCoefficients(image);
   // Within a cell the interpolant is a cubic along each axis, and the
   // five-point difference 8 (f(+e) - f(-e)) - (f(+2e) - f(-2e)) over 12 e is
   // exact for cubics: with all samples in the cell (fractions 0.25..0.75,

@@ -149,7 +149,7 @@ struct PatchMatch {
 // 2. least-squares template matching (Gruen 1985) from the best offset:
 //      min over q, g, o  sum_x (g T(q + J x) + o - R(anchor + x))^2,
 //    x over the template's integer offsets, R the reference tile's raw pixels,
-//    T the target's cubic B-spline interpolant (BSplineCoefficients), J = dq_target /
+//    T the target's cubic B-spline interpolant (CubicBSplineCoefficients), J = dq_target /
 //    dq_reference the local affine of the tile-to-tile map (the prediction's
 //    Jacobian, e.g. from the plane-induced homography), held fixed: only the
 //    position, gain and offset are estimated. The template is never resampled,
@@ -160,7 +160,7 @@ struct PatchMatch {
 //    the views beyond the plane's warp (a bore's wall and what is seen
 //    through it) stop pulling the match. sigma_px then comes from the
 //    weighted normal matrix and weighted residual variance.
-// `target_spline` is BSplineCoefficients(target).
+// `target_spline` is CubicBSplineCoefficients(target).
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
                       const ImageF& target, const ImageF& target_spline,
                       const Eigen::Vector2d& predicted_q_px,

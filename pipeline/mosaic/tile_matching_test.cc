@@ -12,6 +12,7 @@
 
 #include <Eigen/Dense>
 
+#include "pipeline/core/cubic_bspline.h"
 #include "pipeline/mosaic/tile_features.h"
 
 namespace omm {
@@ -117,7 +118,7 @@ TEST(MatchPatch, RecoversAKnownSubPixelShift) {
   const ImageF reference = Sinusoids(120, 120, 0, 0);
   const Eigen::Vector2d shift(2.37, -1.62);
   const ImageF target = Sinusoids(120, 120, shift.x(), shift.y());
-  const ImageF spline = BSplineCoefficients(target);
+  const ImageF spline = CubicBSplineCoefficients(target);
   PatchMatchOptions options;
   const Eigen::Vector2i anchor(60, 55);
   // Predicted 2 px off: the NCC search finds the integer peak, LSQ the rest.

@@ -1,8 +1,10 @@
-#include "pipeline/mosaic/ortho_sampling.h"
+#include "pipeline/core/cubic_bspline.h"
 
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+
+#include <Eigen/Core>
 
 namespace omm {
 namespace {
