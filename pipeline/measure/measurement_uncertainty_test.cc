@@ -8,8 +8,8 @@
 #include <random>
 #include <vector>
 
-#include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
+#include <Eigen/Eigenvalues>
 
 #include "adapters/mrcal/mrcal_lens_projection.h"
 #include "pipeline/measure/scene_sensitivity.h"

@@ -43,9 +43,12 @@ double SampleBoxSmoothed(const ImageF& image, const Eigen::Vector2d& q, int r) {
   const int taps = 2 * r + 2;
   double sum = 0.0;
   for (int j = 0; j < taps; ++j) {
-    const float* row = image.data() + static_cast<std::ptrdiff_t>(std::clamp(iy - r + j, 0, last_row)) *
-                                          image.cols();
-    const auto at = [&](int i) { return static_cast<double>(row[std::clamp(ix - r + i, 0, last_col)]); };
+    const float* row =
+        image.data() +
+        static_cast<std::ptrdiff_t>(std::clamp(iy - r + j, 0, last_row)) * image.cols();
+    const auto at = [&](int i) {
+      return static_cast<double>(row[std::clamp(ix - r + i, 0, last_col)]);
+    };
     double row_sum = (1 - fx) * at(0) + fx * at(taps - 1);
     for (int i = 1; i + 1 < taps; ++i) row_sum += at(i);
     sum += (j == 0 ? 1 - fy : j + 1 == taps ? fy : 1.0) * row_sum;

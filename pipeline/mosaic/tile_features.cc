@@ -286,8 +286,9 @@ namespace {
 // SampleBSpline's body. In float: an SSE register holds four floats but two
 // doubles, which halved the packed arithmetic. Forced inline: GCC otherwise
 // calls it from SampleBSplinePatch's loop, reloading its constants per pixel.
-[[gnu::always_inline]] inline bool SampleBSplineAt(const ImageF& coefficients, double x, double y, double* value,
-                            double* dvalue_dx, double* dvalue_dy) {
+[[gnu::always_inline]] inline bool SampleBSplineAt(const ImageF& coefficients, double x, double y,
+                                                   double* value, double* dvalue_dx,
+                                                   double* dvalue_dy) {
   // floor(x) in [1, cols - 3] (false for NaN), then truncation is floor (SSE2
   // has no rounding instruction: std::floor took a dozen).
   if (!(x >= 1.0 && y >= 1.0 && x < coefficients.cols() - 2.0 && y < coefficients.rows() - 2.0))
@@ -297,8 +298,8 @@ namespace {
   // fraction f (Horner): w = ((a3 f + a2) f + a1) f + a0, dw = (b2 f + b1) f + b0.
   const auto weights = [](float f, Eigen::Array4f* w, Eigen::Array4f* dw) {
     constexpr float k6 = 1.0f / 6.0f;
-    const Eigen::Array4f a0(k6, 4 * k6, k6, 0), a1(-0.5f, 0, 0.5f, 0),
-        a2(0.5f, -1, 0.5f, 0), a3(-k6, 0.5f, -0.5f, k6);
+    const Eigen::Array4f a0(k6, 4 * k6, k6, 0), a1(-0.5f, 0, 0.5f, 0), a2(0.5f, -1, 0.5f, 0),
+        a3(-k6, 0.5f, -0.5f, k6);
     const Eigen::Array4f b0(-0.5f, 0, 0.5f, 0), b1(1, -2, 1, 0), b2(-0.5f, 1.5f, -1.5f, 0.5f);
     *w = ((a3 * f + a2) * f + a1) * f + a0;
     *dw = (b2 * f + b1) * f + b0;
@@ -322,8 +323,8 @@ namespace {
 
 }  // namespace
 
-bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
-                   double* dvalue_dx, double* dvalue_dy) {
+bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value, double* dvalue_dx,
+                   double* dvalue_dy) {
   return SampleBSplineAt(coefficients, x, y, value, dvalue_dx, dvalue_dy);
 }
 
@@ -334,7 +335,8 @@ bool SampleBSplinePatch(const ImageF& coefficients, const Eigen::Vector2d& p0,
   value->resize(n), dvalue_dx->resize(n), dvalue_dy->resize(n);
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Vector2d p = p0 + offsets[i];
-    if (!SampleBSplineAt(coefficients, p.x(), p.y(), &(*value)(i), &(*dvalue_dx)(i), &(*dvalue_dy)(i)))
+    if (!SampleBSplineAt(coefficients, p.x(), p.y(), &(*value)(i), &(*dvalue_dx)(i),
+                         &(*dvalue_dy)(i)))
       return false;
   }
   return true;

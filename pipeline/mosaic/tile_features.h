@@ -79,8 +79,8 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
 // fractional position and biased template matches periodically by up to
 // ~0.045 px on the simulator's tiles ("pixel locking"); the B-spline's bias
 // is far smaller.
-bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value,
-                   double* dvalue_dx, double* dvalue_dy);
+bool SampleBSpline(const ImageF& coefficients, double x, double y, double* value, double* dvalue_dx,
+                   double* dvalue_dy);
 
 // SampleBSpline at p0 + offsets[i] for every i into value, dvalue_dx and
 // dvalue_dy (resized); false if any support leaves the image. The template

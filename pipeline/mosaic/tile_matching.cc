@@ -75,7 +75,8 @@ class WindowMoments {
 
  private:
   double Box(const std::vector<double>& t, int r0, int r1, int c0, int c1) const {
-    return t[r1 * stride_ + c1] - t[r0 * stride_ + c1] - t[r1 * stride_ + c0] + t[r0 * stride_ + c0];
+    return t[r1 * stride_ + c1] - t[r0 * stride_ + c1] - t[r1 * stride_ + c0] +
+           t[r0 * stride_ + c0];
   }
   int stride_;
   std::vector<double> sum_, sum_sq_;
@@ -500,10 +501,10 @@ NccPeak SearchNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int
       // product vectorises them), double across rows.
       double st = 0;
       for (int r = 0; r < side; ++r) {
-        const float* row = target.data() + static_cast<size_t>(cy + dy - h + r) * target.cols() +
-                           (cx + dx - h);
-        st += Eigen::Map<const Eigen::VectorXf>(row, side)
-                  .dot(Eigen::Map<const Eigen::VectorXf>(t0.data() + r * side, side));
+        const float* row =
+            target.data() + static_cast<size_t>(cy + dy - h + r) * target.cols() + (cx + dx - h);
+        st += Eigen::Map<const Eigen::VectorXf>(row, side).dot(
+            Eigen::Map<const Eigen::VectorXf>(t0.data() + r * side, side));
       }
       const double s = box(sum, dy + rad, dx + rad), ss = box(sum_sq, dy + rad, dx + rad);
       const double var = ss - s * s / n;
@@ -627,8 +628,8 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
             gradient_x.segment<2>(i), gradient_y.segment<2>(i));
       }
       if (i < n) {
-        add(Pair(weight(i), 0), Pair(sampled(i), 0), Pair(residual(i), 0),
-            Pair(gradient_x(i), 0), Pair(gradient_y(i), 0));
+        add(Pair(weight(i), 0), Pair(sampled(i), 0), Pair(residual(i), 0), Pair(gradient_x(i), 0),
+            Pair(gradient_y(i), 0));
       }
       const double s01 = n01.sum(), s02 = n02.sum(), s03 = n03.sum(), s12 = n12.sum(),
                    s13 = n13.sum(), s23 = n23.sum();
