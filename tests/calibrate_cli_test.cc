@@ -28,13 +28,6 @@ std::string Quoted(const fs::path& path) {
   return std::string("'").append(path.string()).append("'");
 }
 
-const ReportValue* Member(const ReportObject& object, const std::string& name) {
-  for (const auto& [key, value] : object) {
-    if (key == name) return &value;
-  }
-  return nullptr;
-}
-
 // One calibrated copy of the demo project shared by the tests below.
 class CalibrateCliTest : public ::testing::Test {
  protected:

@@ -27,19 +27,18 @@ namespace {
 // Not the seed the mosaic stage test uses (3): another plate placement.
 constexpr std::uint64_t kSeed = 1;
 
-const ReportValue& Member(const ReportObject& object, const std::string& name) {
-  for (const auto& [key, value] : object) {
-    if (key == name) return value;
-  }
+// The member `name`, a test failure if it is absent.
+const ReportValue& RequiredMember(const ReportObject& object, const std::string& name) {
+  if (const ReportValue* value = Member(object, name)) return *value;
   ADD_FAILURE() << "no member " << name;
   static const ReportValue none;
   return none;
 }
 double Number(const ReportObject& object, const std::string& name) {
-  return std::get<double>(Member(object, name).data());
+  return std::get<double>(RequiredMember(object, name).data());
 }
 std::string Text(const ReportObject& object, const std::string& name) {
-  const ReportValue& v = Member(object, name);
+  const ReportValue& v = RequiredMember(object, name);
   return std::holds_alternative<std::string>(v.data()) ? std::get<std::string>(v.data()) : "";
 }
 
@@ -86,11 +85,11 @@ TEST_F(MosaicPlateStageTest, ReportHasThePlateScaleCheckAndTheRefinedIntrinsics)
   EXPECT_LT(Number(Mosaic(), "intrinsics_max_change_sigmas"), 3.0);
   // The plate makes the scale a few ppm sharp (the table alone: ~46 ppm).
   EXPECT_LT(Number(Mosaic(), "scale_sigma_ppm"), 10.0);
-  const ReportValue& check_value = Member(Mosaic(), "plate_scale_check");
+  const ReportValue& check_value = RequiredMember(Mosaic(), "plate_scale_check");
   ASSERT_TRUE(std::holds_alternative<ReportObject>(check_value.data()));
   const auto& check = std::get<ReportObject>(check_value.data());
-  const auto& whole = std::get<ReportValue::Array>(Member(check, "whole_in_tiles").data());
-  const auto& seen = std::get<ReportValue::Array>(Member(check, "seen_in_tiles").data());
+  const auto& whole = std::get<ReportValue::Array>(RequiredMember(check, "whole_in_tiles").data());
+  const auto& seen = std::get<ReportValue::Array>(RequiredMember(check, "seen_in_tiles").data());
   ASSERT_EQ(whole.size(), 1u);
   EXPECT_GE(seen.size(), 2u);  // seed 1: cut in 3 more tiles
   EXPECT_NE(std::find(seen.begin(), seen.end(), whole[0]), seen.end());
@@ -133,9 +132,9 @@ TEST_F(MosaicPlateStageTest, SceneJsonHoldsTheJointCovariance) {
 // calibration.from a .cameramodel (no covariance) and the tile with the
 // whole plate gone: intrinsics held, no plate, and the report says both.
 TEST_F(MosaicPlateStageTest, HeldIntrinsicsAndNoPlateAreSaid) {
-  const auto& check = std::get<ReportObject>(Member(Mosaic(), "plate_scale_check").data());
+  const auto& check = std::get<ReportObject>(RequiredMember(Mosaic(), "plate_scale_check").data());
   const std::string plate_tile = std::get<std::string>(
-      std::get<ReportValue::Array>(Member(check, "whole_in_tiles").data())[0].data());
+      std::get<ReportValue::Array>(RequiredMember(check, "whole_in_tiles").data())[0].data());
   const fs::path dir = dir_->path() / "held";
   testing::CopyProject(sim_->project_dir, dir);
   const fs::path model = dir_->path() / "elsewhere" / "calibrated.cameramodel";

@@ -37,13 +37,6 @@ namespace {
 // A seed no mosaic code was tuned on (the module tests use 1).
 constexpr std::uint64_t kSeed = 3;
 
-const ReportValue* Member(const ReportObject& object, const std::string& name) {
-  for (const auto& [key, value] : object) {
-    if (key == name) return &value;
-  }
-  return nullptr;
-}
-
 class MosaicStageTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {

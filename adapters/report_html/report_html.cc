@@ -59,37 +59,6 @@ std::string Number(const std::optional<double>& value, int decimals = 4) {
 
 // ------------------------------------------------- the report's extras ---
 
-const ReportValue* Member(const ReportObject& object, std::string_view key) {
-  for (const auto& [name, value] : object)
-    if (name == key) return &value;
-  return nullptr;
-}
-
-std::optional<double> AsNumber(const ReportValue* value) {
-  if (value == nullptr) return std::nullopt;
-  if (const auto* i = std::get_if<std::int64_t>(&value->data())) return static_cast<double>(*i);
-  if (const auto* d = std::get_if<double>(&value->data())) return *d;
-  return std::nullopt;
-}
-
-std::optional<bool> AsBool(const ReportValue* value) {
-  if (value == nullptr) return std::nullopt;
-  if (const auto* b = std::get_if<bool>(&value->data())) return *b;
-  return std::nullopt;
-}
-
-const std::string* AsString(const ReportValue* value) {
-  return value == nullptr ? nullptr : std::get_if<std::string>(&value->data());
-}
-
-const ReportValue::Array* AsArray(const ReportValue* value) {
-  return value == nullptr ? nullptr : std::get_if<ReportValue::Array>(&value->data());
-}
-
-const ReportObject* AsObject(const ReportValue* value) {
-  return value == nullptr ? nullptr : std::get_if<ReportObject>(&value->data());
-}
-
 // Any value as escaped text: numbers to 6 significant digits, arrays in
 // parentheses, objects as "key value; ...".
 std::string Text(const ReportValue& value) {

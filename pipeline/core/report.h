@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <variant>
 #include <vector>
@@ -51,6 +52,40 @@ class ReportValue {
 };
 
 using ReportObject = ReportValue::Object;
+
+// Reading an `extra` object: each accessor is null (nullopt) when the member
+// is absent or of another kind, so readers of older or newer reports degrade.
+inline const ReportValue* Member(const ReportObject& object, std::string_view key) {
+  for (const auto& [name, value] : object)
+    if (name == key) return &value;
+  return nullptr;
+}
+
+// A number (JSON numbers without a fraction come back as integers).
+inline std::optional<double> AsNumber(const ReportValue* value) {
+  if (value == nullptr) return std::nullopt;
+  if (const auto* i = std::get_if<std::int64_t>(&value->data())) return static_cast<double>(*i);
+  if (const auto* d = std::get_if<double>(&value->data())) return *d;
+  return std::nullopt;
+}
+
+inline std::optional<bool> AsBool(const ReportValue* value) {
+  if (value == nullptr) return std::nullopt;
+  if (const auto* b = std::get_if<bool>(&value->data())) return *b;
+  return std::nullopt;
+}
+
+inline const std::string* AsString(const ReportValue* value) {
+  return value == nullptr ? nullptr : std::get_if<std::string>(&value->data());
+}
+
+inline const ReportValue::Array* AsArray(const ReportValue* value) {
+  return value == nullptr ? nullptr : std::get_if<ReportValue::Array>(&value->data());
+}
+
+inline const ReportObject* AsObject(const ReportValue* value) {
+  return value == nullptr ? nullptr : std::get_if<ReportObject>(&value->data());
+}
 
 struct RejectedImage {
   std::string image;  // file name in calib/

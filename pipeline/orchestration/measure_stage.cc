@@ -61,33 +61,22 @@ struct LocatedFeature {
   int value_index = -1;                     // into the propagation's features; -1 if not found
 };
 
-// A number member (a JSON number may come back as an integer), else `otherwise`.
-double Number(const ReportValue& value, double otherwise) {
-  if (const auto* d = std::get_if<double>(&value.data())) return *d;
-  if (const auto* i = std::get_if<std::int64_t>(&value.data())) return static_cast<double>(*i);
-  return otherwise;
-}
-
 // Each tile's exposure as the mosaic divided it out (report.json's mosaic
 // tiles rows); identity for a tile without one (not compensated).
 std::vector<TileExposure> TileExposures(const MosaicReport& mosaic,
                                         const std::vector<std::string>& tile_images) {
   std::vector<TileExposure> exposure(tile_images.size());
-  for (const auto& [key, value] : mosaic.extra) {
-    if (key != "tiles" || !std::holds_alternative<ReportValue::Array>(value.data())) continue;
-    for (const ReportValue& row : std::get<ReportValue::Array>(value.data())) {
-      if (!std::holds_alternative<ReportObject>(row.data())) continue;
-      std::string image;
-      TileExposure e;
-      for (const auto& [name, member] : std::get<ReportObject>(row.data())) {
-        if (name == "image" && std::holds_alternative<std::string>(member.data()))
-          image = std::get<std::string>(member.data());
-        if (name == "exposure_gain") e.gain = Number(member, e.gain);
-        if (name == "vignetting") e.vignetting = Number(member, e.vignetting);
-      }
-      const auto it = std::find(tile_images.begin(), tile_images.end(), image);
-      if (it != tile_images.end()) exposure[it - tile_images.begin()] = e;
-    }
+  const ReportValue::Array* rows = AsArray(Member(mosaic.extra, "tiles"));
+  if (rows == nullptr) return exposure;
+  for (const ReportValue& row : *rows) {
+    const ReportObject* tile = AsObject(&row);
+    const std::string* image = tile ? AsString(Member(*tile, "image")) : nullptr;
+    if (image == nullptr) continue;
+    const auto it = std::find(tile_images.begin(), tile_images.end(), *image);
+    if (it == tile_images.end()) continue;
+    TileExposure& e = exposure[it - tile_images.begin()];
+    e.gain = AsNumber(Member(*tile, "exposure_gain")).value_or(e.gain);
+    e.vignetting = AsNumber(Member(*tile, "vignetting")).value_or(e.vignetting);
   }
   return exposure;
 }
@@ -436,12 +425,10 @@ void RunMeasureStage(StageContext& context) {
   }
   // Raw tile pixels per mosaic pixel: how far the mosaic's edge noise is correlated.
   double source_px = 1.0;
-  for (const auto& [key, value] : mosaic_report.extra) {
-    if (key != "ortho") continue;
-    for (const auto& [name, member] : std::get<ReportObject>(value.data())) {
-      if (name == "tile_px_per_mosaic_px" && std::holds_alternative<double>(member.data()))
-        source_px = 1.0 / std::get<double>(member.data());
-    }
+  if (const ReportObject* ortho = AsObject(Member(mosaic_report.extra, "ortho"))) {
+    if (const auto per_px = AsNumber(Member(*ortho, "tile_px_per_mosaic_px"));
+        per_px && *per_px > 0.0)
+      source_px = 1.0 / *per_px;
   }
 
   MeasureInputs inputs{saved, lens, grid, mosaic.pixels, camera, source_px};
