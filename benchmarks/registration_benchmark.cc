@@ -1,6 +1,8 @@
 // RegisterTiles on the simulated demo's nine 1600 x 1200 tiles (seed 1, the
 // truth camera), on 2 threads: features, matching and the planar bundle
 // adjustment, timed per step (counters, seconds) beside the process CPU time.
+// Beside it, the planar adjustment alone at the real problem's size (3000
+// synthetic tracks on nine tiles): solve and covariance.
 //
 // The tiles come from the tests' render cache (tests/sim_cache.h:
 // build/sim-cache/demo-1, rendered on first use).
@@ -10,7 +12,9 @@
 
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/timing.h"
+#include "pipeline/mosaic/plane_adjustment.h"
 #include "pipeline/mosaic/register_tiles.h"
+#include "pipeline/mosaic/synthetic_plane.h"
 #include "tests/sim_cache.h"
 
 namespace omm {
@@ -64,6 +68,25 @@ void BM_RegisterTilesDemo(benchmark::State& state) {
 }
 
 BENCHMARK(BM_RegisterTilesDemo)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
+
+void BM_PlaneAdjustment3000Tracks(benchmark::State& state) {
+  SyntheticPlaneOptions options;
+  options.num_tracks = 3000;
+  const SyntheticPlane s = MakeSyntheticPlane(options);
+  double solve = 0, covariance = 0;
+  for (auto _ : state) {
+    const PlaneAdjustment a = AdjustPlaneScene(s.camera, s.input, {}, PlaneBundleOptions{});
+    if (!a.summary.usable) state.SkipWithError(a.summary.brief.c_str());
+    solve += a.summary.solve_seconds;
+    covariance += a.summary.covariance_seconds;
+  }
+  const double n = static_cast<double>(state.iterations());
+  state.counters["solve_s"] = solve / n;
+  state.counters["covariance_s"] = covariance / n;
+  state.counters["observations"] = static_cast<double>(s.input.observations.size());
+}
+
+BENCHMARK(BM_PlaneAdjustment3000Tracks)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
 }  // namespace
 }  // namespace omm
