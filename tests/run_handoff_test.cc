@@ -2,13 +2,16 @@
 // mosaic.png on another thread); `omm measure` alone reads the file back.
 // Both must measure the same pixels: on a rendered demo project, the measure
 // stage rerun alone on the run's out/ reproduces every feature and
-// measurement bit for bit (slow: needs a render).
+// measurement bit for bit (slow: needs a render). An out/ whose scene is not
+// the mosaic's is refused.
 #include <filesystem>
+#include <string>
 
 #include <gtest/gtest.h>
 
 #include "adapters/project_io/project_reader.h"
 #include "adapters/project_io/report_json.h"
+#include "pipeline/core/error.h"
 #include "pipeline/orchestration/run_project.h"
 #include "tests/sim_cache.h"
 #include "tests/test_util.h"
@@ -56,6 +59,56 @@ TEST(RunHandoff, MeasureAloneReproducesTheRunExactly) {
   // Not a comparison of two empty lists: the demo's holes are all found.
   EXPECT_EQ(num_found, static_cast<int>(run.features->size()));
   EXPECT_EQ(num_made, static_cast<int>(run.measurements->size()));
+}
+
+// `omm measure` alone on an out/ that mixes runs (hand-edited, or files
+// copied from another run; changed inputs are caught earlier by their hash):
+// the tiles alone on the mosaic's grid would be rendered from a scene that
+// did not make the mosaic. It names scene.json, says what to do, and leaves
+// out/ as it was.
+TEST(RunHandoff, MeasureAloneRefusesAMosaicItsSceneDidNotMake) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "demo";
+  testing::CopyProject(sim.project_dir, project_dir);
+  RunProject(LoadProject(project_dir), RunOptions{});
+  const fs::path report_path = project_dir / "out" / "report.json";
+  RunOptions measure_only;
+  measure_only.stages = {Stage::kMeasure};
+  const auto measure_error = [&] {
+    try {
+      RunProject(LoadProject(project_dir), measure_only);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+
+  // report.json's mosaic moved by ten pixels (a hand edit, or a mix of runs).
+  const Report original = ReadReportJson(report_path);
+  Report moved = original;
+  moved.mosaic->origin_mm.x() += 10 * moved.mosaic->gsd_mm;
+  WriteReportJson(report_path, moved);
+  const std::string moved_text = testing::ReadTextFile(report_path);
+  std::string error = measure_error();
+  EXPECT_NE(error.find("scene.json"), std::string::npos) << error;
+  EXPECT_NE(error.find("but report.json says"), std::string::npos) << error;
+  EXPECT_NE(error.find("rerun `omm mosaic`"), std::string::npos) << error;
+  EXPECT_EQ(testing::ReadTextFile(report_path), moved_text);
+
+  // scene.json's first two tiles swapped (a scene from another run).
+  WriteReportJson(report_path, original);
+  const fs::path scene_path = project_dir / "out" / "mosaic" / "scene.json";
+  testing::ReplaceInFile(scene_path, "\"tile_r0c0.png\"", "\"tile_r0c1.png.tmp\"");
+  testing::ReplaceInFile(scene_path, "\"tile_r0c1.png\"", "\"tile_r0c0.png\"");
+  testing::ReplaceInFile(scene_path, "\"tile_r0c1.png.tmp\"", "\"tile_r0c1.png\"");
+  error = measure_error();
+  EXPECT_NE(error.find("scene.json: made from the tiles tile_r0c1.png, tile_r0c0.png,"),
+            std::string::npos)
+      << error;
+  EXPECT_NE(error.find("table.csv lists tile_r0c0.png, tile_r0c1.png,"), std::string::npos)
+      << error;
+  EXPECT_NE(error.find("rerun `omm mosaic`"), std::string::npos) << error;
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -108,11 +109,10 @@ struct MeasureInputs {
   const ImageF& mosaic;
   const CameraModel& camera;
   double source_px = 1.0;
-  // The tiles alone on the mosaic's grid (ortho_patch.h); null: the hole is
-  // measured in the mosaic only.
-  const OrthoGeometry* geometry = nullptr;
-  const std::vector<ImageF>* tiles = nullptr;  // the scene's tile order
-  std::vector<TileExposure> exposure;          // per tile
+  // The tiles alone on the mosaic's grid (ortho_patch.h), in the scene's tile order.
+  const OrthoGeometry& geometry;
+  const std::vector<ImageF>& tiles;
+  std::vector<TileExposure> exposure;  // per tile
 };
 
 // One fit, in the mosaic or in one tile's patch; mosaic px.
@@ -140,7 +140,7 @@ HoleFit FitInTile(const MeasureInputs& in, int tile, const Eigen::Vector2d& expe
   const Eigen::Vector2i min_px = (expected_px.array() - reach).floor().cast<int>();
   const int size = static_cast<int>(std::ceil(2.0 * reach)) + 1;
   const OrthoPatch patch =
-      RenderTilePatch(*in.geometry, tile, (*in.tiles)[tile], in.exposure[tile],
+      RenderTilePatch(in.geometry, tile, in.tiles[tile], in.exposure[tile],
                       OrthoOptions{}.interpolator, min_px, Eigen::Vector2i::Constant(size));
   const Eigen::Vector2d origin = patch.origin_px.cast<double>();
   const Eigen::Vector2d nadir_px =
@@ -201,7 +201,6 @@ struct TileFits {
 TileFits FitInTiles(const MeasureInputs& in, const Eigen::Vector2d& near_part,
                     const Eigen::Vector2d& expected_px, double radius_mm) {
   TileFits result;
-  if (!in.geometry) return result;
   const SavedScene& saved = in.saved;
   const OrthoGrid& grid = in.grid;
   const CircleMeasureOptions options = FitOptions(in);
@@ -431,31 +430,37 @@ void RunMeasureStage(StageContext& context) {
       source_px = 1.0 / *per_px;
   }
 
-  MeasureInputs inputs{saved, lens, grid, mosaic.pixels, camera, source_px};
-  // The tiles alone on the mosaic's grid, when the grid and the tiles are
-  // the mosaic's (the same scene, gsd and tile files).
-  std::optional<OrthoGeometry> geometry;
-  std::vector<ImageF> tiles;
+  // The tiles alone on the mosaic's grid need the scene, the tiles and the
+  // grid that made the mosaic: an out/ that mixes runs is refused.
   std::vector<std::string> project_tiles;
   for (const TilePosition& tile : project.tiles) project_tiles.push_back(tile.image);
-  if (project_tiles == saved.tile_images) {
-    OrthoOptions ortho_options;
-    ortho_options.gsd_mm = grid.gsd_mm;
-    geometry = ComputeOrthoGeometry(camera, saved.scene, ortho_options);
-    if (geometry->grid.size_px != grid.size_px ||
-        !geometry->grid.origin_mm.isApprox(grid.origin_mm, 1e-12)) {
-      spdlog::warn("measure: the scene's grid is not the mosaic's: holes measured in the mosaic");
-      geometry.reset();
-    }
-  } else {
-    spdlog::warn("measure: tiles/ is not the mosaic scene's tiles: holes measured in the mosaic");
+  if (project_tiles != saved.tile_images) {
+    throw InputError(
+        scene_path.string(),
+        fmt::format("made from the tiles {}, but table.csv lists {}: rerun `omm "
+                    "mosaic`",
+                    fmt::join(saved.tile_images, ", "), fmt::join(project_tiles, ", ")));
   }
-  if (geometry) {
-    tiles = TileImages(project, camera);
-    inputs.geometry = &*geometry;
-    inputs.tiles = &tiles;
-    inputs.exposure = TileExposures(mosaic_report, saved.tile_images);
+  OrthoOptions ortho_options;
+  ortho_options.gsd_mm = grid.gsd_mm;
+  const OrthoGeometry geometry = ComputeOrthoGeometry(camera, saved.scene, ortho_options);
+  if (geometry.grid.size_px != grid.size_px ||
+      !geometry.grid.origin_mm.isApprox(grid.origin_mm, 1e-12)) {
+    throw InputError(
+        scene_path.string(),
+        fmt::format("its scene puts the mosaic at {}x{} px from ({:.3f}, {:.3f}) mm, but {} says "
+                    "{}x{} px from ({:.3f}, {:.3f}) mm: rerun `omm mosaic`",
+                    geometry.grid.size_px.x(), geometry.grid.size_px.y(),
+                    geometry.grid.origin_mm.x(), geometry.grid.origin_mm.y(), "report.json",
+                    grid.size_px.x(), grid.size_px.y(), grid.origin_mm.x(), grid.origin_mm.y()));
   }
+  const std::shared_ptr<const std::vector<ImageF>> tiles =
+      context.tiles ? context.tiles
+                    : std::make_shared<const std::vector<ImageF>>(TileImages(project, camera));
+  const MeasureInputs inputs{
+      saved,         lens,   grid,
+      mosaic.pixels, camera, source_px,
+      geometry,      *tiles, TileExposures(mosaic_report, saved.tile_images)};
 
   const int num_features = static_cast<int>(project.features.size());
   std::vector<LocatedFeature> located(num_features);

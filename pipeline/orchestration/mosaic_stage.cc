@@ -219,7 +219,8 @@ void RunMosaicStage(StageContext& context) {
   const auto prior_start = std::chrono::steady_clock::now();
   const IntrinsicsPrior prior = CalibrationPrior(context, &camera);
   const double prior_seconds = SecondsSince(prior_start);
-  const std::vector<ImageF> tiles = TileImages(project, camera);
+  const auto tile_images = std::make_shared<const std::vector<ImageF>>(TileImages(project, camera));
+  const std::vector<ImageF>& tiles = *tile_images;
   const double read_seconds = SecondsSince(stage_start);
 
   std::vector<Eigen::Vector2d> commanded_mm;
@@ -306,6 +307,7 @@ void RunMosaicStage(StageContext& context) {
   // demo). RunProject waits for it before it commits out/.
   context.mosaic =
       std::make_shared<const StoredImage>(QuantizeImage(ortho.mosaic.pixels, kMosaicBitDepth));
+  context.tiles = tile_images;
   const fs::path mosaic_path = context.staging_dir / kMosaicName;
   auto mosaic = std::make_shared<const OrthoMosaic>(std::move(ortho.mosaic));
   context.pending_writes.push_back(std::async(std::launch::async, [mosaic_path, mosaic] {

@@ -63,6 +63,10 @@ struct StageContext {
   // null if it did not run): the measure stage and report.html take it from
   // here instead of decoding the file again.
   std::shared_ptr<const StoredImage> mosaic;
+  // This run's tiles as gray images, in the project's tile order (set by the
+  // mosaic stage; null if it did not run): the measure stage takes them from
+  // here instead of converting them again.
+  std::shared_ptr<const std::vector<ImageF>> tiles;
   // Output files still being written on other threads (the mosaic's):
   // RunProject waits for them, and rethrows their errors, before it commits
   // out/; destroying the context waits for them too.
