@@ -29,6 +29,12 @@ TEST(RunHandoff, MeasureAloneReproducesTheRunExactly) {
 
   RunProject(LoadProject(project_dir), RunOptions{});
   const Report run = ReadReportJson(project_dir / "out" / "report.json");
+  // The camera the mosaic used is named where it stays (out/), not where the
+  // run staged it.
+  ASSERT_TRUE(run.mosaic.has_value());
+  const std::string* camera = AsString(Member(run.mosaic->extra, "camera"));
+  ASSERT_NE(camera, nullptr);
+  EXPECT_EQ(*camera, (project_dir / "out" / "camera.cameramodel").string());
   RunOptions measure_only;
   measure_only.stages = {Stage::kMeasure};
   RunProject(LoadProject(project_dir), measure_only);

@@ -345,7 +345,7 @@ void RunMosaicStage(StageContext& context) {
   const Eigen::Matrix2d& a = registration.image_px_per_table_mm;
   report.extra = ReportObject{
       {"brief", registration.brief},
-      {"camera", camera_path.string()},
+      {"camera", context.Published(camera_path).string()},
       {"num_tracks", registration.input.num_tracks},
       {"num_observations", static_cast<int>(registration.input.observations.size())},
       {"num_dropped_observations", registration.num_dropped_observations},

@@ -37,6 +37,12 @@ std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera
   return tiles;
 }
 
+std::filesystem::path StageContext::Published(const std::filesystem::path& path) const {
+  const std::filesystem::path relative = path.lexically_relative(staging_dir);
+  if (relative.empty() || *relative.begin() == "..") return path;
+  return out_dir / relative;
+}
+
 std::filesystem::path StageContext::Input(const std::string& name) const {
   std::error_code ec;
   if (std::filesystem::exists(staging_dir / name, ec)) return staging_dir / name;

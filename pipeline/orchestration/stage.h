@@ -75,6 +75,9 @@ struct StageContext {
   // An earlier stage's output file: this run's if it wrote one, else the one
   // in out/ from an earlier run, else an empty path.
   std::filesystem::path Input(const std::string& name) const;
+  // Where `path` will be once out/ is committed: a file of the staging
+  // directory by its place in out/, any other as it is (for the report).
+  std::filesystem::path Published(const std::filesystem::path& path) const;
 };
 
 // The project's tiles as gray images, in its tile order, 2 at a time:
