@@ -36,6 +36,14 @@ foreach(tgt Eigen3::Eigen Ceres::ceres yaml-cpp nlohmann_json::nlohmann_json
     endif()
   endif()
 endforeach()
+# libdeflate ships no CMake config either: whole-buffer zlib streams and
+# CRC-32 for PNG files (adapters/png).
+find_path(LIBDEFLATE_INCLUDE_DIR libdeflate.h REQUIRED)
+find_library(LIBDEFLATE_LIBRARY deflate REQUIRED)
+add_library(libdeflate::libdeflate UNKNOWN IMPORTED)
+set_target_properties(libdeflate::libdeflate PROPERTIES
+  IMPORTED_LOCATION "${LIBDEFLATE_LIBRARY}"
+  INTERFACE_INCLUDE_DIRECTORIES "${LIBDEFLATE_INCLUDE_DIR}")
 add_library(omm_opencv_system INTERFACE)
 target_include_directories(omm_opencv_system SYSTEM INTERFACE ${OpenCV_INCLUDE_DIRS})
 target_link_libraries(omm_opencv_system INTERFACE ${OpenCV_LIBS})

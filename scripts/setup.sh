@@ -11,7 +11,7 @@ packages=(
   # calibration, geometry, optimisation
   libmrcal-dev python3-mrcal libsuitesparse-dev libopencv-dev libceres-dev libeigen3-dev libapriltag-dev colmap
   # files, command line, logging
-  libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev libsqlite3-dev libssl-dev
+  libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev libsqlite3-dev libssl-dev libdeflate-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # headless browser for the HTML report's test

@@ -1,8 +1,11 @@
 #include "adapters/opencv/image_io.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
+#include <fstream>
+#include <optional>
 #include <stdexcept>
 #include <system_error>
 #include <vector>
@@ -11,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "adapters/png/png_codec.h"
 #include "pipeline/core/error.h"
 
 namespace omm {
@@ -55,14 +59,18 @@ StoredImage ReadStoredImage(const std::filesystem::path& path) {
   if (!std::filesystem::is_regular_file(path, ec)) {
     throw InputError(path.string(), "image file not found");
   }
-  try {
-    return ToStored(cv::imread(path.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR), path);
-  } catch (const cv::Exception& e) {
-    throw InputError(path.string(), std::string("cannot decode image: ") + e.what());
-  }
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  std::string bytes(static_cast<std::size_t>(std::max<std::streamoff>(0, in.tellg())), '\0');
+  in.seekg(0);
+  if (!in.read(bytes.data(), static_cast<std::streamsize>(bytes.size())))
+    throw InputError(path.string(), "cannot read image file");
+  return DecodeImage(bytes, path);
 }
 
 StoredImage DecodeImage(std::string_view file_bytes, const std::filesystem::path& path) {
+  // Gray PNGs (every image omm writes, and the usual camera image) without
+  // OpenCV's libpng path: ~40 % less CPU (adapters/png).
+  if (std::optional<StoredImage> png = DecodeGrayPng(file_bytes, path)) return std::move(*png);
   try {
     const cv::Mat bytes(1, static_cast<int>(file_bytes.size()), CV_8U,
                         const_cast<char*>(file_bytes.data()));
@@ -101,14 +109,28 @@ StoredImage QuantizeImage(const ImageF& pixels, int bit_depth) {
   return image;
 }
 
-void WriteStoredImage(const std::filesystem::path& path, const StoredImage& image) {
+void WriteStoredImage(const std::filesystem::path& path, const StoredImage& image,
+                      int png_deflate_level) {
   std::filesystem::path tmp = path;
   tmp += ".tmp" + path.extension().string();
   bool ok = false;
-  try {
-    ok = cv::imwrite(tmp.string(), SamplesMat(image));
-  } catch (const cv::Exception&) {
-    ok = false;
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (extension == ".png") {
+    PngWriteOptions options;
+    options.deflate_level = png_deflate_level;
+    if (const std::string why = options.Check(); !why.empty()) throw std::invalid_argument(why);
+    const std::string bytes = EncodeGrayPng(image, options);
+    std::ofstream out(tmp, std::ios::binary);
+    ok = static_cast<bool>(out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()))) &&
+         static_cast<bool>(out.flush());
+  } else {
+    try {
+      ok = cv::imwrite(tmp.string(), SamplesMat(image));
+    } catch (const cv::Exception&) {
+      ok = false;
+    }
   }
   std::error_code ec;
   if (ok) std::filesystem::rename(tmp, path, ec);

@@ -1,10 +1,12 @@
-// Reading and writing images (PNG, TIFF, JPEG) through OpenCV's imgcodecs.
+// Reading and writing images (PNG, TIFF, JPEG) through OpenCV's imgcodecs;
+// gray 8- and 16-bit PNGs through adapters/png.
 #pragma once
 
 #include <filesystem>
 #include <string>
 #include <string_view>
 
+#include "adapters/png/png_codec.h"
 #include "pipeline/core/image.h"
 
 namespace omm {
@@ -32,8 +34,11 @@ StoredImage QuantizeImage(const ImageF& pixels, int bit_depth);
 
 // Writes `image` as a gray PNG or TIFF (by extension) at its depth, through a
 // temporary file beside `path` and a rename, so a reader never sees a
-// half-written file. Throws InputError if it cannot be written.
-void WriteStoredImage(const std::filesystem::path& path, const StoredImage& image);
+// half-written file. A PNG is written by adapters/png at libdeflate's
+// `png_deflate_level` (PngWriteOptions: 0 stores it uncompressed, fastest).
+// Throws InputError if it cannot be written.
+void WriteStoredImage(const std::filesystem::path& path, const StoredImage& image,
+                      int png_deflate_level = PngWriteOptions{}.deflate_level);
 
 // WriteStoredImage(path, QuantizeImage(pixels, bit_depth)).
 void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int bit_depth);

@@ -13,10 +13,10 @@ MosaicReport OrthoMosaicReport(const std::filesystem::path& path, const OrthoGri
   return report;
 }
 
-MosaicReport WriteOrthoMosaic(const std::filesystem::path& path, const OrthoMosaic& mosaic,
-                              int bit_depth) {
-  WriteGrayImage(path, mosaic.pixels, bit_depth);
-  return OrthoMosaicReport(path, mosaic.grid);
+MosaicReport WriteOrthoMosaic(const std::filesystem::path& path, const OrthoGrid& grid,
+                              const StoredImage& samples) {
+  WriteStoredImage(path, samples, /*png_deflate_level=*/0);
+  return OrthoMosaicReport(path, grid);
 }
 
 }  // namespace omm

@@ -14,10 +14,13 @@ namespace omm {
 // registration's) and extra are the caller's.
 MosaicReport OrthoMosaicReport(const std::filesystem::path& path, const OrthoGrid& grid);
 
-// Writes mosaic.pixels to `path` (.png, .tif or .tiff; 8 or 16 bit) through a
-// temporary file and a rename, and returns OrthoMosaicReport(path,
-// mosaic.grid). Throws InputError if it cannot be written.
-MosaicReport WriteOrthoMosaic(const std::filesystem::path& path, const OrthoMosaic& mosaic,
-                              int bit_depth = 16);
+// Writes `samples` (the mosaic's pixels through QuantizeImage, 8 or 16 bit)
+// to `path` (.png, .tif or .tiff) through a temporary file and a rename, and
+// returns OrthoMosaicReport(path, grid). A PNG is stored uncompressed: the
+// demo's 16-bit 2667 x 3697 mosaic takes ~0.05 s of CPU instead of ~0.25 s
+// for 1.28x the bytes (its low bytes are noise to deflate). Throws InputError
+// if it cannot be written.
+MosaicReport WriteOrthoMosaic(const std::filesystem::path& path, const OrthoGrid& grid,
+                              const StoredImage& samples);
 
 }  // namespace omm
