@@ -2,6 +2,10 @@
 
 #include <libdeflate.h>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <algorithm>
 #include <cassert>
 #include <cstdint>
@@ -45,6 +49,33 @@ struct CompressorDeleter {
   void operator()(libdeflate_compressor* c) const { libdeflate_free_compressor(c); }
 };
 
+// Filter "sub" undone: row[k] += row[k - bpp], a running sum at lag bpp.
+// Byte by byte it is one long dependency chain (a quarter of the decoding
+// time of an 8-bit image): with SSE2, a prefix sum over 16 bytes in log
+// steps plus the carry of the previous 16.
+template <int kBpp>
+void UndoSub(std::uint8_t* row, std::size_t n) {
+  std::size_t k = 0;
+#if defined(__SSE2__)
+  __m128i carry = _mm_setzero_si128();  // the previous block's last sample, in every lane
+  for (; k + 16 <= n; k += 16) {
+    __m128i x = _mm_loadu_si128(reinterpret_cast<const __m128i*>(row + k));
+    if constexpr (kBpp == 1) x = _mm_add_epi8(x, _mm_slli_si128(x, 1));
+    x = _mm_add_epi8(x, _mm_slli_si128(x, 2));
+    x = _mm_add_epi8(x, _mm_slli_si128(x, 4));
+    x = _mm_add_epi8(x, _mm_slli_si128(x, 8));
+    x = _mm_add_epi8(x, carry);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(row + k), x);
+    if constexpr (kBpp == 1) {
+      carry = _mm_set1_epi8(static_cast<char>(row[k + 15]));
+    } else {
+      carry = _mm_shuffle_epi32(_mm_shufflelo_epi16(_mm_srli_si128(x, 14), 0), 0);
+    }
+  }
+#endif
+  for (; k < n; ++k) row[k] += k >= static_cast<std::size_t>(kBpp) ? row[k - kBpp] : 0;
+}
+
 std::uint8_t Paeth(int a, int b, int c) {
   const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
   return static_cast<std::uint8_t>(pa <= pb && pa <= pc ? a : pb <= pc ? b : c);
@@ -57,7 +88,7 @@ bool Unfilter(int type, int bpp, std::uint8_t* row, const std::uint8_t* prev, st
     case 0:
       return true;
     case 1:  // sub
-      for (std::size_t k = static_cast<std::size_t>(bpp); k < n; ++k) row[k] += row[k - bpp];
+      bpp == 1 ? UndoSub<1>(row, n) : UndoSub<2>(row, n);
       return true;
     case 2:  // up
       for (std::size_t k = 0; k < n; ++k) row[k] += prev[k];
