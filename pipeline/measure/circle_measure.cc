@@ -214,10 +214,13 @@ StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, doub
   p.lin = (jtj.topLeftCorner<4, 4>() + 1e-12 * Eigen::Matrix4d::Identity())
               .ldlt()
               .solve(-jtr.head<4>());
-  double current = evaluate(p, nullptr, nullptr, false);
+  // Each trial point's normal equations come with its cost: an accepted
+  // step (the usual case) needs no second pass over the samples.
+  double current = evaluate(p, &jtj, &jtr, false);
+  Normal next_jtj;
+  Vector7 next_jtr;
   double lambda = 1e-3;
   for (int iteration = 0; iteration < 30; ++iteration) {
-    evaluate(p, &jtj, &jtr, false);
     bool improved = false, converged = false;
     for (int attempt = 0; attempt < 10 && !improved; ++attempt) {
       Normal damped = jtj;
@@ -234,11 +237,13 @@ StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, doub
         lambda *= 10;
         continue;
       }
-      const double cost = evaluate(next, nullptr, nullptr, false);
+      const double cost = evaluate(next, &next_jtj, &next_jtr, false);
       if (cost < current) {
         converged = step.head(nn).cwiseAbs().maxCoeff() < 1e-4;
         p = next;
         current = cost;
+        jtj = next_jtj;
+        jtr = next_jtr;
         lambda = std::max(1e-7, lambda * 0.3);
         improved = true;
       } else {
