@@ -85,8 +85,7 @@ std::uint8_t Paeth(int a, int b, int c) {
 // row, already unfiltered (zeros for the first). bpp: bytes per sample.
 bool Unfilter(int type, int bpp, std::uint8_t* row, const std::uint8_t* prev, std::size_t n) {
   switch (type) {
-    case 0:
-      return true;
+    case 0: return true;
     case 1:  // sub
       bpp == 1 ? UndoSub<1>(row, n) : UndoSub<2>(row, n);
       return true;
@@ -105,8 +104,7 @@ bool Unfilter(int type, int bpp, std::uint8_t* row, const std::uint8_t* prev, st
         row[k] += Paeth(first ? 0 : row[k - bpp], prev[k], first ? 0 : prev[k - bpp]);
       }
       return true;
-    default:
-      return false;
+    default: return false;
   }
 }
 
@@ -116,7 +114,9 @@ std::optional<StoredImage> DecodeGrayPng(std::string_view bytes,
                                          const std::filesystem::path& path) {
   const auto* data = reinterpret_cast<const unsigned char*>(bytes.data());
   if (bytes.size() < 8 || std::memcmp(data, kSignature, 8) != 0) return std::nullopt;
-  auto corrupt = [&](const std::string& why) { return InputError(path.string(), "corrupt PNG: " + why); };
+  auto corrupt = [&](const std::string& why) {
+    return InputError(path.string(), "corrupt PNG: " + why);
+  };
   StoredImage image;
   bool header = false, end = false;
   // The zlib stream: the IDAT chunks' data in order (one view when there is one chunk).
@@ -231,8 +231,8 @@ std::string EncodeGrayPng(const StoredImage& image, const PngWriteOptions& optio
       libdeflate_alloc_compressor(options.deflate_level));
   if (!compressor) throw std::bad_alloc();
   std::vector<std::uint8_t> zlib(libdeflate_zlib_compress_bound(compressor.get(), raw.size()));
-  const std::size_t zlib_size = libdeflate_zlib_compress(compressor.get(), raw.data(), raw.size(),
-                                                         zlib.data(), zlib.size());
+  const std::size_t zlib_size =
+      libdeflate_zlib_compress(compressor.get(), raw.data(), raw.size(), zlib.data(), zlib.size());
   assert(zlib_size > 0);  // the bound always suffices
 
   std::string out(reinterpret_cast<const char*>(kSignature), 8);

@@ -56,9 +56,9 @@ std::set<int> FilterTypes(std::string_view png, int height, std::size_t stride) 
   }
   std::vector<std::uint8_t> raw((stride + 1) * height);
   libdeflate_decompressor* d = libdeflate_alloc_decompressor();
-  EXPECT_EQ(libdeflate_zlib_decompress(d, stream.data(), stream.size(), raw.data(), raw.size(),
-                                       nullptr),
-            LIBDEFLATE_SUCCESS);
+  EXPECT_EQ(
+      libdeflate_zlib_decompress(d, stream.data(), stream.size(), raw.data(), raw.size(), nullptr),
+      LIBDEFLATE_SUCCESS);
   libdeflate_free_decompressor(d);
   std::set<int> types;
   for (int y = 0; y < height; ++y) types.insert(raw[y * (stride + 1)]);
