@@ -187,9 +187,11 @@ std::optional<StoredImage> DecodeGrayPng(std::string_view bytes,
     if (bpp == 1) {
       std::memcpy(out, row + 1, stride);
     } else {
-      auto* out16 = reinterpret_cast<std::uint16_t*>(out);  // samples are 2-byte aligned
-      for (int x = 0; x < image.width; ++x)
-        out16[x] = static_cast<std::uint16_t>((row[1 + 2 * x] << 8) | row[2 + 2 * x]);
+      // Big-endian in the file, native in StoredImage (memcpy: no aliasing).
+      for (int x = 0; x < image.width; ++x) {
+        const auto sample = static_cast<std::uint16_t>((row[1 + 2 * x] << 8) | row[2 + 2 * x]);
+        std::memcpy(out + 2 * x, &sample, 2);
+      }
     }
     prev = row + 1;
   }
@@ -217,10 +219,11 @@ std::string EncodeGrayPng(const StoredImage& image, const PngWriteOptions& optio
     if (bpp == 1) {
       std::memcpy(row + 1, in, stride);
     } else {
-      const auto* in16 = reinterpret_cast<const std::uint16_t*>(in);
       for (int x = 0; x < image.width; ++x) {
-        row[1 + 2 * x] = static_cast<std::uint8_t>(in16[x] >> 8);
-        row[2 + 2 * x] = static_cast<std::uint8_t>(in16[x]);
+        std::uint16_t sample;
+        std::memcpy(&sample, in + 2 * x, 2);
+        row[1 + 2 * x] = static_cast<std::uint8_t>(sample >> 8);
+        row[2 + 2 * x] = static_cast<std::uint8_t>(sample);
       }
     }
     if (sub) {
