@@ -483,4 +483,75 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   return summary;
 }
 
+PlateScaleRelease ReleasePlateScale(const LensProjection& lens, const PlaneBundleInput& input,
+                                    const PlaneBundleOptions& options, const PlaneScene& scene,
+                                    int plate) {
+  PlateScaleRelease result;
+  const int num_tiles = static_cast<int>(scene.table_pos_mm.size());
+  const int num_plates = static_cast<int>(scene.plates.size());
+  const int size = PlaneSceneCovarianceSize(num_tiles, num_plates, lens.NumIntrinsics());
+  if (plate < 0 || plate >= num_plates || scene.covariance.rows() != size) return result;
+  // The blocks as the solve had them; none constant, so that every column is
+  // ambient (a block the solve held has zero rows in C).
+  Blocks b = BlocksFromScene(scene);
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  std::unique_ptr<ceres::LossFunction> loss(MakeLoss(options, input.observation_sigma_px));
+  const double inv_sigma = 1.0 / input.observation_sigma_px;
+  for (const PlateMarkObservation& obs : input.plate_observations) {
+    if (obs.plate != plate || obs.weight <= 0.0) continue;
+    problem.AddResidualBlock(
+        new PlateMarkReprojectionCost(lens, input.plates[plate].mark_uv_mm.col(obs.mark), obs.q_px,
+                                      obs.weight * inv_sigma),
+        loss.get(),
+        {b.r.data(), b.t.data(), b.table_pos[obs.tile].data(), b.plate_pose[plate].data(),
+         &b.plate_height[plate], &b.plate_scale[plate], b.intrinsics.data()});
+  }
+  if (problem.NumResidualBlocks() == 0) return result;
+  // The evaluated blocks and their offsets in the scene vector; s last.
+  ceres::Problem::EvaluateOptions evaluate;
+  std::vector<int> offset;
+  const auto add = [&](double* block, int at) {
+    if (!problem.HasParameterBlock(block)) return;
+    evaluate.parameter_blocks.push_back(block);
+    offset.push_back(at);
+  };
+  const int plate_offset = 6 + 2 * num_tiles + 5 * plate;
+  add(b.r.data(), 0);
+  add(b.t.data(), 3);
+  for (int i = 0; i < num_tiles; ++i) add(b.table_pos[i].data(), 6 + 2 * i);
+  add(b.plate_pose[plate].data(), plate_offset);
+  add(&b.plate_height[plate], plate_offset + 3);
+  add(b.intrinsics.data(), 6 + 2 * num_tiles + 5 * num_plates);
+  std::vector<int> scene_index;  // per Jacobian column but s's: its index in the scene vector
+  for (size_t k = 0; k < offset.size(); ++k) {
+    for (int j = 0; j < problem.ParameterBlockSize(evaluate.parameter_blocks[k]); ++j)
+      scene_index.push_back(offset[k] + j);
+  }
+  const int s_column = static_cast<int>(scene_index.size());
+  evaluate.parameter_blocks.push_back(&b.plate_scale[plate]);
+  std::vector<double> residuals;
+  ceres::CRSMatrix jacobian;
+  if (!problem.Evaluate(evaluate, nullptr, &residuals, nullptr, &jacobian)) return result;
+  double h_ss = 0.0, g_s = 0.0;
+  Eigen::VectorXd h = Eigen::VectorXd::Zero(size);
+  for (int row = 0; row < jacobian.num_rows; ++row) {
+    double j_s = 0.0;
+    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e)
+      if (jacobian.cols[e] == s_column) j_s = jacobian.values[e];
+    h_ss += j_s * j_s;
+    g_s += j_s * residuals[row];
+    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e)
+      if (jacobian.cols[e] != s_column) h(scene_index[jacobian.cols[e]]) += j_s * jacobian.values[e];
+  }
+  const double s = h_ss - h.dot(scene.covariance * h);
+  if (!(s > 0)) return result;
+  result.ok = true;
+  result.scale_minus_1 = scene.plates[plate].scale - 1.0 - g_s / s;
+  result.sigma = 1.0 / std::sqrt(s);
+  return result;
+}
+
 }  // namespace omm
+

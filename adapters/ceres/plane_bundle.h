@@ -34,4 +34,22 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
                                     const PlaneBundleConfig& config,
                                     const PlaneBundleOptions& options, PlaneScene* scene);
 
+// Plate `plate`'s scale s released around a solved scene that held it at 1
+// (config.refine_plate_scale false, the covariance computed): s - 1 and its
+// sigma as the solve with s free gives them to first order. The marks are
+// the only residuals s enters and they involve no track point, so the Schur
+// complement of s needs their Jacobian and the scene's covariance C alone:
+// S = H_ss - h^T C h, s - 1 = -g_s / S, sigma = S^-1/2, with H_ss, h, g_s
+// = J_s^T (J_s, J_scene, r) over the marks (loss applied; the scene's
+// gradient is zero at the solution). One evaluation of the marks instead of
+// that solve (0.3 s CPU on the demo). Not ok without a covariance or for S <= 0.
+struct PlateScaleRelease {
+  bool ok = false;
+  double scale_minus_1 = 0.0;
+  double sigma = 0.0;
+};
+PlateScaleRelease ReleasePlateScale(const LensProjection& lens, const PlaneBundleInput& input,
+                                    const PlaneBundleOptions& options, const PlaneScene& scene,
+                                    int plate);
+
 }  // namespace omm

@@ -32,9 +32,11 @@
 // holds h / (d - h) besides the table's own scale error.
 //
 // Scale check. The final solve holds the plate's scale at 1 (its pitch is the
-// metric reference); a second solve with the scale s free measures the
-// table's scale relative to the plate: s - 1 and its sigma (both in ppm).
-// Without scale_reference the final solve is that solve.
+// metric reference); the scale s released measures the table's scale
+// relative to the plate: s - 1 and its sigma (both in ppm), to first order
+// from the final solve's covariance (ReleasePlateScale, adapters/ceres), so
+// it needs FinalAdjustmentOptions::compute_covariance. Without
+// scale_reference the final solve has s free already.
 #pragma once
 
 #include <optional>
@@ -114,9 +116,6 @@ IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance)
 struct FinalAdjustmentOptions {
   PlaneBundleOptions bundle;
   bool compute_covariance = true;  // the joint covariance (PlaneScene::covariance)
-  // The second solve, with the plate's scale free (false: the caller runs
-  // CheckPlateScale itself).
-  bool plate_scale_check = true;
   // Plate observations whose residual exceeds this many of their sigmas are
   // dropped and the scene solved again (a mark misread, a speck on the plate).
   double plate_outlier_sigmas = 5.0;
@@ -129,7 +128,7 @@ struct FinalAdjustmentOptions {
   std::string Check() const;
 };
 
-// The table's scale relative to the plate (the solve with s free).
+// The table's scale relative to the plate (s free).
 struct PlateScaleCheck {
   bool ok = false;
   double scale_minus_1_ppm = 0.0;  // s - 1: > 0 when the table reads more than it moved
@@ -170,15 +169,6 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
                                         const PlaneScene& registered_scene,
                                         const PlateOnPart& plate, const IntrinsicsPrior& prior,
                                         const FinalAdjustmentOptions& options);
-
-// The scale check's solve (the final one with the plate's scale free) from
-// AdjustWithPlateAndPrior's result with options.plate_scale_check false: on
-// its own so that the mosaic stage runs it beside the orthorectification,
-// which does not need it. adjusted.scale_check when there is no such solve
-// (no plate used, or its scale free in the final solve already).
-PlateScaleCheck CheckPlateScale(const CameraModel& camera, const PlateOnPart& plate,
-                                const FinalAdjustment& adjusted,
-                                const FinalAdjustmentOptions& options);
 
 // sigma of the similarity scale of `table_pos` (the scene's adjusted table
 // positions) about the commanded ones, from the scene covariance's table

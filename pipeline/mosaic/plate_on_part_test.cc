@@ -221,6 +221,33 @@ TEST(FinalAdjustment, ScaleCheckFindsATableScaleError) {
   EXPECT_GT(a.scale_check.scale_minus_1_ppm / a.scale_check.sigma_ppm, 4.0);
 }
 
+// The check releases the plate's scale to first order: it must agree with
+// the solve that frees s (what it replaced) far inside its sigma, here with
+// a 300 ppm table scale error to release (the model's nonlinearity in s is
+// of order 300 ppm relative to that: ~0.1 ppm).
+TEST(FinalAdjustment, ScaleCheckIsTheSolveWithTheScaleFree) {
+  SyntheticPlaneOptions options = PlateScene();
+  options.table_scale_error = 3e-4;
+  const Registered r = Register(options);
+  const FinalAdjustment a = AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOf(r.s),
+                                                    IntrinsicsPrior{}, FinalAdjustmentOptions{});
+  ASSERT_TRUE(a.scale_check.ok);
+  PlaneBundleConfig config;
+  config.refine_plate_scale = true;
+  PlaneScene solved = a.scene;
+  const PlaneBundleSummary summary = SolvePlaneBundle(MrcalLensProjection(r.s.camera), a.input,
+                                                      config, PlaneBundleOptions{}, &solved);
+  ASSERT_TRUE(summary.usable && summary.covariance_ok) << summary.brief;
+  const int s = PlaneSceneCovarianceSize(static_cast<int>(solved.table_pos_mm.size()), 0, 0) + 4;
+  const double solved_ppm = (solved.plates[0].scale - 1) * 1e6;
+  const double solved_sigma_ppm = std::sqrt(solved.covariance(s, s)) * 1e6;
+  std::printf("released s-1 %.4f +- %.4f ppm, solved %.4f +- %.4f ppm\n",
+              a.scale_check.scale_minus_1_ppm, a.scale_check.sigma_ppm, solved_ppm,
+              solved_sigma_ppm);
+  EXPECT_NEAR(a.scale_check.scale_minus_1_ppm, solved_ppm, 0.5);
+  EXPECT_NEAR(a.scale_check.sigma_ppm, solved_sigma_ppm, 1e-3 * solved_sigma_ppm);
+}
+
 // A plate seen in one tile, of unknown height (3 mm in truth), must not set
 // the scale: taken at height 0 it would make it 3 / 387 = 0.78 % wrong. It
 // only checks: the table-only scale stands, and s - 1 holds h / (H - h)

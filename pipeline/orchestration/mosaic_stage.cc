@@ -262,7 +262,6 @@ void RunMosaicStage(StageContext& context) {
   spdlog::info("mosaic: {}", plate.brief);
   FinalAdjustmentOptions final_options;
   final_options.bundle = register_options.bundle;
-  final_options.plate_scale_check = false;  // below, beside the orthorectification
   FinalAdjustment adjusted = AdjustWithPlateAndPrior(camera, registration.input, registration.scene,
                                                      plate, prior, final_options);
   spdlog::info("mosaic: final {}", adjusted.summary.brief);
@@ -285,17 +284,7 @@ void RunMosaicStage(StageContext& context) {
   if (context.progress) context.progress(num_tiles + 1, num_tiles + 3, "orthorectify");
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
-  // The scale check only feeds the report: its solve (on a core the
-  // exposure compensation leaves idle) beside the orthorectification.
-  double scale_check_seconds = 0.0;
-  std::future<PlateScaleCheck> scale_check = std::async(std::launch::async, [&] {
-    const auto start = std::chrono::steady_clock::now();
-    PlateScaleCheck check = CheckPlateScale(camera, plate, adjusted, final_options);
-    scale_check_seconds = SecondsSince(start);
-    return check;
-  });
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options);
-  adjusted.scale_check = scale_check.get();
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) throw StageFailedError(Stage::kMosaic, ortho.summary.brief);
 
@@ -393,8 +382,6 @@ void RunMosaicStage(StageContext& context) {
                                  {"plate_detection", plate.seconds},
                                  {"intrinsics_prior", prior_seconds},
                                  {"final_adjustment", adjusted.seconds},
-                                 // in the background during the orthorectification
-                                 {"plate_scale_check", scale_check_seconds},
                                  {"ortho_geometry", ortho.summary.geometry_seconds},
                                  {"ortho_exposure", ortho.summary.exposure_seconds},
                                  {"ortho_resample", ortho.summary.resample_seconds},
