@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "adapters/mrcal/mrcal_lens_projection.h"
+
 namespace omm {
 namespace {
 
@@ -77,6 +79,38 @@ TEST(Lens, PointGradientsAloneMatchGradientsWithIntrinsics) {
   ASSERT_TRUE(ProjectPoints(camera, p, &q, &dq_dp_both, &dq_di));
   EXPECT_EQ(dq_dp_alone, dq_dp_both);
   EXPECT_GT(dq_dp_alone.row(5).norm(), 1.0);  // the last point's gradient is not zero
+}
+
+// The Ceres costs' one-point projection calls mrcal directly: the same
+// numbers as ProjectPoints with the given intrinsics, with or without the
+// intrinsics' gradient (mrcal's dq_dp caveat is about the points after the
+// first), and a failure for a model that does not fit its intrinsics.
+TEST(Lens, MrcalLensProjectionIsProjectPoints) {
+  const CameraModel camera = TwelveMillimetreCamera();
+  CameraModel other = camera;
+  other.intrinsics(0) += 3.0;
+  other.intrinsics(5) += 0.01;
+  const MrcalLensProjection lens(camera);
+  const Eigen::Vector3d p(-85.0, 60.0, 410.0);
+  for (const CameraModel& c : {camera, other}) {
+    Eigen::Matrix2Xd q;
+    Eigen::MatrixXd dq_dp, dq_di;
+    ASSERT_TRUE(ProjectPoints(c, p, &q, &dq_dp, &dq_di));
+    Eigen::Vector2d q_alone, q_both;
+    Matrix23d dp_alone, dp_both;
+    RowMajorMatrix2Xd di;
+    ASSERT_TRUE(lens.Project(p, c.intrinsics.data(), &q_alone, &dp_alone, nullptr));
+    ASSERT_TRUE(lens.Project(p, c.intrinsics.data(), &q_both, &dp_both, &di));
+    EXPECT_EQ(q_alone, q.col(0));
+    EXPECT_EQ(q_both, q.col(0));
+    EXPECT_EQ(Eigen::MatrixXd(dp_alone), dq_dp);
+    EXPECT_EQ(Eigen::MatrixXd(dp_both), dq_dp);
+    EXPECT_EQ(Eigen::MatrixXd(di), dq_di);
+  }
+  CameraModel wrong = camera;
+  wrong.intrinsics.conservativeResize(8);
+  Eigen::Vector2d q;
+  EXPECT_FALSE(MrcalLensProjection(wrong).Project(p, wrong.intrinsics.data(), &q, nullptr, nullptr));
 }
 
 }  // namespace
