@@ -366,6 +366,7 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
                                           ? ceres::SPARSE_SCHUR
                                           : ceres::DENSE_SCHUR;
   solver_options.max_num_iterations = options.max_iterations;
+  solver_options.initial_trust_region_radius = options.initial_trust_region_radius;
   solver_options.function_tolerance = options.function_tolerance;
   solver_options.gradient_tolerance = options.gradient_tolerance;
   solver_options.parameter_tolerance = options.parameter_tolerance;

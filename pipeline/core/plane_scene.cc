@@ -34,6 +34,7 @@ std::string PlaneBundleConfig::Check() const {
 std::string PlaneBundleOptions::Check() const {
   if (!(loss_scale_px > 0.0)) return "loss_scale_px must be > 0";
   if (max_iterations < 1) return "max_iterations must be >= 1";
+  if (!(initial_trust_region_radius > 0.0)) return "initial_trust_region_radius must be > 0";
   if (!(function_tolerance >= 0.0) || !(gradient_tolerance >= 0.0) ||
       !(parameter_tolerance >= 0.0)) {
     return "tolerances must be >= 0";
