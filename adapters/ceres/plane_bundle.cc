@@ -544,7 +544,8 @@ PlateScaleRelease ReleasePlateScale(const LensProjection& lens, const PlaneBundl
     h_ss += j_s * j_s;
     g_s += j_s * residuals[row];
     for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e)
-      if (jacobian.cols[e] != s_column) h(scene_index[jacobian.cols[e]]) += j_s * jacobian.values[e];
+      if (jacobian.cols[e] != s_column)
+        h(scene_index[jacobian.cols[e]]) += j_s * jacobian.values[e];
   }
   const double s = h_ss - h.dot(scene.covariance * h);
   if (!(s > 0)) return result;
@@ -555,4 +556,3 @@ PlateScaleRelease ReleasePlateScale(const LensProjection& lens, const PlaneBundl
 }
 
 }  // namespace omm
-

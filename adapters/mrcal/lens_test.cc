@@ -110,7 +110,8 @@ TEST(Lens, MrcalLensProjectionIsProjectPoints) {
   CameraModel wrong = camera;
   wrong.intrinsics.conservativeResize(8);
   Eigen::Vector2d q;
-  EXPECT_FALSE(MrcalLensProjection(wrong).Project(p, wrong.intrinsics.data(), &q, nullptr, nullptr));
+  EXPECT_FALSE(
+      MrcalLensProjection(wrong).Project(p, wrong.intrinsics.data(), &q, nullptr, nullptr));
 }
 
 }  // namespace

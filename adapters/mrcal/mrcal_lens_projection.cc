@@ -35,11 +35,10 @@ bool MrcalLensProjection::Project(const Eigen::Vector3d& p_cam, const double* in
     dq_dintrinsics->resize(2, NumIntrinsics());
     dq_dintrinsics->setZero();
   }
-  if (!mrcal_project(reinterpret_cast<mrcal_point2_t*>(q_px->data()),
-                     dq_dp != nullptr ? dq_dp_rows : nullptr,
-                     dq_dintrinsics != nullptr ? dq_dintrinsics->data() : nullptr,
-                     reinterpret_cast<const mrcal_point3_t*>(p_cam.data()), 1, &lens_->model,
-                     intrinsics))
+  if (!mrcal_project(
+          reinterpret_cast<mrcal_point2_t*>(q_px->data()), dq_dp != nullptr ? dq_dp_rows : nullptr,
+          dq_dintrinsics != nullptr ? dq_dintrinsics->data() : nullptr,
+          reinterpret_cast<const mrcal_point3_t*>(p_cam.data()), 1, &lens_->model, intrinsics))
     return false;
   if (dq_dp != nullptr) {
     for (int i = 0; i < 2; ++i)

@@ -19,7 +19,7 @@ class MrcalLensProjection : public LensProjection {
                Matrix23d* dq_dp, RowMajorMatrix2Xd* dq_dintrinsics) const override;
 
  private:
-  struct Lens;                       // mrcal's parsed lens model
+  struct Lens;                        // mrcal's parsed lens model
   std::shared_ptr<const Lens> lens_;  // null if the camera's model is invalid
   CameraModel camera_;
 };

@@ -105,8 +105,8 @@ Eigen::Matrix2d TransferJacobian(const Eigen::Matrix3d& h, const Eigen::Vector2d
 }
 
 // RANSAC on a homography b ~ H a (at most `iterations` samples); inliers
-// where |Transfer(H, a) - b| * scale <= threshold. Returns the inlier mask of the refitted model (empty if fewer
-// than 4 points or no model).
+// where |Transfer(H, a) - b| * scale <= threshold. Returns the inlier mask of
+// the refitted model (empty if fewer than 4 points or no model).
 std::vector<bool> RansacHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b,
                                    double threshold, double scale, int iterations,
                                    double confidence, std::mt19937_64* rng,
@@ -147,8 +147,8 @@ std::vector<bool> RansacHomography(const Eigen::Matrix2Xd& a, const Eigen::Matri
       best_count = count, best = mask;
       const double all_inliers = std::pow(static_cast<double>(count) / n, 4);
       if (all_inliers >= 1.0) break;
-      needed = static_cast<int>(
-          std::ceil(std::log(1.0 - confidence) / std::log(1.0 - all_inliers)));
+      needed =
+          static_cast<int>(std::ceil(std::log(1.0 - confidence) / std::log(1.0 - all_inliers)));
     }
   }
   if (best_count < 4) return {};
@@ -455,7 +455,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       const std::vector<bool> inliers =
           rays_a.cols() == sift.q_a_px.cols() && rays_b.cols() == sift.q_b_px.cols()
               ? RansacHomography(rays_a, rays_b, options.ransac_threshold_px, fx,
-                                 options.ransac_iterations, options.ransac_confidence, &rng, &h_rays)
+                                 options.ransac_iterations, options.ransac_confidence, &rng,
+                                 &h_rays)
               : std::vector<bool>();
       if (std::count(inliers.begin(), inliers.end(), true) >= 8) {
         std::vector<Eigen::Vector2i> pixels;
@@ -514,9 +515,9 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     const Eigen::Matrix2Xd rb = unproject(qb);
     if (rb.cols() != qb.cols()) return;
     Eigen::Matrix3d h_rays;
-    const std::vector<bool> inliers = RansacHomography(
-        ra, rb, options.ransac_threshold_px, fx, options.ransac_iterations,
-        options.ransac_confidence, &rng, &h_rays);
+    const std::vector<bool> inliers =
+        RansacHomography(ra, rb, options.ransac_threshold_px, fx, options.ransac_iterations,
+                         options.ransac_confidence, &rng, &h_rays);
     std::vector<Match> kept;
     for (size_t k = 0; k < inliers.size(); ++k) {
       if (inliers[k]) kept.push_back(matches[k]);
