@@ -107,10 +107,10 @@ ResidualStats Stats(const PlaneBundleInput& input, const PlaneScene& scene, doub
   double sum_sq = 0.0, inlier_sum_sq = 0.0;
   int count = 0;
   const double inv_sigma = 1.0 / input.observation_sigma_px;
-  auto add = [&](double weight, const Eigen::Vector2d& res) {
+  auto add = [&](double weight, const Eigen::Matrix2d& shape, const Eigen::Vector2d& res) {
     if (weight <= 0.0) return;
     sum_sq += res.squaredNorm();
-    stats.chi2 += (weight * inv_sigma * res).squaredNorm();
+    stats.chi2 += (weight * inv_sigma * shape * res).squaredNorm();
     ++count;
     if (res.norm() > outlier_px) {
       ++stats.num_outliers;
@@ -119,10 +119,11 @@ ResidualStats Stats(const PlaneBundleInput& input, const PlaneScene& scene, doub
     }
   };
   for (size_t n = 0; n < input.observations.size(); ++n) {
-    add(input.observations[n].weight, scene.residual_px.col(static_cast<Eigen::Index>(n)));
+    add(input.observations[n].weight, input.observations[n].shape,
+        scene.residual_px.col(static_cast<Eigen::Index>(n)));
   }
   for (size_t n = 0; n < input.plate_observations.size(); ++n) {
-    add(input.plate_observations[n].weight,
+    add(input.plate_observations[n].weight, Eigen::Matrix2d::Identity(),
         scene.plate_residual_px.col(static_cast<Eigen::Index>(n)));
   }
   const int inliers = count - stats.num_outliers;
@@ -309,7 +310,7 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   for (const TrackObservation& obs : input.observations) {
     if (obs.weight <= 0.0) continue;
     problem.AddResidualBlock(
-        new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma), loss.get(),
+        new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma * obs.shape), loss.get(),
         {b.r.data(), b.t.data(), b.table_pos[obs.tile].data(), b.point(scene, obs.track),
          b.intrinsics.data()});
     ++tile_observations[obs.tile];

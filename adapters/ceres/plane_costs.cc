@@ -86,7 +86,12 @@ Eigen::Matrix3d RightJacobianSO3(const Eigen::Vector3d& r) {
 TrackReprojectionCost::TrackReprojectionCost(const LensProjection& lens,
                                              const Eigen::Vector2d& q_px,
                                              double weight_over_sigma_px)
-    : lens_(lens), q_px_(q_px), scale_(weight_over_sigma_px) {
+    : TrackReprojectionCost(lens, q_px, weight_over_sigma_px * Eigen::Matrix2d::Identity()) {}
+
+TrackReprojectionCost::TrackReprojectionCost(const LensProjection& lens,
+                                             const Eigen::Vector2d& q_px,
+                                             const Eigen::Matrix2d& scale)
+    : lens_(lens), q_px_(q_px), scale_(scale) {
   set_num_residuals(2);
   *mutable_parameter_block_sizes() = {3, 3, 2, 2, lens.NumIntrinsics()};
 }
@@ -99,15 +104,29 @@ bool TrackReprojectionCost::Evaluate(double const* const* parameters, double* re
   const bool want_dx =
       jacobians != nullptr && (jacobians[2] != nullptr || jacobians[3] != nullptr);
   Matrix23d dres_dx;
-  if (!ReprojectMovedPoint(lens_, q_px_, scale_, parameters[0], parameters[1], parameters[4],
-                           x_part, residuals, jacobians, 0, 1, 4, want_dx, &dres_dx)) {
+  // In px, then scaled by the matrix.
+  if (!ReprojectMovedPoint(lens_, q_px_, 1.0, parameters[0], parameters[1], parameters[4], x_part,
+                           residuals, jacobians, 0, 1, 4, want_dx, &dres_dx)) {
     return false;
+  }
+  Eigen::Map<Eigen::Vector2d> res(residuals);
+  res = scale_ * res;
+  if (jacobians == nullptr) return true;
+  for (int block : {0, 1}) {
+    if (jacobians[block] != nullptr) {
+      Eigen::Map<RowMajorMatrix23d> j(jacobians[block]);
+      j = scale_ * j;
+    }
+  }
+  if (jacobians[4] != nullptr) {
+    Eigen::Map<RowMajorMatrix2Xd> j(jacobians[4], 2, lens_.NumIntrinsics());
+    j = scale_ * j;
   }
   // T and P enter only through X = P + T (in-plane): both Jacobians are the
   // first two columns of dres/dX.
   for (int block : {2, 3}) {
-    if (jacobians != nullptr && jacobians[block] != nullptr) {
-      Eigen::Map<RowMajorMatrix22d>{jacobians[block]} = dres_dx.leftCols<2>();
+    if (jacobians[block] != nullptr) {
+      Eigen::Map<RowMajorMatrix22d>{jacobians[block]} = scale_ * dres_dx.leftCols<2>();
     }
   }
   return true;

@@ -31,13 +31,17 @@ class TrackReprojectionCost : public ceres::CostFunction {
  public:
   TrackReprojectionCost(const LensProjection& lens, const Eigen::Vector2d& q_px,
                         double weight_over_sigma_px);
+  // The residual scaled by a 2 x 2 matrix (weight * shape / sigma_px,
+  // TrackObservation) instead.
+  TrackReprojectionCost(const LensProjection& lens, const Eigen::Vector2d& q_px,
+                        const Eigen::Matrix2d& scale);
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
 
  private:
   const LensProjection& lens_;
   Eigen::Vector2d q_px_;
-  double scale_;  // weight / sigma_px, 1/px
+  Eigen::Matrix2d scale_;  // weight shape / sigma_px, 1/px
 };
 
 // Residual (2, dimensionless): (weight / sigma_px) (q(R (P + T) + t) - q_px)

@@ -107,6 +107,20 @@ TEST(PlaneCosts, TrackReprojectionJacobiansMatchNumeric) {
   Eigen::VectorXd intrinsics = TwelveMillimetreCamera().intrinsics;
   ExpectJacobiansMatch(cost, {r.data(), t.data(), table_pos.data(), point.data(),
                               intrinsics.data()});
+  // Scaled by a matrix (an edge's shaped weight): the residual is that
+  // matrix times the pixel error, exactly (the same float operations).
+  Eigen::Matrix2d scale;
+  scale << 0.9, 0.3, 0.3, 0.2;
+  scale /= 0.07;
+  const TrackReprojectionCost shaped(lens, Eigen::Vector2d(300.0, 900.0), scale);
+  ExpectJacobiansMatch(shaped,
+                       {r.data(), t.data(), table_pos.data(), point.data(), intrinsics.data()});
+  const TrackReprojectionCost px(lens, Eigen::Vector2d(300.0, 900.0), 1.0);
+  const double* params[] = {r.data(), t.data(), table_pos.data(), point.data(), intrinsics.data()};
+  Eigen::Vector2d error_px, residual;
+  ASSERT_TRUE(px.Evaluate(params, error_px.data(), nullptr));
+  ASSERT_TRUE(shaped.Evaluate(params, residual.data(), nullptr));
+  EXPECT_EQ(residual, Eigen::Vector2d(scale * error_px));
 }
 
 TEST(PlaneCosts, PlateMarkReprojectionJacobiansMatchNumeric) {

@@ -57,8 +57,8 @@ std::string CheckPlaneBundleInput(const PlaneBundleInput& input,
     if (obs.track < 0 || obs.track >= input.num_tracks) {
       return "an observation's track is out of range";
     }
-    if (!(obs.weight >= 0.0) || !obs.q_px.allFinite()) {
-      return "an observation has a negative weight or a non-finite pixel";
+    if (!(obs.weight >= 0.0) || !obs.q_px.allFinite() || !obs.shape.allFinite()) {
+      return "an observation has a negative weight or a non-finite pixel or shape";
     }
     if (obs.weight > 0.0) ++seen[obs.track];
   }

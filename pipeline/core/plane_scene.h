@@ -53,8 +53,12 @@ struct TrackObservation {
   int track = 0;  // 0 .. num_tracks-1
   Eigen::Vector2d q_px = Eigen::Vector2d::Zero();
   // Nominal sigma / this observation's sigma (mrcal's convention): the
-  // residual is weight * (q - q_px) / observation_sigma_px; 0 drops it.
+  // residual is weight * shape * (q - q_px) / observation_sigma_px; 0 drops it.
   double weight = 1.0;
+  // The weight's shape (symmetric, 1 along its stiffest direction): a
+  // template match on an edge is located across the edge, far less along it
+  // (RegisterTiles). Identity: isotropic.
+  Eigen::Matrix2d shape = Eigen::Matrix2d::Identity();
 };
 
 // A plate of marks with known plate coordinates lying face up on the part.

@@ -176,7 +176,7 @@ struct Match {
   Eigen::Vector2d ray_a = Eigen::Vector2d::Zero();  // the anchor's undistorted ray (x, y; z = 1)
   Eigen::Vector2d q_b = Eigen::Vector2d::Zero();
   Eigen::Matrix2d db_da = Eigen::Matrix2d::Identity();  // affine of the last match
-  double sigma_px = 0.0;  // the last match's predicted sigma (PatchMatch::sigma_px)
+  Eigen::Matrix2d covariance_px2 = Eigen::Matrix2d::Zero();  // the last match's (PatchMatch)
   bool tag = false;
   bool sift = false;  // its anchor came from a SIFT match
   bool keep = true;
@@ -502,7 +502,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                        m.db_da, options.search_radius_px, options.patch);
       if (!pm.ok) continue;
       m.q_b = pm.q_px;
-      m.sigma_px = pm.sigma_px;
+      m.covariance_px2 = pm.covariance_px2;
       matches.push_back(m);
     }
     pair.num_matched = static_cast<int>(matches.size());
@@ -555,7 +555,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                          m.db_da, options.search_radius_px, options.patch);
         if (!pm.ok) continue;
         m.q_b = pm.q_px;
-      m.sigma_px = pm.sigma_px;
+        m.covariance_px2 = pm.covariance_px2;
         tag_matches.push_back(m);
       }
     }
@@ -643,13 +643,18 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
           input.observations.push_back({m.tile_a, it->second, m.anchor_px.cast<double>(), 1.0});
           match_of_observation->emplace_back(-1, -1);
         }
-        // Down-weighting only: weights above 1 (sigmas below
-        // observation_sigma_px) stalled the first, outlier-laden solve.
-        const double weight =
-            options.weight_by_match_sigma
-                ? std::min(1.0, options.observation_sigma_px / std::max(m.sigma_px, 1e-9))
-                : 1.0;
-        input.observations.push_back({m.tile_b, it->second, m.q_b, weight});
+        TrackObservation obs{m.tile_b, it->second, m.q_b, 1.0};
+        if (options.weight_by_match_sigma) {
+          // Down-weighting only: weights above 1 (sigmas below
+          // observation_sigma_px) stalled the first, outlier-laden solve.
+          const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(m.covariance_px2);
+          const Eigen::Vector2d sigma = eigen.eigenvalues().cwiseMax(1e-18).cwiseSqrt();
+          obs.weight = std::min(1.0, options.observation_sigma_px / sigma(0));
+          obs.shape = eigen.eigenvectors() *
+                      Eigen::Vector2d(1.0, sigma(0) / sigma(1)).asDiagonal() *
+                      eigen.eigenvectors().transpose();
+        }
+        input.observations.push_back(obs);
         match_of_observation->emplace_back(static_cast<int>(p), static_cast<int>(k));
       }
     }
@@ -664,11 +669,14 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     adjustment = AdjustPlaneScene(camera, input, config, options.bundle);
     result.input = std::move(input);
   };
-  // Drops matches whose target or anchor observation has a large residual;
+  // Drops matches whose target or anchor observation has a large residual
+  // (shaped as its weight: an edge's match along the edge counts less);
   // returns how many.
   const auto drop_outliers = [&] {
     int dropped = 0;
-    const Eigen::Matrix2Xd& res = adjustment.scene.residual_px;
+    Eigen::Matrix2Xd res = adjustment.scene.residual_px;
+    for (Eigen::Index k = 0; k < res.cols(); ++k)
+      res.col(k) = result.input.observations[k].shape * res.col(k);
     std::vector<double> norms;
     for (Eigen::Index k = 0; k < res.cols(); ++k)
       if (res.col(k).allFinite()) norms.push_back(res.col(k).norm());
@@ -738,7 +746,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         return;
       }
       m.q_b = pm.q_px;
-      m.sigma_px = pm.sigma_px;
+      m.covariance_px2 = pm.covariance_px2;
     });
     return num_relocated.load();
   };

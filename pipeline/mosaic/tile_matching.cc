@@ -671,7 +671,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   // The weighted residual variance over the pixels that count.
   const double w_sum = weight.sum();
   const double variance = weight.dot(residual.cwiseAbs2()) / std::max(1.0, w_sum - 4);
-  match.sigma_px = std::sqrt(0.5 * variance * normal.inverse().topLeftCorner<2, 2>().trace());
+  match.covariance_px2 = variance * normal.inverse().topLeftCorner<2, 2>();
   match.q_px = q;
   match.ok = converged && match.ncc >= options.min_ncc;
   return match;

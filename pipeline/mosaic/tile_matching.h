@@ -134,10 +134,11 @@ struct PatchMatch {
   Eigen::Vector2d q_px = Eigen::Vector2d::Zero();  // the anchor's position in the target tile
   double ncc = 0.0;                                // after refinement
   double residual_rms = 0.0;  // RMS of gain * target + offset - template (normalised units)
-  // Predicted 1-sigma of q_px per axis, px: sqrt(trace(C) / 2) of the position
-  // block C of the least-squares covariance s^2 N^-1 (N the normal matrix,
-  // s^2 the residual variance): small where the texture is strong.
-  double sigma_px = 0.0;
+  // Predicted covariance of q_px, px^2: the position block of the
+  // least-squares covariance s^2 N^-1 (N the normal matrix, s^2 the residual
+  // variance): small where the texture is strong; on an edge, small across
+  // it and large along it.
+  Eigen::Matrix2d covariance_px2 = Eigen::Matrix2d::Zero();
   int iterations = 0;
 };
 
@@ -158,7 +159,7 @@ struct PatchMatch {
 //    2's solution with Tukey's biweight of each pixel's residual (scale
 //    1.4826 MAD), to its fixed point: pixels whose content differs between
 //    the views beyond the plane's warp (a bore's wall and what is seen
-//    through it) stop pulling the match. sigma_px then comes from the
+//    through it) stop pulling the match. covariance_px2 then comes from the
 //    weighted normal matrix and weighted residual variance.
 // `target_spline` is CubicBSplineCoefficients(target).
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
