@@ -41,8 +41,6 @@ std::string RegisterTilesOptions::Check() const {
   if (search_radius_px < 1) return "search_radius_px must be >= 1";
   if (!(ransac_threshold_px > 0)) return "ransac_threshold_px must be > 0";
   if (ransac_iterations < 1) return "ransac_iterations must be >= 1";
-  if (!(ransac_confidence > 0 && ransac_confidence < 1))
-    return "ransac_confidence must be in (0, 1)";
   if (min_pair_matches < 4) return "min_pair_matches must be >= 4";
   if (!(observation_sigma_px > 0)) return "observation_sigma_px must be > 0";
   if (!(outlier_factor > 1)) return "outlier_factor must be > 1";
@@ -104,13 +102,12 @@ Eigen::Matrix2d TransferJacobian(const Eigen::Matrix3d& h, const Eigen::Vector2d
   return j;
 }
 
-// RANSAC on a homography b ~ H a (at most `iterations` samples); inliers
-// where |Transfer(H, a) - b| * scale <= threshold. Returns the inlier mask of
-// the refitted model (empty if fewer than 4 points or no model).
+// RANSAC on a homography b ~ H a; inliers where |Transfer(H, a) - b| * scale
+// <= threshold. Returns the inlier mask of the refitted model (empty if fewer
+// than 4 points or no model).
 std::vector<bool> RansacHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b,
                                    double threshold, double scale, int iterations,
-                                   double confidence, std::mt19937_64* rng,
-                                   Eigen::Matrix3d* model) {
+                                   std::mt19937_64* rng, Eigen::Matrix3d* model) {
   const int n = static_cast<int>(a.cols());
   std::vector<bool> best;
   if (n < 4) return best;
@@ -126,10 +123,7 @@ std::vector<bool> RansacHomography(const Eigen::Matrix2Xd& a, const Eigen::Matri
   int best_count = 0;
   std::vector<bool> mask;
   std::uniform_int_distribution<int> pick(0, n - 1);
-  // Stop once an all-inlier sample would have been drawn with probability
-  // confidence at the best inlier fraction so far (Hartley & Zisserman, 4.7.1).
-  int needed = iterations;
-  for (int it = 0; it < std::min(iterations, needed); ++it) {
+  for (int it = 0; it < iterations; ++it) {
     int idx[4];
     for (int k = 0; k < 4; ++k) {
       bool again = true;
@@ -143,13 +137,7 @@ std::vector<bool> RansacHomography(const Eigen::Matrix2Xd& a, const Eigen::Matri
     const Eigen::Matrix3d h = FitHomography(sa, sb);
     if (!h.allFinite()) continue;
     const int count = inliers_of(h, &mask);
-    if (count > best_count) {
-      best_count = count, best = mask;
-      const double all_inliers = std::pow(static_cast<double>(count) / n, 4);
-      if (all_inliers >= 1.0) break;
-      needed =
-          static_cast<int>(std::ceil(std::log(1.0 - confidence) / std::log(1.0 - all_inliers)));
-    }
+    if (count > best_count) best_count = count, best = mask;
   }
   if (best_count < 4) return {};
   // Refit on the inliers, twice (the inlier set may grow).
@@ -421,7 +409,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       Eigen::Matrix3d h_pixels;
       const std::vector<bool> probe_inliers = RansacHomography(
           probe_a.leftCols(found), probe_b.leftCols(found), options.probe_ransac_threshold_px, 1.0,
-          options.ransac_iterations, options.ransac_confidence, &rng, &h_pixels);
+          options.ransac_iterations, &rng, &h_pixels);
       const int num_probe_inliers =
           static_cast<int>(std::count(probe_inliers.begin(), probe_inliers.end(), true));
       // The plane-induced homography between the rays from the probe
@@ -455,8 +443,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       const std::vector<bool> inliers =
           rays_a.cols() == sift.q_a_px.cols() && rays_b.cols() == sift.q_b_px.cols()
               ? RansacHomography(rays_a, rays_b, options.ransac_threshold_px, fx,
-                                 options.ransac_iterations, options.ransac_confidence, &rng,
-                                 &h_rays)
+                                 options.ransac_iterations, &rng, &h_rays)
               : std::vector<bool>();
       if (std::count(inliers.begin(), inliers.end(), true) >= 8) {
         std::vector<Eigen::Vector2i> pixels;
@@ -515,9 +502,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     const Eigen::Matrix2Xd rb = unproject(qb);
     if (rb.cols() != qb.cols()) return;
     Eigen::Matrix3d h_rays;
-    const std::vector<bool> inliers =
-        RansacHomography(ra, rb, options.ransac_threshold_px, fx, options.ransac_iterations,
-                         options.ransac_confidence, &rng, &h_rays);
+    const std::vector<bool> inliers = RansacHomography(
+        ra, rb, options.ransac_threshold_px, fx, options.ransac_iterations, &rng, &h_rays);
     std::vector<Match> kept;
     for (size_t k = 0; k < inliers.size(); ++k) {
       if (inliers[k]) kept.push_back(matches[k]);

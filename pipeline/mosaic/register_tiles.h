@@ -123,10 +123,7 @@ struct RegisterTilesOptions {
   // Plane-induced homography on undistorted rays: inlier distance, px (measured
   // in the target tile with the camera's fx).
   double ransac_threshold_px = 1.0;
-  int ransac_iterations = 400;  // at most
-  // ... fewer once a sample of inliers alone was drawn with this probability
-  // at the best inlier fraction so far (the demo's pairs: ~10 samples).
-  double ransac_confidence = 0.999999;
+  int ransac_iterations = 400;
   std::uint64_t ransac_seed = 1;  // the RANSAC's samples are drawn from this seed
   // A pair with fewer inliers is dropped (reported). Ten plane-consistent
   // template matches (NCC >= patch.min_ncc, within ransac_threshold_px of one
