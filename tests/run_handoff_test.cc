@@ -21,13 +21,18 @@ namespace fs = std::filesystem;
 namespace omm {
 namespace {
 
-TEST(RunHandoff, MeasureAloneReproducesTheRunExactly) {
+// The rendered demo (seed 101) copied into `dir` and run whole (`omm run`).
+fs::path RunDemo(const testing::TempDir& dir) {
   const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
-  testing::TempDir dir;
   const fs::path project_dir = dir.path() / "demo";
   testing::CopyProject(sim.project_dir, project_dir);
-
   RunProject(LoadProject(project_dir), RunOptions{});
+  return project_dir;
+}
+
+TEST(RunHandoff, MeasureAloneReproducesTheRunExactly) {
+  testing::TempDir dir;
+  const fs::path project_dir = RunDemo(dir);
   const Report run = ReadReportJson(project_dir / "out" / "report.json");
   // The camera the mosaic used is named where it stays (out/), not where the
   // run staged it.
@@ -73,11 +78,8 @@ TEST(RunHandoff, MeasureAloneReproducesTheRunExactly) {
 // did not make the mosaic. It names scene.json, says what to do, and leaves
 // out/ as it was.
 TEST(RunHandoff, MeasureAloneRefusesAMosaicItsSceneDidNotMake) {
-  const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
   testing::TempDir dir;
-  const fs::path project_dir = dir.path() / "demo";
-  testing::CopyProject(sim.project_dir, project_dir);
-  RunProject(LoadProject(project_dir), RunOptions{});
+  const fs::path project_dir = RunDemo(dir);
   const fs::path report_path = project_dir / "out" / "report.json";
   RunOptions measure_only;
   measure_only.stages = {Stage::kMeasure};
