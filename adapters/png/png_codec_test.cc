@@ -4,7 +4,12 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <set>
 #include <string>
 #include <vector>
@@ -132,6 +137,35 @@ TEST(PngCodec, CorruptFilesThrow) {
   for (int i = 0; i < 4; ++i)
     bad_filter[idat + 8 + length + i] = static_cast<char>(crc >> (24 - 8 * i));
   EXPECT_THROW(DecodeGrayPng(bad_filter, "x.png"), InputError);
+}
+
+// The real PNGs of ../shared/data (calibration plates and microscope tiles
+// from public sources, written by other encoders): every one this reader
+// takes decodes to OpenCV's samples exactly; the others are left to OpenCV.
+TEST(PngCodec, RealFilesDecodeAsOpenCvDecodesThem) {
+  const char* source = std::getenv("OMM_SOURCE_DIR");
+  const std::filesystem::path data =
+      std::filesystem::path(source ? source : ".") / ".." / "shared" / "data";
+  if (!std::filesystem::is_directory(data)) GTEST_SKIP() << data << " is not there";
+  int num_taken = 0, num_left = 0;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(data)) {
+    if (entry.path().extension() != ".png") continue;
+    std::ifstream file(entry.path(), std::ios::binary);
+    const std::string bytes{std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>()};
+    const std::optional<StoredImage> ours = DecodeGrayPng(bytes, entry.path());
+    if (!ours) {
+      ++num_left;
+      continue;
+    }
+    ++num_taken;
+    const StoredImage theirs = OpenCvDecode(bytes);
+    EXPECT_EQ(ours->width, theirs.width) << entry.path();
+    EXPECT_EQ(ours->height, theirs.height) << entry.path();
+    EXPECT_EQ(ours->bit_depth, theirs.bit_depth) << entry.path();
+    EXPECT_TRUE(ours->samples == theirs.samples) << entry.path();
+  }
+  std::printf("%d real PNGs decoded here, %d left to OpenCV\n", num_taken, num_left);
+  EXPECT_GT(num_taken, 0);
 }
 
 }  // namespace
