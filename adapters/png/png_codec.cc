@@ -115,7 +115,7 @@ std::optional<StoredImage> DecodeGrayPng(std::string_view bytes,
   const auto* data = reinterpret_cast<const unsigned char*>(bytes.data());
   if (bytes.size() < 8 || std::memcmp(data, kSignature, 8) != 0) return std::nullopt;
   auto corrupt = [&](const std::string& why) {
-    return InputError(path.string(), "corrupt PNG: " + why);
+    return InputError(path.string(), "cannot decode image: corrupt PNG (" + why + ")");
   };
   StoredImage image;
   bool header = false, end = false;

@@ -126,7 +126,13 @@ TEST(PngCodec, CorruptFilesThrow) {
   std::string flipped = png;
   flipped[60] = static_cast<char>(flipped[60] ^ 1);  // inside IDAT: its CRC no longer matches
   EXPECT_THROW(DecodeGrayPng(flipped, "x.png"), InputError);
-  EXPECT_THROW(DecodeGrayPng(png.substr(0, png.size() / 2), "x.png"), InputError);
+  try {
+    DecodeGrayPng(png.substr(0, png.size() / 2), "x.png");
+    ADD_FAILURE() << "a truncated PNG decoded";
+  } catch (const InputError& e) {
+    // Worded as the other decoders' failures are (project_reader's tests).
+    EXPECT_STREQ(e.what(), "x.png: cannot decode image: corrupt PNG (truncated)");
+  }
   std::string bad_filter = EncodeGrayPng(Pattern(40, 30, 8), PngWriteOptions{0});
   // Stored deflate: zlib header (2) and the block header (5) precede row 0's
   // filter byte; the IDAT's data starts at 8 + 25 + 8. Fix its CRC to match.
