@@ -11,14 +11,13 @@
 #include "adapters/opencv/image_io.h"
 #include "adapters/opencv/opencv_calibration.h"
 #include "pipeline/calibration/calibrate_stage.h"
+#include "tests/test_util.h"
 
 namespace omm {
 namespace {
 
 std::filesystem::path DataDir() {
-  const char* source = std::getenv("OMM_SOURCE_DIR");
-  return std::filesystem::path(source ? source : ".") / ".." / "shared" / "data" /
-         "opencv_samples_chessboard_9x6";
+  return testing::SharedDataDir() / "opencv_samples_chessboard_9x6";
 }
 
 TEST(CalibrationOnRealImages, OpenCvChessboard9x6AgreesWithOpenCvWithinOurUncertainty) {

@@ -104,4 +104,9 @@ CommandResult RunCommand(const std::string& command) {
 
 fs::path OmmProgram() { return OMM_PROGRAM; }
 
+fs::path SharedDataDir() {
+  const char* source = std::getenv("OMM_SOURCE_DIR");
+  return fs::path(source ? source : ".") / ".." / "shared" / "data";
+}
+
 }  // namespace omm::testing

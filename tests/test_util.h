@@ -55,4 +55,8 @@ CommandResult RunCommand(const std::string& command);
 // The built `omm` program of this build tree.
 std::filesystem::path OmmProgram();
 
+// The real images from public sources in ../shared/data beside the
+// repository (OMM_SOURCE_DIR, set by omm_test; read in place, never copied).
+std::filesystem::path SharedDataDir();
+
 }  // namespace omm::testing

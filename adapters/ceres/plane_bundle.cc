@@ -423,12 +423,12 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
     add_block(b.t.data(), 3);
     for (int i = 0; i < num_tiles; ++i) add_block(b.table_pos[i].data(), 6 + 2 * i);
     for (int g = 0; g < num_plates; ++g) {
-      const int offset = 6 + 2 * num_tiles + 5 * g;
+      const int offset = PlaneSceneCovariancePlateIndex(num_tiles, g);
       add_block(b.plate_pose[g].data(), offset);
       add_block(&b.plate_height[g], offset + 3);
       add_block(&b.plate_scale[g], offset + 4);
     }
-    add_block(b.intrinsics.data(), 6 + 2 * num_tiles + 5 * num_plates);
+    add_block(b.intrinsics.data(), PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates));
     const int size = PlaneSceneCovarianceSize(num_tiles, num_plates, num_intrinsics);
     scene->covariance.resize(0, 0);
     scene->track_covariance_mm2.clear();
@@ -519,13 +519,13 @@ PlateScaleRelease ReleasePlateScale(const LensProjection& lens, const PlaneBundl
     evaluate.parameter_blocks.push_back(block);
     offset.push_back(at);
   };
-  const int plate_offset = 6 + 2 * num_tiles + 5 * plate;
+  const int plate_offset = PlaneSceneCovariancePlateIndex(num_tiles, plate);
   add(b.r.data(), 0);
   add(b.t.data(), 3);
   for (int i = 0; i < num_tiles; ++i) add(b.table_pos[i].data(), 6 + 2 * i);
   add(b.plate_pose[plate].data(), plate_offset);
   add(&b.plate_height[plate], plate_offset + 3);
-  add(b.intrinsics.data(), 6 + 2 * num_tiles + 5 * num_plates);
+  add(b.intrinsics.data(), PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates));
   std::vector<int> scene_index;  // per Jacobian column but s's: its index in the scene vector
   for (size_t k = 0; k < offset.size(); ++k) {
     for (int j = 0; j < problem.ParameterBlockSize(evaluate.parameter_blocks[k]); ++j)

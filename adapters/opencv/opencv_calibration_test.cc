@@ -3,7 +3,6 @@
 #include "adapters/opencv/opencv_calibration.h"
 
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -13,14 +12,12 @@
 #include "adapters/mrcal/projection_diff.h"
 #include "adapters/opencv/image_io.h"
 #include "adapters/opencv/simulated_caltab_testing.h"
+#include "tests/test_util.h"
 
 namespace omm {
 namespace {
 
-std::filesystem::path DataDir() {
-  const char* source = std::getenv("OMM_SOURCE_DIR");
-  return std::filesystem::path(source ? source : ".") / ".." / "shared" / "data";
-}
+using testing::SharedDataDir;
 
 TEST(OpenCvCalibration, OptionsCheck) {
   EXPECT_EQ(OpenCvCalibrationOptions{}.Check(), "");
@@ -36,7 +33,7 @@ TEST(OpenCvCalibration, OptionsCheck) {
 // gave fx = 536.10, cx = 342.37, cy = 235.59, rms 0.41 px. Same library, same
 // data: we must land on the re-run to a small fraction of a pixel.
 TEST(OpenCvCalibration, SamplesChessboard9x6MatchesThePublishedResult) {
-  const auto dir = DataDir() / "opencv_samples_chessboard_9x6";
+  const auto dir = SharedDataDir() / "opencv_samples_chessboard_9x6";
   if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no " << dir;
   std::vector<GrayImage> images;
   std::vector<std::string> names;

@@ -1,6 +1,5 @@
 #include "adapters/opencv/plate_detector.h"
 
-#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -10,15 +9,12 @@
 
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/statistics.h"
+#include "tests/test_util.h"
 
 namespace omm {
 namespace {
 
-// Real images live in ../shared/data beside the repository (read in place).
-std::filesystem::path DataDir() {
-  const char* source = std::getenv("OMM_SOURCE_DIR");
-  return std::filesystem::path(source ? source : ".") / ".." / "shared" / "data";
-}
+using testing::SharedDataDir;
 
 // An OpenCV FileStorage reference (.dat): the grid size and its points.
 struct Reference {
@@ -75,8 +71,8 @@ std::vector<double> DistancesToReference(const PlateObservation& o, const Eigen:
   return d;
 }
 
-#define SKIP_WITHOUT_DATA()                                                       \
-  if (!std::filesystem::is_directory(DataDir())) GTEST_SKIP() << "no " << DataDir()
+#define SKIP_WITHOUT_DATA() \
+  if (!std::filesystem::is_directory(SharedDataDir())) GTEST_SKIP() << "no " << SharedDataDir()
 
 TEST(PlateDetector, OptionsCheck) {
   EXPECT_EQ(PlateDetectionOptions{}.Check(), "");
@@ -92,7 +88,7 @@ TEST(PlateDetector, OpenCvCircles7x7AgreeWithOpenCv) {
   SKIP_WITHOUT_DATA();
   const BoardSpec board = Board(BoardType::kCircles, 7, 7);
   for (int k = 1; k <= 14; ++k) {
-    const auto dir = DataDir() / "opencv_circles_7x7";
+    const auto dir = SharedDataDir() / "opencv_circles_7x7";
     const PlateObservation o = DetectPlate(ReadGrayImage(dir / ("circles" + std::to_string(k) + ".png")), board);
     ASSERT_TRUE(o.usable) << k << ": " << o.why_rejected;
     EXPECT_GT(Handedness(o, board), 0.0) << k;
@@ -112,8 +108,10 @@ TEST(PlateDetector, VispGrid6x6IsFoundInProperOrder) {
   SKIP_WITHOUT_DATA();
   const BoardSpec board = Board(BoardType::kCircles, 6, 6);
   for (int k = 1; k <= 4; ++k) {
-    const PlateObservation o = DetectPlate(
-        ReadGrayImage(DataDir() / "visp_grid36_circles_6x6" / ("grid36-0" + std::to_string(k) + ".pgm")), board);
+    const PlateObservation o =
+        DetectPlate(ReadGrayImage(SharedDataDir() / "visp_grid36_circles_6x6" /
+                                  ("grid36-0" + std::to_string(k) + ".pgm")),
+                    board);
     ASSERT_TRUE(o.usable) << k << ": " << o.why_rejected;
     EXPECT_GT(Handedness(o, board), 0.0) << k;
     EXPECT_LT(o.sigma_px.maxCoeff(), 0.1) << k;
@@ -125,7 +123,7 @@ TEST(PlateDetector, VispGrid6x6IsFoundInProperOrder) {
 TEST(PlateDetector, BoofCvCircleRegular) {
   SKIP_WITHOUT_DATA();
   const BoardSpec board = Board(BoardType::kCircles, 8, 10);
-  const auto dir = DataDir() / "boofcv_mono_calibration" / "Sony_DSC-HX5V_CircleRegular";
+  const auto dir = SharedDataDir() / "boofcv_mono_calibration" / "Sony_DSC-HX5V_CircleRegular";
   for (int k = 0; k <= 5; ++k) {
     const PlateObservation o = DetectPlate(ReadGrayImage(dir / ("image0000" + std::to_string(k) + ".jpg")), board);
     if (k == 0 || k == 4) {
@@ -144,7 +142,7 @@ TEST(PlateDetector, BoofCvCircleRegular) {
 TEST(PlateDetector, AsymmetricGridsAreRejected) {
   SKIP_WITHOUT_DATA();
   for (int k = 1; k <= 9; ++k) {
-    const auto dir = DataDir() / "opencv_acircles";
+    const auto dir = SharedDataDir() / "opencv_acircles";
     const Reference ref = ReadReference(dir / ("acircles_corners" + std::to_string(k) + ".dat"));
     const BoardSpec board = Board(BoardType::kCircles, ref.rows, ref.cols);
     const PlateObservation o = DetectPlate(ReadGrayImage(dir / ("acircles" + std::to_string(k) + ".png")), board);
@@ -155,7 +153,7 @@ TEST(PlateDetector, AsymmetricGridsAreRejected) {
 
 TEST(PlateDetector, OpenCvChessboardsAgreeWithOpenCv) {
   SKIP_WITHOUT_DATA();
-  const auto dir = DataDir() / "opencv_chessboards";
+  const auto dir = SharedDataDir() / "opencv_chessboards";
   std::vector<std::pair<std::string, std::string>> sets;
   for (int k = 1; k <= 9; ++k) sets.emplace_back("chess" + std::to_string(k) + ".png", "chess_corners" + std::to_string(k) + ".dat");
   for (int k = 1; k <= 3; ++k) sets.emplace_back("small_chessboard" + std::to_string(k) + ".png", "small_chessboard" + std::to_string(k) + ".dat");
@@ -183,7 +181,8 @@ TEST(PlateDetector, OpenCvSamplesChessboard9x6AllFound) {
     for (int k : {1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14}) {
       char name[32];
       std::snprintf(name, sizeof(name), "%s%02d.jpg", side, k);
-      const PlateObservation o = DetectPlate(ReadGrayImage(DataDir() / "opencv_samples_chessboard_9x6" / name), board);
+      const PlateObservation o = DetectPlate(
+          ReadGrayImage(SharedDataDir() / "opencv_samples_chessboard_9x6" / name), board);
       ASSERT_TRUE(o.usable) << name << ": " << o.why_rejected;
       EXPECT_GT(Handedness(o, board), 0.0) << name;
     }

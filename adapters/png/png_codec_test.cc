@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -19,6 +18,7 @@
 
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/error.h"
+#include "tests/test_util.h"
 
 namespace omm {
 namespace {
@@ -149,9 +149,7 @@ TEST(PngCodec, CorruptFilesThrow) {
 // from public sources, written by other encoders): every one this reader
 // takes decodes to OpenCV's samples exactly; the others are left to OpenCV.
 TEST(PngCodec, RealFilesDecodeAsOpenCvDecodesThem) {
-  const char* source = std::getenv("OMM_SOURCE_DIR");
-  const std::filesystem::path data =
-      std::filesystem::path(source ? source : ".") / ".." / "shared" / "data";
+  const std::filesystem::path data = testing::SharedDataDir();
   if (!std::filesystem::is_directory(data)) GTEST_SKIP() << data << " is not there";
   int num_taken = 0, num_left = 0;
   for (const auto& entry : std::filesystem::recursive_directory_iterator(data)) {

@@ -229,6 +229,12 @@ inline int PlaneSceneCovarianceIntrinsicsIndex(int num_tiles, int num_plates) {
   return PlaneSceneCovarianceSize(num_tiles, num_plates, 0);
 }
 
+// Index of plate `plate`'s first entry (x; then y, theta, h, s) in
+// PlaneScene::covariance's vector.
+inline int PlaneSceneCovariancePlateIndex(int num_tiles, int plate) {
+  return PlaneSceneCovarianceSize(num_tiles, plate, 0);
+}
+
 // Angle between the camera's z axis and the part's -Z (the plane's tilt), deg.
 double PlaneTiltDeg(const Eigen::Vector3d& cam_from_part_r);
 

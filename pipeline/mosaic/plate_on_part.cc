@@ -324,7 +324,7 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   const Clock::time_point start = Clock::now();
   // Plate 0's (x, y, theta, h, s) in the covariance's vector.
   const int plate_index =
-      PlaneSceneCovarianceSize(static_cast<int>(registered_scene.table_pos_mm.size()), 0, 0);
+      PlaneSceneCovariancePlateIndex(static_cast<int>(registered_scene.table_pos_mm.size()), 0);
   FinalAdjustment result;
   result.intrinsics_refined = prior.information.size() > 0;
   result.input = plate.found ? WithPlate(registered_input, plate) : registered_input;

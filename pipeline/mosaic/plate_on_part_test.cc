@@ -229,7 +229,7 @@ TEST(FinalAdjustment, ScaleCheckFindsATableScaleErrorAsAFreeScaleSolveDoes) {
   const PlaneBundleSummary summary = SolvePlaneBundle(MrcalLensProjection(r.s.camera), a.input,
                                                       config, PlaneBundleOptions{}, &solved);
   ASSERT_TRUE(summary.usable && summary.covariance_ok) << summary.brief;
-  const int s = PlaneSceneCovarianceSize(static_cast<int>(solved.table_pos_mm.size()), 0, 0) + 4;
+  const int s = PlaneSceneCovariancePlateIndex(static_cast<int>(solved.table_pos_mm.size()), 0) + 4;
   const double solved_ppm = (solved.plates[0].scale - 1) * 1e6;
   const double solved_sigma_ppm = std::sqrt(solved.covariance(s, s)) * 1e6;
   std::printf("released s-1 %.4f +- %.4f ppm, solved %.4f +- %.4f ppm\n",

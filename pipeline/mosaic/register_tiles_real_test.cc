@@ -15,7 +15,6 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -25,14 +24,12 @@
 
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/statistics.h"
+#include "tests/test_util.h"
 
 namespace omm {
 namespace {
 
-std::filesystem::path DataDir() {
-  const char* source = std::getenv("OMM_SOURCE_DIR");
-  return std::filesystem::path(source ? source : ".") / ".." / "shared" / "data";
-}
+using testing::SharedDataDir;
 
 // Fiji TileConfiguration: "name.tif; ; (x, y)" per tile, file order.
 std::vector<std::pair<std::string, Eigen::Vector2d>> ReadTileConfiguration(
@@ -50,7 +47,7 @@ std::vector<std::pair<std::string, Eigen::Vector2d>> ReadTileConfiguration(
 }
 
 TEST(RegisterTilesReal, LscmSpeckleOffsetsAgreeWithPublishedRegistration) {
-  const std::filesystem::path dir = DataDir() / "lscm_speckle_3x4_tiles";
+  const std::filesystem::path dir = SharedDataDir() / "lscm_speckle_3x4_tiles";
   // The data sits beside the repository, not in it: a clone elsewhere skips.
   if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no " << dir;
   const auto nominal = ReadTileConfiguration(dir / "TileConfiguration.txt");
