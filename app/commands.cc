@@ -159,13 +159,9 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
   return any_failed ? kExitFailed : kExitOk;
 }
 
-int SimulateCommand(const fs::path& project_dir, std::uint64_t seed, const std::string& preset,
-                    int calib_images, const std::optional<fs::path>& truth) {
+int SimulateCommand(const fs::path& project_dir, const SimulationOptions& options,
+                    const std::optional<fs::path>& truth) {
   return Finish(Guarded([&] {
-    SimulationOptions options;
-    options.seed = seed;
-    options.preset = preset;
-    options.num_calib_images = calib_images;
     if (const std::string problem = options.Check(); !problem.empty()) {
       throw InputError("omm simulate", problem);
     }
@@ -175,8 +171,9 @@ int SimulateCommand(const fs::path& project_dir, std::uint64_t seed, const std::
         SimulateProjectDirectory(options, project_dir, truth_path, progress.Callback());
     progress.Finish();
     spdlog::info("{}", summary.brief);
-    spdlog::info("simulated project '{}' (preset {}, seed {}); truth in {}", project_dir.string(),
-                 preset, seed, truth_path.string());
+    spdlog::info("simulated project '{}' (preset {}{}, seed {}); truth in {}", project_dir.string(),
+                 options.preset, options.plate_on_part ? " with the plate on the part" : "",
+                 options.seed, truth_path.string());
     fmt::print("{}\n", project_dir.string());
   }));
 }

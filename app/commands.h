@@ -2,13 +2,13 @@
 // log through spdlog and print results to stdout.
 #pragma once
 
-#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "pipeline/orchestration/stage.h"
+#include "pipeline/simulate/simulation.h"
 
 namespace omm {
 
@@ -24,8 +24,7 @@ int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage
 int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force);
 
 // `omm simulate`.
-int SimulateCommand(const std::filesystem::path& project_dir, std::uint64_t seed,
-                    const std::string& preset, int calib_images,
+int SimulateCommand(const std::filesystem::path& project_dir, const SimulationOptions& options,
                     const std::optional<std::filesystem::path>& truth);
 
 // `omm report`: regenerates out/report.html and out/report.json (normalised)

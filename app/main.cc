@@ -1,5 +1,4 @@
 // `omm`: on-machine vision metrology from the command line. See README.md.
-#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -131,9 +130,7 @@ int main(int argc, char** argv) {
   batch->add_flag("--force", force, "rerun projects whose report is current");
 
   fs::path simulate_out;
-  std::uint64_t seed = 1;
-  std::string preset = "demo";
-  int calib_images = omm::SimulationOptions().num_calib_images;
+  omm::SimulationOptions simulation;
   std::optional<fs::path> truth;
   CLI::App* simulate = app.add_subcommand(
       "simulate",
@@ -141,11 +138,16 @@ int main(int argc, char** argv) {
       "Writes the project directory OUT (must not exist or be empty) and its truth as JSON\n"
       "(default OUT.truth.json beside it, outside the project).");
   simulate->add_option("OUT", simulate_out, "project directory to create")->required();
-  simulate->add_option("--seed", seed, "random seed; the same seed gives the same project")
-      ->capture_default_str();
-  simulate->add_option("--preset", preset, "scene preset: " + PresetList())->capture_default_str();
   simulate
-      ->add_option("--calib-images", calib_images,
+      ->add_option("--seed", simulation.seed, "random seed; the same seed gives the same project")
+      ->capture_default_str();
+  simulate->add_option("--preset", simulation.preset, "scene preset: " + PresetList())
+      ->capture_default_str();
+  simulate->add_flag("--plate-on-part", simulation.plate_on_part,
+                     "also lay the calibration plate on the part (a scale reference; the demo "
+                     "preset always has it)");
+  simulate
+      ->add_option("--calib-images", simulation.num_calib_images,
                    "calibration images (3..100: one partly outside the image, one without "
                    "the plate, the rest full)")
       ->capture_default_str();
@@ -173,8 +175,7 @@ int main(int argc, char** argv) {
   if (run->parsed()) return omm::RunCommand(project, omm::AllStages(), false, mosaic_features);
   if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features);
   if (batch->parsed()) return omm::BatchCommand(batch_dirs, force);
-  if (simulate->parsed())
-    return omm::SimulateCommand(simulate_out, seed, preset, calib_images, truth);
+  if (simulate->parsed()) return omm::SimulateCommand(simulate_out, simulation, truth);
   if (report->parsed()) return omm::ReportCommand(project, json);
   return omm::kExitBadInput;
 }

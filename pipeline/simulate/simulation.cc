@@ -685,6 +685,7 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   SimulationPlan plan;
   plan.options = options;
   plan.preset = GetPreset(options.preset);
+  plan.preset.plate_on_part = plan.preset.plate_on_part || options.plate_on_part;
   SimulationTruth& truth = plan.truth;
   truth.preset = options.preset;
   truth.seed = options.seed;
@@ -772,7 +773,8 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   PlaceHoles(footprint, markers, &truth, &part_random);
 
   Project& project = plan.project;
-  project.name = "sim-" + options.preset + "-" + std::to_string(options.seed);
+  project.name = "sim-" + options.preset + (options.plate_on_part ? "-plate-" : "-") +
+                 std::to_string(options.seed);
   project.camera.pixel_pitch_um = kNominalPitchUm;
   project.camera.focal_length_mm = kNominalFocalMm;
   // The lens type is known for a stock lens; for the mismatch the pipeline

@@ -46,6 +46,9 @@ struct SimulationOptions {
   // Number of calib/ images, including one with the plate partly outside the
   // image and one without the plate (>= 3).
   int num_calib_images = 20;
+  // Also lay the caltab on the part (the demo preset always does): a
+  // capture in the paper's set-up, with a scale reference on the workpiece.
+  bool plate_on_part = false;
   bool sensor_noise = true;     // shot and read noise (images are quantised either way)
   int supersampling = 4;        // S: the ray table's S x S rays per pixel (IntegratePixels)
   int edge_supersampling = 16;  // rays per axis in pixels an edge crosses (IntegrationOptions)

@@ -432,6 +432,20 @@ TEST(PlanSimulation, DemoPlateLiesOnThePartInView) {
   EXPECT_FALSE(Plan("markers", 8).truth.part_from_plate.has_value());
 }
 
+// --plate-on-part: any preset in the paper's set-up, with the plate lying on
+// the part as on the demo, and the preset's own scene kept (its markers).
+TEST(PlanSimulation, PlateOnPartLaysThePlateOnAnyPreset) {
+  SimulationOptions options;
+  options.preset = "markers";
+  options.seed = 8;
+  options.plate_on_part = true;
+  const SimulationPlan plan = PlanSimulation(options);
+  ASSERT_TRUE(plan.truth.part_from_plate.has_value());
+  EXPECT_NEAR(plan.truth.part_from_plate->translation().z(), 0.0, 1e-12);
+  EXPECT_GE(plan.truth.markers.size(), 12u);
+  EXPECT_EQ(plan.project.name, "sim-markers-plate-8");
+}
+
 TEST(PlanSimulation, MarkersAreDistinctAndInView) {
   const SimulationTruth truth = Plan("markers", 9).truth;
   ASSERT_GE(truth.markers.size(), 12u);
