@@ -344,8 +344,13 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
     }
     if (config.refine_intrinsics) {
       problem.AddResidualBlock(
-          new IntrinsicsPriorCost(calibrated_intrinsics, input.intrinsics_information), nullptr,
-          b.intrinsics.data());
+          new IntrinsicsPriorCost(calibrated_intrinsics, input.intrinsics_information,
+                                  input.intrinsics_held),
+          nullptr, b.intrinsics.data());
+      if (!input.intrinsics_held.empty()) {
+        problem.SetManifold(b.intrinsics.data(),
+                            new ceres::SubsetManifold(num_intrinsics, input.intrinsics_held));
+      }
     } else {
       problem.SetParameterBlockConstant(b.intrinsics.data());
     }

@@ -196,22 +196,25 @@ bool TablePriorCost::Evaluate(double const* const* parameters, double* residuals
 }
 
 IntrinsicsPriorCost::IntrinsicsPriorCost(const Eigen::VectorXd& calibrated,
-                                         const Eigen::MatrixXd& information)
+                                         const Eigen::MatrixXd& information,
+                                         const std::vector<int>& held)
     : calibrated_(calibrated),
-      sqrt_information_(Eigen::LLT<Eigen::MatrixXd>(information).matrixU()) {
-  const int n = static_cast<int>(calibrated.size());
-  set_num_residuals(n);
-  *mutable_parameter_block_sizes() = {n};
+      free_(FreeIntrinsics(static_cast<int>(calibrated.size()), held)),
+      sqrt_information_(Eigen::LLT<Eigen::MatrixXd>(information(free_, free_)).matrixU()) {
+  set_num_residuals(static_cast<int>(free_.size()));
+  *mutable_parameter_block_sizes() = {static_cast<int>(calibrated.size())};
 }
 
 bool IntrinsicsPriorCost::Evaluate(double const* const* parameters, double* residuals,
                                    double** jacobians) const {
-  const int n = static_cast<int>(calibrated_.size());
+  const int n = static_cast<int>(calibrated_.size()), f = static_cast<int>(free_.size());
   const Eigen::Map<const Eigen::VectorXd> intrinsics(parameters[0], n);
-  Eigen::Map<Eigen::VectorXd>{residuals, n} = sqrt_information_ * (intrinsics - calibrated_);
+  Eigen::Map<Eigen::VectorXd>{residuals, f} = sqrt_information_ * (intrinsics - calibrated_)(free_);
   if (jacobians != nullptr && jacobians[0] != nullptr) {
-    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>{
-        jacobians[0], n, n} = sqrt_information_;
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> jacobian(
+        jacobians[0], f, n);
+    jacobian.setZero();
+    jacobian(Eigen::all, free_) = sqrt_information_;
   }
   return true;
 }

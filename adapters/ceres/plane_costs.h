@@ -10,6 +10,8 @@
 //   dp_cam/dt = I,   dp_cam/dT = dp_cam/dP = R[:, 0:2] (both in the plane).
 #pragma once
 
+#include <vector>
+
 #include <ceres/ceres.h>
 
 #include <Eigen/Core>
@@ -80,14 +82,17 @@ class TablePriorCost : public ceres::SizedCostFunction<2, 2> {
 // Gaussian prior's 0.5 (k - k0)^T Info (k - k0). Block: intrinsics k (N).
 class IntrinsicsPriorCost : public ceres::CostFunction {
  public:
-  // `information` must be positive definite (N x N).
-  IntrinsicsPriorCost(const Eigen::VectorXd& calibrated, const Eigen::MatrixXd& information);
+  // `information` (N x N) must be positive definite over the intrinsics not
+  // in `held` (ascending); those have no residual and a zero Jacobian.
+  IntrinsicsPriorCost(const Eigen::VectorXd& calibrated, const Eigen::MatrixXd& information,
+                      const std::vector<int>& held);
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
 
  private:
   Eigen::VectorXd calibrated_;
-  Eigen::MatrixXd sqrt_information_;  // U, upper triangular
+  std::vector<int> free_;             // the residuals' intrinsics
+  Eigen::MatrixXd sqrt_information_;  // U of the free block, upper triangular
 };
 
 }  // namespace omm

@@ -146,7 +146,7 @@ TEST(PlaneCosts, PriorJacobiansMatchNumericAndCostIsTheGaussian) {
   Eigen::MatrixXd a = Eigen::MatrixXd::Random(4, 4);
   const Eigen::MatrixXd information = a * a.transpose() + Eigen::MatrixXd::Identity(4, 4);
   const Eigen::Vector4d calibrated(2667.0, 2665.0, 805.0, 596.0);
-  const IntrinsicsPriorCost intrinsics_prior(calibrated, information);
+  const IntrinsicsPriorCost intrinsics_prior(calibrated, information, {});
   Eigen::Vector4d k(2667.3, 2664.8, 805.2, 595.9);
   ExpectJacobiansMatch(intrinsics_prior, {k.data()});
   // |residual|^2 is the Mahalanobis norm the prior stands for.
@@ -155,6 +155,19 @@ TEST(PlaneCosts, PriorJacobiansMatchNumericAndCostIsTheGaussian) {
   ASSERT_TRUE(intrinsics_prior.Evaluate(params, residual.data(), nullptr));
   EXPECT_NEAR(residual.squaredNorm(), (k - calibrated).dot(information * (k - calibrated)),
               1e-9);
+
+  // Held intrinsics (1 and 3): no residual, a zero Jacobian column; the norm
+  // is the free ones'.
+  const std::vector<int> free = {0, 2};
+  Eigen::MatrixXd held_information = Eigen::MatrixXd::Zero(4, 4);
+  held_information(free, free) = information(free, free);
+  const IntrinsicsPriorCost held_prior(calibrated, held_information, {1, 3});
+  ASSERT_EQ(held_prior.num_residuals(), 2);
+  ExpectJacobiansMatch(held_prior, {k.data()});
+  Eigen::Vector2d free_residual;
+  ASSERT_TRUE(held_prior.Evaluate(params, free_residual.data(), nullptr));
+  EXPECT_NEAR(free_residual.squaredNorm(),
+              (k - calibrated).dot(held_information * (k - calibrated)), 1e-9);
 }
 
 }  // namespace

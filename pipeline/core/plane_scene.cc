@@ -44,6 +44,14 @@ std::string PlaneBundleOptions::Check() const {
   return "";
 }
 
+std::vector<int> FreeIntrinsics(int num_intrinsics, const std::vector<int>& held) {
+  std::vector<int> free;
+  for (int k = 0; k < num_intrinsics; ++k) {
+    if (!std::binary_search(held.begin(), held.end(), k)) free.push_back(k);
+  }
+  return free;
+}
+
 std::string CheckPlaneBundleInput(const PlaneBundleInput& input,
                                   const PlaneBundleConfig& config, int num_intrinsics) {
   const int num_tiles = static_cast<int>(input.commanded_table_pos_mm.size());
@@ -89,8 +97,17 @@ std::string CheckPlaneBundleInput(const PlaneBundleInput& input,
       return "refine_intrinsics needs an intrinsics_information of " +
              std::to_string(num_intrinsics) + " x " + std::to_string(num_intrinsics);
     }
-    if (Eigen::LLT<Eigen::MatrixXd>(info).info() != Eigen::Success) {
-      return "intrinsics_information is not positive definite";
+    const std::vector<int>& held = input.intrinsics_held;
+    for (size_t i = 0; i < held.size(); ++i) {
+      if (held[i] < 0 || held[i] >= num_intrinsics || (i > 0 && held[i] <= held[i - 1]))
+        return "intrinsics_held must be ascending indices of intrinsics";
+      if (!info.row(held[i]).isZero() || !info.col(held[i]).isZero())
+        return "intrinsics_information must be 0 in the rows and columns of held intrinsics";
+    }
+    const std::vector<int> free = FreeIntrinsics(num_intrinsics, held);
+    if (free.empty()) return "refine_intrinsics with every intrinsic held";
+    if (Eigen::LLT<Eigen::MatrixXd>(info(free, free)).info() != Eigen::Success) {
+      return "intrinsics_information is not positive definite over the free intrinsics";
     }
     if (input.intrinsics_prior_mean.size() != 0 &&
         input.intrinsics_prior_mean.size() != num_intrinsics) {

@@ -87,8 +87,13 @@ struct PlaneBundleInput {
   std::vector<PlateMarks> plates;
   std::vector<PlateMarkObservation> plate_observations;
   // Calibration information matrix (inverse covariance) of the intrinsics,
-  // N x N, positive definite; empty if not known. Needed to refine them.
+  // N x N; empty if not known. Needed to refine them. Positive definite over
+  // the intrinsics not in intrinsics_held; their rows and columns are 0.
   Eigen::MatrixXd intrinsics_information;
+  // Intrinsics the calibration held fixed (mrcal's splined models hold the
+  // core fx, fy, cx, cy), ascending: they keep their prior mean when the
+  // others are refined.
+  std::vector<int> intrinsics_held;
   // The prior's mean (the calibrated intrinsics, N); empty: the initial
   // scene's intrinsics. Lets a solve start from refined intrinsics.
   Eigen::VectorXd intrinsics_prior_mean;
@@ -216,6 +221,9 @@ struct PlaneBundleSummary {
   double solve_seconds = 0.0;
   double covariance_seconds = 0.0;
 };
+
+// The intrinsics 0..num_intrinsics-1 not in `held` (ascending), in order.
+std::vector<int> FreeIntrinsics(int num_intrinsics, const std::vector<int>& held);
 
 // Empty if `input` fits `config` and `num_intrinsics`, else what is wrong.
 std::string CheckPlaneBundleInput(const PlaneBundleInput& input,

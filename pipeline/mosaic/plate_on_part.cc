@@ -258,15 +258,26 @@ IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance)
     prior.why_held = "no intrinsics covariance";
     return prior;
   }
-  const Eigen::VectorXd variance = covariance.diagonal();
-  if (!(variance.array() > 0).all() || !covariance.allFinite()) {
-    prior.why_held = "the calibration held some intrinsics fixed: no prior for them";
+  if (!covariance.allFinite()) {
+    prior.why_held = "the calibration's intrinsics covariance is not finite";
+    return prior;
+  }
+  std::vector<int> held;
+  for (int k = 0; k < covariance.rows(); ++k) {
+    if (covariance.row(k).isZero() && covariance.col(k).isZero()) held.push_back(k);
+  }
+  const std::vector<int> free = FreeIntrinsics(static_cast<int>(covariance.rows()), held);
+  const Eigen::VectorXd variance = covariance.diagonal()(free);
+  if (free.empty() || !(variance.array() > 0).all()) {
+    prior.why_held = free.empty() ? "the calibration held every intrinsic"
+                                  : "the calibration's intrinsics covariance has a zero variance";
     return prior;
   }
   // Inverted as a correlation matrix: the parameters' scales differ by ~1e7
   // (focal length vs high-order distortions).
   const Eigen::VectorXd inv_sigma = variance.cwiseSqrt().cwiseInverse();
-  const Eigen::MatrixXd correlation = inv_sigma.asDiagonal() * covariance * inv_sigma.asDiagonal();
+  const Eigen::MatrixXd correlation =
+      inv_sigma.asDiagonal() * covariance(free, free) * inv_sigma.asDiagonal();
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(correlation);
   // A rational lens model's parameters are nearly redundant: the calibration
   // determines some combinations to ~1e-7 of their marginal sigmas
@@ -287,8 +298,11 @@ IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance)
   const Eigen::VectorXd lambda = eigen.eigenvalues().cwiseMax(lambda_max / kMaxConditioning);
   const Eigen::MatrixXd inv_correlation =
       eigen.eigenvectors() * lambda.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
-  prior.information = inv_sigma.asDiagonal() * inv_correlation * inv_sigma.asDiagonal();
-  prior.information = 0.5 * (prior.information + prior.information.transpose()).eval();
+  const Eigen::MatrixXd information =
+      inv_sigma.asDiagonal() * inv_correlation * inv_sigma.asDiagonal();
+  prior.information = Eigen::MatrixXd::Zero(covariance.rows(), covariance.cols());
+  prior.information(free, free) = 0.5 * (information + information.transpose());
+  prior.held = held;
   return prior;
 }
 
@@ -330,6 +344,7 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.input = plate.found ? WithPlate(registered_input, plate) : registered_input;
   if (result.intrinsics_refined) {
     result.input.intrinsics_information = prior.information;
+    result.input.intrinsics_held = prior.held;
     result.input.intrinsics_prior_mean = registered_scene.intrinsics;
   }
   PlaneBundleConfig config;

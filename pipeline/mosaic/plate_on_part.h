@@ -100,15 +100,18 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options);
 
 // The calibration's information on the intrinsics: the inverse of their
-// covariance (CalibrationUncertainty::IntrinsicsCovariance, N x N). Empty
-// information (with why_held) when they cannot be refined: a parameter the
-// calibration held (zero variance: no prior for it), or a covariance that is
-// not positive semi-definite. Combinations the calibration determines beyond
-// a 1e6 conditioning of the correlation matrix (a rational model's near
+// covariance (CalibrationUncertainty::IntrinsicsCovariance, N x N) over the
+// parameters the calibration refined; those it held (a zero row and column:
+// mrcal's splined models hold the core) are listed in `held` and get zero
+// rows and columns. Empty information (with why_held) when none can be
+// refined: every parameter held, or a covariance that is not positive
+// semi-definite. Combinations the calibration determines beyond a 1e6
+// conditioning of the correlation matrix (a rational model's near
 // redundancy) get that much information only: a weaker prior, never a
 // stronger one (the .cc says why).
 struct IntrinsicsPrior {
-  Eigen::MatrixXd information;  // N x N, positive definite, or empty
+  Eigen::MatrixXd information;  // N x N, positive definite over the free ones, or empty
+  std::vector<int> held;        // ascending
   std::string why_held;         // set when information is empty
 };
 IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance);

@@ -136,12 +136,37 @@ TEST(IntrinsicsPrior, NearlyRedundantCombinationIsCapped) {
   }
 }
 
-TEST(IntrinsicsPrior, HeldParameterOrNoCovarianceGivesNoPrior) {
-  Eigen::MatrixXd covariance = Eigen::MatrixXd::Identity(4, 4);
-  covariance(2, 2) = 0;  // held by the calibration
-  IntrinsicsPrior prior = IntrinsicsPriorFromCovariance(covariance);
+// Parameters the calibration held (zero rows and columns, as mrcal's splined
+// models' core) get no information and are listed; the others' information
+// is their covariance block's inverse.
+TEST(IntrinsicsPrior, HeldParametersAreListedWithoutInformation) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal;
+  Eigen::MatrixXd a(4, 12);
+  for (Eigen::Index k = 0; k < a.size(); ++k) a.data()[k] = normal(rng);
+  const std::vector<int> free = {1, 3, 4, 5};
+  Eigen::MatrixXd covariance = Eigen::MatrixXd::Zero(6, 6);
+  covariance(free, free) = a * a.transpose() / 12;
+  const IntrinsicsPrior prior = IntrinsicsPriorFromCovariance(covariance);
+  ASSERT_TRUE(prior.why_held.empty()) << prior.why_held;
+  EXPECT_EQ(prior.held, (std::vector<int>{0, 2}));
+  for (int k : prior.held) {
+    EXPECT_EQ(prior.information.row(k).cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_EQ(prior.information.col(k).cwiseAbs().maxCoeff(), 0.0);
+  }
+  const Eigen::MatrixXd product =
+      Eigen::MatrixXd(prior.information(free, free)) * covariance(free, free);
+  EXPECT_LT((product - Eigen::MatrixXd::Identity(4, 4)).cwiseAbs().maxCoeff(), 1e-10);
+}
+
+TEST(IntrinsicsPrior, NothingFreeOrNoCovarianceGivesNoPrior) {
+  IntrinsicsPrior prior = IntrinsicsPriorFromCovariance(Eigen::MatrixXd::Zero(4, 4));
   EXPECT_EQ(prior.information.size(), 0);
-  EXPECT_NE(prior.why_held.find("held"), std::string::npos) << prior.why_held;
+  EXPECT_NE(prior.why_held.find("held every"), std::string::npos) << prior.why_held;
+  Eigen::MatrixXd negative = Eigen::MatrixXd::Identity(4, 4);
+  negative(2, 2) = -1;  // not a covariance
+  prior = IntrinsicsPriorFromCovariance(negative);
+  EXPECT_EQ(prior.information.size(), 0);
   prior = IntrinsicsPriorFromCovariance(Eigen::MatrixXd());
   EXPECT_EQ(prior.information.size(), 0);
   EXPECT_FALSE(prior.why_held.empty());
@@ -377,6 +402,41 @@ TEST(FinalAdjustment, IntrinsicsPriorGivesAJointCovariance) {
   EXPECT_FALSE(held.intrinsics_refined);
   EXPECT_EQ(held.scene.intrinsics, r.s.camera.intrinsics);
   EXPECT_EQ(held.scene.covariance.bottomRightCorner(12, 12).cwiseAbs().maxCoeff(), 0.0);
+}
+
+// A calibration that held the core (as mrcal's splined models do): the
+// adjustment refines the rest under their prior and keeps the core exactly;
+// the covariance's intrinsics block has zero held rows and no variance
+// beyond the prior's.
+TEST(FinalAdjustment, CoreTheCalibrationHeldStaysHeld) {
+  const Registered r = Register(PlateScene());
+  Eigen::VectorXd sigma(12);
+  sigma << 0.5, 0.5, 0.4, 0.4, 2e-4, 5e-4, 2e-5, 2e-5, 1e-3, 1e-3, 1e-3, 1e-3;
+  Eigen::MatrixXd covariance = sigma.array().square().matrix().asDiagonal();
+  covariance.topLeftCorner(4, 4).setZero();
+  const IntrinsicsPrior prior = IntrinsicsPriorFromCovariance(covariance);
+  ASSERT_EQ(prior.held, (std::vector<int>{0, 1, 2, 3}));
+  const FinalAdjustment a =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, PlateOf(r.s), prior, {});
+  ASSERT_TRUE(a.summary.usable) << a.summary.brief;
+  ASSERT_TRUE(a.intrinsics_refined);
+  EXPECT_EQ(a.scene.intrinsics.head(4), r.s.camera.intrinsics.head(4));
+  const int k0 = PlaneSceneCovarianceSize(9, 1, 0);
+  ASSERT_EQ(a.scene.covariance.rows(), k0 + 12);
+  const Eigen::MatrixXd block = a.scene.covariance.bottomRightCorner(12, 12);
+  EXPECT_EQ(block.topRows(4).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(block.leftCols(4).cwiseAbs().maxCoeff(), 0.0);
+  for (int k = 4; k < 12; ++k) {
+    EXPECT_GT(block(k, k), 0.0);
+    EXPECT_LE(block(k, k), sigma[k] * sigma[k] * (1 + 1e-9));
+  }
+  EXPECT_GT(a.scene.covariance.block(0, k0 + 4, k0, 8).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_LT((a.scene.intrinsics - r.s.camera.intrinsics)
+                .tail(8)
+                .cwiseQuotient(sigma.tail(8))
+                .cwiseAbs()
+                .maxCoeff(),
+            3.0);
 }
 
 // PlaneBundleInput::intrinsics_prior_mean: a solve warm-started from refined

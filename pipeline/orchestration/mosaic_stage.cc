@@ -159,14 +159,27 @@ ReportValue TilesReport(const Project& project, const TileRegistration& registra
   return rows;
 }
 
-// Largest |refined - calibrated| / calibration sigma over the intrinsics (0 if held).
+// Largest |refined - calibrated| / calibration sigma over the intrinsics the
+// calibration refined (0 if held).
 double IntrinsicsChangeSigmas(const CameraModel& camera, const FinalAdjustment& adjusted,
                               const IntrinsicsPrior& prior) {
   if (!adjusted.intrinsics_refined) return 0.0;
-  const Eigen::VectorXd sigma = prior.information.inverse().diagonal().cwiseSqrt();
-  return ((adjusted.scene.intrinsics - camera.intrinsics).cwiseQuotient(sigma))
+  const std::vector<int> free =
+      FreeIntrinsics(static_cast<int>(camera.intrinsics.size()), prior.held);
+  const Eigen::VectorXd sigma = prior.information(free, free).inverse().diagonal().cwiseSqrt();
+  return ((adjusted.scene.intrinsics - camera.intrinsics)(free).cwiseQuotient(sigma))
       .cwiseAbs()
       .maxCoeff();
+}
+
+// report.mosaic's intrinsics: how the adjustment treated them.
+std::string IntrinsicsTreatment(const FinalAdjustment& adjusted, const IntrinsicsPrior& prior) {
+  if (!adjusted.intrinsics_refined) return "held: " + prior.why_held;
+  std::string text = "refined with the calibration covariance as prior";
+  if (!prior.held.empty()) {
+    text += fmt::format(" (the {} the calibration held kept)", prior.held.size());
+  }
+  return text;
 }
 
 // report.mosaic's plate_scale_check: the table's scale against the plate, or
@@ -347,9 +360,7 @@ void RunMosaicStage(StageContext& context) {
       {"image_px_per_table_mm", ReportValue::Array{ReportValue::Array{a(0, 0), a(0, 1)},
                                                    ReportValue::Array{a(1, 0), a(1, 1)}}},
       {"covariance_computed", registration.scene.covariance.size() > 0},
-      {"intrinsics", adjusted.intrinsics_refined
-                         ? "refined with the calibration covariance as prior"
-                         : "held: " + prior.why_held},
+      {"intrinsics", IntrinsicsTreatment(adjusted, prior)},
       {"intrinsics_max_change_sigmas", IntrinsicsChangeSigmas(camera, adjusted, prior)},
       {"scale_sigma_ppm", adjusted.scale_sigma_ppm},
       {"plate_scale_check", PlateReport(project, plate, adjusted)},
