@@ -170,34 +170,37 @@ enum class Inner {
 };
 
 // The rim profile of the header fitted to (d, value) samples by
-// Levenberg-damped Gauss-Newton:
+// Levenberg-damped Gauss-Newton, the blur s fitted too:
 //   f = a + c0 Phi(z0) + go Rout(u0) + [gi Rin(u0)] + [c1 (Phi(z1) - Phi(z0)) if x1 < x0],
 //   u_j = d - x_j, z_j = u_j / s, Rout(u) = u Phi(u/s) + s phi(u/s),
 //   Rin(u) = u Phi(-u/s) - s phi(u/s) (ramps blurred by the same Gaussian);
 // the last term is the bore wall, the band [x1, x0] between the bottom rim
 // and the top rim (absent where the wall is hidden, x1 >= x0).
-StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
-                double sigma, bool fit_sigma, Inner inner) {
+template <Inner kInner>
+StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
+                  double sigma) {
+  constexpr bool kWall = kInner != Inner::kRamp;
+  constexpr int kLinear = 4;                                 // a, c0, go, and gi or c1
+  constexpr int kNonlinear = kInner == Inner::kFree ? 3 : 2;  // x0, [x1,] s
+  constexpr int kParams = kNonlinear + kLinear;
+  using Normal = Eigen::Matrix<double, kParams, kParams>;
+  using Vector = Eigen::Matrix<double, kParams, 1>;
   const int n = static_cast<int>(d.size());
-  const bool wall = inner != Inner::kRamp;
-  constexpr int kLinear = 4;  // a, c0, go, and gi or c1
-  const int nn = 1 + (inner == Inner::kFree ? 1 : 0) + (fit_sigma ? 1 : 0);
-  const int np = nn + kLinear;
   StepFit fit;
-  if (n < np + 3) return fit;
+  if (n < kParams + 3) return fit;
   struct Params {
     double x0, x1, s;
     Eigen::Vector4d lin;
   };
-  using Normal = Eigen::Matrix<double, 7, 7>;
-  using Vector7 = Eigen::Matrix<double, 7, 1>;
-  // Sum of squared residuals; with `jtj`, also the normal equations (the
-  // Jacobian's rows: nonlinear parameters first, then the linear ones); with
-  // `basis_only`, the linear least-squares system of the linear parameters.
-  auto evaluate = [&](const Params& p, Normal* jtj, Vector7* jtr, bool basis_only) {
-    const bool band = wall && p.x1 < p.x0;
+  // The Jacobian's rows (nonlinear parameters first, then the linear ones)
+  // and the residuals at the last point evaluated.
+  Eigen::Matrix<double, kParams, Eigen::Dynamic> rows(kParams, n);
+  Eigen::VectorXd residual(n);
+  // Sum of squared residuals; rows and residuals kept for NormalEquations.
+  auto evaluate = [&](const Params& p) {
+    const bool band = kWall && p.x1 < p.x0;
+    const double c0 = p.lin(1), go = p.lin(2), l3 = p.lin(3);
     double cost = 0.0;
-    if (jtj != nullptr) jtj->setZero(), jtr->setZero();
     for (int i = 0; i < n; ++i) {
       const double di = d[static_cast<size_t>(i)];
       const double u0 = di - p.x0, z0 = u0 / p.s;
@@ -208,74 +211,78 @@ StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, doub
       const double cdf1 = n1.cdf, pdf1 = n1.pdf;
       const Eigen::Vector4d basis(
           1.0, cdf0, u0 * cdf0 + p.s * pdf0,
-          wall ? (band ? cdf1 - cdf0 : 0.0) : u0 * (1.0 - cdf0) - p.s * pdf0);
+          kWall ? (band ? cdf1 - cdf0 : 0.0) : u0 * (1.0 - cdf0) - p.s * pdf0);
       const double r = basis.dot(p.lin) - v[static_cast<size_t>(i)];
       cost += r * r;
-      if (jtj == nullptr) continue;
-      Vector7 row = Vector7::Zero();
-      int col = 0;
-      if (!basis_only) {
-        const double c0 = p.lin(1), go = p.lin(2), l3 = p.lin(3);
-        if (wall) {
-          row(col++) = -(c0 * pdf0 / p.s + go * cdf0) + (band ? l3 * pdf0 / p.s : 0.0);
-          if (inner == Inner::kFree) row(col++) = band ? -l3 * pdf1 / p.s : 0.0;
-          if (fit_sigma) {
-            row(col++) = -c0 * z0 * pdf0 / p.s + go * pdf0 +
-                         (band ? l3 * (z0 * pdf0 - z1 * pdf1) / p.s : 0.0);
-          }
-        } else {
-          row(col++) = -(c0 * pdf0 / p.s + go * cdf0 + l3 * (1.0 - cdf0));
-          if (fit_sigma) row(col++) = -c0 * z0 * pdf0 / p.s + (go - l3) * pdf0;
-        }
+      residual(i) = r;
+      auto row = rows.col(i);
+      if constexpr (kWall) {
+        row(0) = -(c0 * pdf0 / p.s + go * cdf0) + (band ? l3 * pdf0 / p.s : 0.0);
+        if constexpr (kInner == Inner::kFree) row(1) = band ? -l3 * pdf1 / p.s : 0.0;
+        row(kNonlinear - 1) = -c0 * z0 * pdf0 / p.s + go * pdf0 +
+                              (band ? l3 * (z0 * pdf0 - z1 * pdf1) / p.s : 0.0);
+      } else {
+        row(0) = -(c0 * pdf0 / p.s + go * cdf0 + l3 * (1.0 - cdf0));
+        row(1) = -c0 * z0 * pdf0 / p.s + (go - l3) * pdf0;
       }
-      row.segment<kLinear>(col) = basis;
-      jtj->noalias() += row * row.transpose();
-      *jtr += row * (basis_only ? -v[static_cast<size_t>(i)] : r);
+      row.template segment<kLinear>(kNonlinear) = basis;
     }
     return cost;
   };
+  // The normal equations of the last point evaluated, J'J's lower triangle
+  // (all SolveSpd reads): built only where a step is taken from that point.
+  auto normal_equations = [&](Normal* jtj, Vector* jtr) {
+    jtj->setZero();
+    jtr->setZero();
+    for (int i = 0; i < n; ++i) {
+      for (int c = 0; c < kParams; ++c) {
+        for (int r = c; r < kParams; ++r) (*jtj)(r, c) += rows(r, i) * rows(c, i);
+      }
+      *jtr += rows.col(i) * residual(i);
+    }
+  };
   Params p{x0, x1, sigma, Eigen::Vector4d::Zero()};
-  Normal jtj;
-  Vector7 jtr;
   // The linear parameters at the start: least squares (tiny ridge: the wall
   // column is zero where the wall is hidden).
-  evaluate(p, &jtj, &jtr, true);
-  p.lin = (jtj.topLeftCorner<4, 4>() + 1e-12 * Eigen::Matrix4d::Identity())
-              .ldlt()
-              .solve(-jtr.head<4>());
-  // Each trial point's normal equations come with its cost: an accepted
-  // step (the usual case) needs no second pass over the samples.
-  double current = evaluate(p, &jtj, &jtr, false);
-  Normal next_jtj;
-  Vector7 next_jtr;
+  evaluate(p);
+  Eigen::Matrix4d btb = Eigen::Matrix4d::Zero();
+  Eigen::Vector4d btv = Eigen::Vector4d::Zero();
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector4d basis = rows.col(i).template tail<kLinear>();
+    btb.noalias() += basis * basis.transpose();
+    btv += basis * -v[static_cast<size_t>(i)];
+  }
+  p.lin = (btb + 1e-12 * Eigen::Matrix4d::Identity()).ldlt().solve(-btv);
+  double current = evaluate(p);
+  Normal jtj;
+  Vector jtr;
+  normal_equations(&jtj, &jtr);
   double lambda = 1e-3;
   for (int iteration = 0; iteration < 30; ++iteration) {
     bool improved = false, converged = false;
     for (int attempt = 0; attempt < 10 && !improved; ++attempt) {
       Normal damped = jtj;
-      damped.diagonal() += lambda * damped.diagonal() + Vector7::Constant(1e-12);
-      Vector7 step;
-      if (!SolveSpd<7>(damped, -jtr, np, &step)) {
+      damped.diagonal() += lambda * damped.diagonal() + Vector::Constant(1e-12);
+      Vector step;
+      if (!SolveSpd<kParams>(damped, -jtr, kParams, &step)) {
         lambda *= 10;
         continue;
       }
       Params next = p;
-      int col = 0;
-      next.x0 += step(col++);
-      if (inner == Inner::kFree) next.x1 += step(col++);
-      if (fit_sigma) next.s += step(col++);
-      next.lin += step.segment<kLinear>(nn);
+      next.x0 += step(0);
+      if constexpr (kInner == Inner::kFree) next.x1 += step(1);
+      next.s += step(kNonlinear - 1);
+      next.lin += step.template segment<kLinear>(kNonlinear);
       if (!(next.s > 0.2)) {
         lambda *= 10;
         continue;
       }
-      const double cost = evaluate(next, &next_jtj, &next_jtr, false);
+      const double cost = evaluate(next);
       if (cost < current) {
-        converged = step.head(nn).cwiseAbs().maxCoeff() < 1e-4;
+        converged = step.template head<kNonlinear>().cwiseAbs().maxCoeff() < 1e-4;
         p = next;
         current = cost;
-        jtj = next_jtj;
-        jtr = next_jtr;
+        if (!converged) normal_equations(&jtj, &jtr);
         lambda = std::max(1e-7, lambda * 0.3);
         improved = true;
       } else {
@@ -288,11 +295,24 @@ StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, doub
   fit.x0 = p.x0;
   fit.x1 = p.x1;
   fit.sigma = p.s;
-  const bool band = wall && p.x1 < p.x0;
+  const bool band = kWall && p.x1 < p.x0;
   fit.wall_contrast = band ? p.lin(3) : 0.0;
   fit.contrast = p.lin(1) - fit.wall_contrast;
   fit.rms = std::sqrt(current / n);
   return fit;
+}
+
+StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
+                double sigma, Inner inner) {
+  switch (inner) {
+    case Inner::kRamp:
+      return FitStepOf<Inner::kRamp>(d, v, x0, x1, sigma);
+    case Inner::kFree:
+      return FitStepOf<Inner::kFree>(d, v, x0, x1, sigma);
+    case Inner::kFixed:
+      return FitStepOf<Inner::kFixed>(d, v, x0, x1, sigma);
+  }
+  return {};
 }
 
 // One wedge's edges (step 2).
@@ -423,7 +443,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
     std::vector<double> d, v;
     if (inner == Inner::kFree) {
       samples_in(x_rim - hw, x_rim + hw, &d, &v);
-      wedge.step = FitStep(d, v, x_rim, x_rim - hw, sigma, true, Inner::kRamp);
+      wedge.step = FitStep(d, v, x_rim, x_rim - hw, sigma, Inner::kRamp);
       wedge.ok = accept(wedge.step);
       // The bottom rim: the strongest rise inside the rim's flank ...
       const int stop =
@@ -441,7 +461,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       if (wedge.ok && inner_peak >= 0 && x_peak < x_rim - 2.0 * hw) {
         // ... far inside: a step of its own.
         samples_in(x_peak - hw, x_peak + hw, &d, &v);
-        const StepFit step = FitStep(d, v, x_peak, x_peak - hw, sigma, true, Inner::kRamp);
+        const StepFit step = FitStep(d, v, x_peak, x_peak - hw, sigma, Inner::kRamp);
         if (step.ok && std::abs(step.x0 - x_peak) <= 1.0 &&
             step.contrast >= 0.5 * options.min_contrast) {
           wedge.step.x1 = step.x0;
@@ -458,9 +478,9 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       if (inner_peak >= 0) starts.push_back(x_peak);
       const double lo = std::min(x_rim - hw, *std::min_element(starts.begin(), starts.end()) - hw);
       samples_in(lo, x_rim + hw, &d, &v);
-      const StepFit alone = FitStep(d, v, x_rim, x_rim, sigma, true, Inner::kRamp);
+      const StepFit alone = FitStep(d, v, x_rim, x_rim, sigma, Inner::kRamp);
       for (const double x1 : starts) {
-        const StepFit step = FitStep(d, v, x_rim, x1, sigma, true, Inner::kFree);
+        const StepFit step = FitStep(d, v, x_rim, x1, sigma, Inner::kFree);
         const bool resolved =
             accept(step) && step.x1 < step.x0 - 2.0 * step.sigma && step.x1 > lo + step.sigma &&
             step.wall_contrast >= 0.5 * options.min_contrast && step.rms < 0.7 * alone.rms;
@@ -480,7 +500,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;
     }
     samples_in(x_rim - hw, x_rim + hw, &d, &v);
-    wedge.step = FitStep(d, v, x_rim, x1, sigma, true, mode);
+    wedge.step = FitStep(d, v, x_rim, x1, sigma, mode);
     wedge.ok = accept(wedge.step);
   }
   std::vector<double> rms, sigmas;
