@@ -280,6 +280,10 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
       const double cost = evaluate(next);
       if (cost < current) {
         converged = step.template head<kNonlinear>().cwiseAbs().maxCoeff() < 1e-4;
+        // The two-step fit also stops where the cost stalls: a wall narrower
+        // than ~2 blurs trades x1 against c1 along a curved valley, which
+        // the steps crawl along (a quarter of these fits ran to the cap).
+        if constexpr (kInner == Inner::kFree) converged |= current - cost < 1e-4 * current;
         p = next;
         current = cost;
         if (!converged) normal_equations(&jtj, &jtr);
