@@ -123,30 +123,29 @@ Normal01 NormalAt(double z) {
   return {e / std::sqrt(2.0 * kPi), z >= 0.0 ? 1.0 - tail : tail};
 }
 
-// x solving a x = b for the leading n x n block of a symmetric positive
-// definite `a` (its lower triangle read) by Cholesky, entries n.. of x zero;
-// false if a pivot is not positive. The damped step's system: Eigen's
-// pivoting LDLT ran dynamic-size kernels on it, a tenth of the fit's time.
+// x solving a x = b for a symmetric positive definite `a` (its lower
+// triangle read) by Cholesky; false if a pivot is not positive. The damped
+// step's system: Eigen's pivoting LDLT ran dynamic-size kernels on it, a
+// tenth of the fit's time.
 template <int N>
-bool SolveSpd(Eigen::Matrix<double, N, N> a, const Eigen::Matrix<double, N, 1>& b, int n,
+bool SolveSpd(Eigen::Matrix<double, N, N> a, const Eigen::Matrix<double, N, 1>& b,
               Eigen::Matrix<double, N, 1>* x) {
-  for (int j = 0; j < n; ++j) {
+  for (int j = 0; j < N; ++j) {
     for (int k = 0; k < j; ++k) {
-      for (int i = j; i < n; ++i) a(i, j) -= a(i, k) * a(j, k);
+      for (int i = j; i < N; ++i) a(i, j) -= a(i, k) * a(j, k);
     }
     if (!(a(j, j) > 0.0)) return false;
     const double d = std::sqrt(a(j, j));
-    for (int i = j; i < n; ++i) a(i, j) /= d;
+    for (int i = j; i < N; ++i) a(i, j) /= d;
   }
-  x->setZero();
-  for (int i = 0; i < n; ++i) {  // L y = b
+  for (int i = 0; i < N; ++i) {  // L y = b
     double v = b(i);
     for (int k = 0; k < i; ++k) v -= a(i, k) * (*x)(k);
     (*x)(i) = v / a(i, i);
   }
-  for (int i = n - 1; i >= 0; --i) {  // L' x = y
+  for (int i = N - 1; i >= 0; --i) {  // L' x = y
     double v = (*x)(i);
-    for (int k = i + 1; k < n; ++k) v -= a(k, i) * (*x)(k);
+    for (int k = i + 1; k < N; ++k) v -= a(k, i) * (*x)(k);
     (*x)(i) = v / a(i, i);
   }
   return true;
@@ -248,7 +247,7 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
   Eigen::Matrix4d btb = Eigen::Matrix4d::Zero();
   Eigen::Vector4d btv = Eigen::Vector4d::Zero();
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector4d basis = rows.col(i).template tail<kLinear>();
+    const Eigen::Vector4d basis = rows.col(i).template segment<kLinear>(kNonlinear);
     btb.noalias() += basis * basis.transpose();
     btv += basis * -v[static_cast<size_t>(i)];
   }
@@ -264,7 +263,7 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
       Normal damped = jtj;
       damped.diagonal() += lambda * damped.diagonal() + Vector::Constant(1e-12);
       Vector step;
-      if (!SolveSpd<kParams>(damped, -jtr, kParams, &step)) {
+      if (!SolveSpd<kParams>(damped, -jtr, &step)) {
         lambda *= 10;
         continue;
       }
@@ -391,6 +390,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
   const int samples = static_cast<int>(std::lround((d_hi - d_lo) / kStep)) + 1;
   Eigen::VectorXd profile(samples), deriv = Eigen::VectorXd::Zero(samples);
   const int h = static_cast<int>(std::lround(0.5 / kStep));
+  std::vector<double> d, v;  // a step fit's samples
   for (int k = 0; k < num; ++k) {
     WedgeEdge& wedge = pass.wedges[static_cast<size_t>(k)];
     wedge.angle = 2 * kPi * (k + 0.5) / num;
@@ -429,14 +429,14 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
     const double x_rim = d_lo + peak * kStep;
     const auto& all_d = wd[static_cast<size_t>(k)];
     const auto& all_v = wv[static_cast<size_t>(k)];
-    // The wedge's pixels with d in [lo, hi].
-    auto samples_in = [&](double lo, double hi, std::vector<double>* d, std::vector<double>* v) {
-      d->clear();
-      v->clear();
+    // The wedge's pixels with d in [lo, hi], into d and v.
+    auto samples_in = [&](double lo, double hi) {
+      d.clear();
+      v.clear();
       for (size_t i = 0; i < all_d.size(); ++i) {
         if (all_d[i] >= lo && all_d[i] <= hi) {
-          d->push_back(all_d[i]);
-          v->push_back(all_v[i]);
+          d.push_back(all_d[i]);
+          v.push_back(all_v[i]);
         }
       }
     };
@@ -444,9 +444,8 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       return step.ok && std::abs(step.x0 - x_rim) <= 1.0 && step.contrast >= options.min_contrast &&
              step.sigma < hw;
     };
-    std::vector<double> d, v;
     if (inner == Inner::kFree) {
-      samples_in(x_rim - hw, x_rim + hw, &d, &v);
+      samples_in(x_rim - hw, x_rim + hw);
       wedge.step = FitStep(d, v, x_rim, x_rim - hw, sigma, Inner::kRamp);
       wedge.ok = accept(wedge.step);
       // The bottom rim: the strongest rise inside the rim's flank ...
@@ -464,7 +463,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       const double x_peak = d_lo + inner_peak * kStep;
       if (wedge.ok && inner_peak >= 0 && x_peak < x_rim - 2.0 * hw) {
         // ... far inside: a step of its own.
-        samples_in(x_peak - hw, x_peak + hw, &d, &v);
+        samples_in(x_peak - hw, x_peak + hw);
         const StepFit step = FitStep(d, v, x_peak, x_peak - hw, sigma, Inner::kRamp);
         if (step.ok && std::abs(step.x0 - x_peak) <= 1.0 &&
             step.contrast >= 0.5 * options.min_contrast) {
@@ -481,7 +480,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       std::vector<double> starts = {x_rim - 2.0 * sigma, x_rim - 3.5 * sigma};
       if (inner_peak >= 0) starts.push_back(x_peak);
       const double lo = std::min(x_rim - hw, *std::min_element(starts.begin(), starts.end()) - hw);
-      samples_in(lo, x_rim + hw, &d, &v);
+      samples_in(lo, x_rim + hw);
       const StepFit alone = FitStep(d, v, x_rim, x_rim, sigma, Inner::kRamp);
       for (const double x1 : starts) {
         const StepFit step = FitStep(d, v, x_rim, x1, sigma, Inner::kFree);
@@ -503,7 +502,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       // Beyond the window's reach (a wide wall) or no bottom rim: the ramp.
       if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;
     }
-    samples_in(x_rim - hw, x_rim + hw, &d, &v);
+    samples_in(x_rim - hw, x_rim + hw);
     wedge.step = FitStep(d, v, x_rim, x1, sigma, mode);
     wedge.ok = accept(wedge.step);
   }
