@@ -29,8 +29,8 @@ bool Covered(const ImageF& image, Eigen::Index row, Eigen::Index col) {
 double Bilinear(const ImageF& image, double x, double y) {
   const double fx = std::floor(x), fy = std::floor(y);
   const auto c = static_cast<Eigen::Index>(fx), r = static_cast<Eigen::Index>(fy);
-  if (!Covered(image, r, c) || !Covered(image, r, c + 1) || !Covered(image, r + 1, c) ||
-      !Covered(image, r + 1, c + 1)) {
+  if (c < 0 || r < 0 || c + 1 >= image.cols() || r + 1 >= image.rows() || image(r, c) == 0.0f ||
+      image(r, c + 1) == 0.0f || image(r + 1, c) == 0.0f || image(r + 1, c + 1) == 0.0f) {
     return kNaN;
   }
   const double ax = x - fx, ay = y - fy;
@@ -365,6 +365,9 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
   // Each wedge's pixels (radial distance d, value).
   std::vector<std::vector<double>> wd(static_cast<size_t>(num)), wv(static_cast<size_t>(num));
   const double rmax = circle.radius + d_hi, rmin = std::max(0.0, circle.radius + d_lo);
+  // A wedge's share of the annulus, and some: one allocation each.
+  const auto per_wedge = static_cast<size_t>(kPi * (rmax * rmax - rmin * rmin) / num) + 8;
+  for (size_t k = 0; k < wd.size(); ++k) wd[k].reserve(per_wedge), wv[k].reserve(per_wedge);
   const auto col_lo = static_cast<Eigen::Index>(std::floor(circle.centre.x() - rmax));
   const auto col_hi = static_cast<Eigen::Index>(std::ceil(circle.centre.x() + rmax));
   const auto row_lo = static_cast<Eigen::Index>(std::floor(circle.centre.y() - rmax));
