@@ -484,13 +484,15 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       if (inner_peak >= 0) starts.push_back(x_peak);
       const double lo = std::min(x_rim - hw, *std::min_element(starts.begin(), starts.end()) - hw);
       samples_in(lo, x_rim + hw);
-      const StepFit alone = FitStep(d, v, x_rim, x_rim, sigma, Inner::kRamp);
+      std::optional<StepFit> alone;  // fitted when a two-step fit needs the comparison
       for (const double x1 : starts) {
         const StepFit step = FitStep(d, v, x_rim, x1, sigma, Inner::kFree);
-        const bool resolved =
-            accept(step) && step.x1 < step.x0 - 2.0 * step.sigma && step.x1 > lo + step.sigma &&
-            step.wall_contrast >= 0.5 * options.min_contrast && step.rms < 0.7 * alone.rms;
-        if (resolved && (!wedge.inner_ok || step.rms < wedge.step.rms)) {
+        if (!(accept(step) && step.x1 < step.x0 - 2.0 * step.sigma && step.x1 > lo + step.sigma &&
+              step.wall_contrast >= 0.5 * options.min_contrast)) {
+          continue;
+        }
+        if (!alone) alone = FitStep(d, v, x_rim, x_rim, sigma, Inner::kRamp);
+        if (step.rms < 0.7 * alone->rms && (!wedge.inner_ok || step.rms < wedge.step.rms)) {
           wedge.step = step;
           wedge.ok = wedge.inner_ok = true;
         }
