@@ -282,7 +282,7 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
         // The two-step fit also stops where the cost stalls: a wall narrower
         // than ~2 blurs trades x1 against c1 along a curved valley, which
         // the steps crawl along (a quarter of these fits ran to the cap).
-        if constexpr (kInner == Inner::kFree) converged |= current - cost < 1e-4 * current;
+        if constexpr (kInner == Inner::kFree) converged |= current - cost < 1e-3 * current;
         p = next;
         current = cost;
         if (!converged) normal_equations(&jtj, &jtr);
