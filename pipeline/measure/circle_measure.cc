@@ -195,7 +195,7 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
   // and the residuals at the last point evaluated.
   Eigen::Matrix<double, kParams, Eigen::Dynamic> rows(kParams, n);
   Eigen::VectorXd residual(n);
-  // Sum of squared residuals; rows and residuals kept for NormalEquations.
+  // Sum of squared residuals; rows and residuals kept for normal_equations.
   auto evaluate = [&](const Params& p) {
     const bool band = kWall && p.x1 < p.x0;
     const double c0 = p.lin(1), go = p.lin(2), l3 = p.lin(3);
