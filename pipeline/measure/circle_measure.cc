@@ -130,8 +130,12 @@ Normal01 NormalAt(double z) {
 template <int N>
 bool SolveSpd(Eigen::Matrix<double, N, N> a, const Eigen::Matrix<double, N, 1>& b,
               Eigen::Matrix<double, N, 1>* x) {
+  // Unrolled (N is 6 or 7): the loops' own bookkeeping was most of the time.
+#pragma GCC unroll 8
   for (int j = 0; j < N; ++j) {
+#pragma GCC unroll 8
     for (int k = 0; k < j; ++k) {
+#pragma GCC unroll 8
       for (int i = j; i < N; ++i) a(i, j) -= a(i, k) * a(j, k);
     }
     if (!(a(j, j) > 0.0)) return false;
@@ -234,7 +238,9 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
     jtj->setZero();
     jtr->setZero();
     for (int i = 0; i < n; ++i) {
+#pragma GCC unroll 8  // as in SolveSpd
       for (int c = 0; c < kParams; ++c) {
+#pragma GCC unroll 8
         for (int r = c; r < kParams; ++r) (*jtj)(r, c) += rows(r, i) * rows(c, i);
       }
       *jtr += rows.col(i) * residual(i);
