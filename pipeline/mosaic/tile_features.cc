@@ -152,10 +152,10 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
   const auto blur_rows_through = [&](int last) {
     for (; next_row <= last; ++next_row) {
       const int r = next_row;
-      std::fill(xx.begin(), xx.end(), 0.0f);
-      std::fill(yy.begin(), yy.end(), 0.0f);
-      std::fill(xy.begin(), xy.end(), 0.0f);
       if (r >= 1 && r + 1 < rows) {
+        // Zero at the border columns (no central difference), the rest written
+        // below: a fill of the whole rows cost 3 % of the registration.
+        for (std::vector<float>* v : {&xx, &yy, &xy}) v->front() = v->back() = 0.0f;
         const float* row = image.data() + static_cast<size_t>(r) * cols;
         for (int c = 1; c + 1 < cols; ++c) {
           const float gx = 0.5f * (row[c + 1] - row[c - 1]);
@@ -164,6 +164,10 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
           yy[c] = gy * gy;
           xy[c] = gx * gy;
         }
+      } else {
+        std::fill(xx.begin(), xx.end(), 0.0f);
+        std::fill(yy.begin(), yy.end(), 0.0f);
+        std::fill(xy.begin(), xy.end(), 0.0f);
       }
       const size_t offset = static_cast<size_t>(r % ring_rows) * cols;
       BlurRow(kernel, xx.data(), cols, ring_xx.data() + offset);
