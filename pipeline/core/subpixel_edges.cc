@@ -13,18 +13,24 @@
 namespace omm {
 namespace {
 
-// Interpolated value at (x, y); false if the 4x4 neighbourhood leaves the
-// image. Cubic rather than bilinear: at a blurred edge linear interpolation
-// errs by t(1-t)(1-2t)/6 f''' (t the pixel phase), ~0.03 px of edge position
-// for a 0.75 px blur, and these phase errors do not average out fully over
-// one mark's perimeter; Keys' cubic convolution (CatmullRomWeights) is exact
-// for quadratics. In float, like the image (a few float epsilons of its
-// scale): four weights or pixels per SSE register, where the rays sample it
-// ~10^7 times per project.
-bool Interpolate(const ImageF& image, double x, double y, double* value) {
-  // floor(x) in [1, cols - 3] (false for NaN), then truncation is floor (SSE2
-  // has no rounding instruction: std::floor took a dozen).
-  if (!(x >= 1.0 && y >= 1.0 && x < image.cols() - 2.0 && y < image.rows() - 2.0)) return false;
+// Whether the 4x4 neighbourhood that InterpolateOnImage reads at (x, y) is
+// on the image: floor(x) in [1, cols - 3] (false for NaN). A convex set, so a
+// segment whose ends are in it lies in it.
+bool InterpolationDomain(const ImageF& image, double x, double y) {
+  return x >= 1.0 && y >= 1.0 && x < image.cols() - 2.0 && y < image.rows() - 2.0;
+}
+
+// Interpolated value at (x, y), a point of InterpolationDomain. Cubic rather
+// than bilinear: at a blurred edge linear interpolation errs by
+// t(1-t)(1-2t)/6 f''' (t the pixel phase), ~0.03 px of edge position for a
+// 0.75 px blur, and these phase errors do not average out fully over one
+// mark's perimeter; Keys' cubic convolution (CatmullRomWeights) is exact for
+// quadratics. In float, like the image (a few float epsilons of its scale):
+// four weights or pixels per SSE register, where the rays sample it ~10^7
+// times per project.
+double InterpolateOnImage(const ImageF& image, double x, double y) {
+  // Truncation is floor on the domain (SSE2 has no rounding instruction:
+  // std::floor took a dozen).
   const Eigen::Index c = static_cast<Eigen::Index>(x), r = static_cast<Eigen::Index>(y);
   Eigen::Array4f wx, wy;
   CatmullRomWeights(static_cast<float>(x - c), wx.data());
@@ -33,8 +39,7 @@ bool Interpolate(const ImageF& image, double x, double y, double* value) {
   const Eigen::Index stride = image.cols();
   const Eigen::Map<const Eigen::Array4f> r0(row), r1(row + stride), r2(row + 2 * stride),
       r3(row + 3 * stride);
-  *value = (wx * (wy(0) * r0 + wy(1) * r1 + wy(2) * r2 + wy(3) * r3)).sum();
-  return true;
+  return (wx * (wy(0) * r0 + wy(1) * r1 + wy(2) * r2 + wy(3) * r3)).sum();
 }
 
 // level(p) = a + b . (p - origin), least squares with one round of rejecting
@@ -102,11 +107,16 @@ struct EdgePass {
   double var_inside = 0.0, var_outside = 0.0;
 
   // f(s) along `ray`: rises through 0 at the edge whatever the polarity.
+  // ProfileOnRay for s in [in_lo, out_hi], where the ray is on the image;
+  // Profile anywhere (false off the image).
+  double ProfileOnRay(const ImageF& image, size_t ray_index, double s) const {
+    const Eigen::Vector2d p = bases[ray_index] + s * normals[ray_index];
+    return polarity * (InterpolateOnImage(image, p.x(), p.y()) - 0.5 * (inside.At(p) + outside.At(p)));
+  }
   bool Profile(const ImageF& image, size_t ray_index, double s, double* f) const {
     const Eigen::Vector2d p = bases[ray_index] + s * normals[ray_index];
-    double v;
-    if (!Interpolate(image, p.x(), p.y(), &v)) return false;
-    *f = polarity * (v - 0.5 * (inside.At(p) + outside.At(p)));
+    if (!InterpolationDomain(image, p.x(), p.y())) return false;
+    *f = ProfileOnRay(image, ray_index, s);
     return true;
   }
 };
@@ -158,29 +168,21 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
   std::vector<double> in_value, out_value;
   for (int k = 0; k < edges.num_rays; ++k) {
     const Eigen::Vector2d base = boundary.col(k), normal = boundary_normals.col(k);
-    // The plateaus span the ray's ends, so the ray is on the image (a convex
-    // set for Interpolate) when all their samples are.
-    const size_t in_size = in_value.size(), out_size = out_value.size();
-    bool on_image = true;
-    for (double s = pass.in_lo; s <= pass.in_hi + 1e-9 && on_image; s += options.sample_step_px) {
-      const Eigen::Vector2d p = base + s * normal;
-      double v = 0.0;
-      on_image = Interpolate(image, p.x(), p.y(), &v);
-      pass.in_at.push_back(p);
-      in_value.push_back(v);
-    }
-    for (double s = pass.out_lo; s <= pass.out_hi + 1e-9 && on_image; s += options.sample_step_px) {
-      const Eigen::Vector2d p = base + s * normal;
-      double v = 0.0;
-      on_image = Interpolate(image, p.x(), p.y(), &v);
-      pass.out_at.push_back(p);
-      out_value.push_back(v);
-    }
-    if (!on_image) {
-      pass.in_at.resize(in_size), in_value.resize(in_size);
-      pass.out_at.resize(out_size), out_value.resize(out_size);
+    // Every sample of the ray lies between its ends.
+    const Eigen::Vector2d first = base + pass.in_lo * normal, last = base + pass.out_hi * normal;
+    if (!InterpolationDomain(image, first.x(), first.y()) || !InterpolationDomain(image, last.x(), last.y())) {
       ++edges.num_rays_off_image;
       continue;
+    }
+    for (double s = pass.in_lo; s <= pass.in_hi + 1e-9; s += options.plateau_step_px) {
+      const Eigen::Vector2d p = base + s * normal;
+      pass.in_at.push_back(p);
+      in_value.push_back(InterpolateOnImage(image, p.x(), p.y()));
+    }
+    for (double s = pass.out_lo; s <= pass.out_hi + 1e-9; s += options.plateau_step_px) {
+      const Eigen::Vector2d p = base + s * normal;
+      pass.out_at.push_back(p);
+      out_value.push_back(InterpolateOnImage(image, p.x(), p.y()));
     }
     bases.push_back(base);
     normals.push_back(normal);
@@ -193,7 +195,7 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
   pass.outside = FitLevelPlane(pass.out_at, out_value, rough.centre_px);
   edges.contrast = pass.outside.coeffs(0) - pass.inside.coeffs(0);
   pass.polarity = edges.contrast >= 0.0 ? 1.0 : -1.0;
-  auto profile = [&](size_t ray, double s, double* f) { return pass.Profile(image, ray, s, f); };
+  auto profile = [&](size_t ray, double s) { return pass.ProfileOnRay(image, ray, s); };
 
   std::vector<Eigen::Vector2d> points;
   points.reserve(bases.size());
@@ -202,14 +204,9 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     // Every upward crossing on the grid; keep the ray only if there is one.
     int crossings = 0;
     double lo = 0, hi = 0, f_lo = 0, f_hi = 0;
-    double s_prev = search_lo, f_prev = 0.0;
-    if (!profile(ray, s_prev, &f_prev)) continue;  // the ray leaves the image
-    for (double s = search_lo + options.sample_step_px; s <= search_hi + 1e-9; s += options.sample_step_px) {
-      double f = 0.0;
-      if (!profile(ray, s, &f)) {
-        crossings = -1;
-        break;
-      }
+    double s_prev = search_lo, f_prev = profile(ray, s_prev);
+    for (double s = search_lo + options.bracket_step_px; s <= search_hi + 1e-9; s += options.bracket_step_px) {
+      const double f = profile(ray, s);
       if (f_prev < 0.0 && f >= 0.0) {
         ++crossings;
         lo = s_prev, hi = s, f_lo = f_prev, f_hi = f;
@@ -225,8 +222,7 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     double s_root = lo;
     for (int it = 0; it < 40 && hi - lo > 1e-5; ++it) {
       s_root = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
-      double f = 0.0;
-      if (!profile(ray, s_root, &f)) break;  // unreachable: [lo, hi] was sampled
+      const double f = profile(ray, s_root);
       if (f < 0.0) {
         lo = s_root, f_lo = f;
         if (side == -1) f_hi *= 0.5;
@@ -241,7 +237,8 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     // difference): how far pixel noise moves the crossing.
     constexpr double kH = 0.05;
     double f_before, f_after;
-    if (!profile(ray, s_root - kH, &f_before) || !profile(ray, s_root + kH, &f_after) || !(f_after > f_before)) {
+    if (!pass.Profile(image, ray, s_root - kH, &f_before) || !pass.Profile(image, ray, s_root + kH, &f_after) ||
+        !(f_after > f_before)) {
       continue;
     }
     points.push_back(bases[ray] + s_root * normals[ray]);
@@ -364,7 +361,8 @@ std::string EllipseEdgeOptions::Check() const {
     return "plateau_px must be in (0, ray_half_length_px)";
   }
   if (!(ray_spacing_px > 0.0)) return "ray_spacing_px must be > 0";
-  if (!(sample_step_px > 0.0 && sample_step_px <= 1.0)) return "sample_step_px must be in (0, 1]";
+  if (!(plateau_step_px > 0.0 && plateau_step_px <= 1.0)) return "plateau_step_px must be in (0, 1]";
+  if (!(bracket_step_px > 0.0 && bracket_step_px <= 1.0)) return "bracket_step_px must be in (0, 1]";
   if (min_rays < 8) return "min_rays must be >= 8";
   return {};
 }

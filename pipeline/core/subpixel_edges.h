@@ -16,10 +16,11 @@
 //
 // Procedure: rays along the normals of a rough ellipse, one per
 // `ray_spacing_px` of its perimeter, evenly spaced in the ellipse's parametric
-// angle, sampled by bilinear interpolation; the outer `plateau_px` of each ray
-// gives the inside and outside levels (a robust plane fit of each over all
-// rays); the mid-level crossing is bracketed on a `sample_step_px` grid and
-// solved to 1e-5 px by false position on the interpolated profile.
+// angle, sampled by cubic interpolation; the outer `plateau_px` of each ray
+// (samples every `plateau_step_px`) gives the inside and outside levels (a
+// robust plane fit of each over all rays); the mid-level crossing is
+// bracketed on a `bracket_step_px` grid and solved to 1e-5 px by false
+// position on the interpolated profile.
 // RefineEllipticalMark repeats this along the normals of the previous fit
 // until the centre settles and fits an ellipse (ellipse_fit.h) to the edge
 // points of the last pass.
@@ -41,7 +42,12 @@ struct EllipseEdgeOptions {
   double ray_half_length_px = 4.0;  // rays span the rough boundary +- this, px
   double plateau_px = 1.5;          // outer part of each ray used for the levels, px
   double ray_spacing_px = 1.0;      // rays per px of the rough perimeter (1/spacing)
-  double sample_step_px = 0.25;     // bracketing step along a ray, px
+  double plateau_step_px = 0.25;    // level samples along each plateau, px
+  // Grid on which the mid-level crossing is bracketed, px. The root is then
+  // solved on the continuous profile, so the step only decides which rays
+  // cross more than once (none of the demo's 371,000 at 0.25 or 0.5 px);
+  // 0.25 moved its centres by 3e-6 px RMS and cost a quarter more samples.
+  double bracket_step_px = 0.5;
   int min_rays = 24;                // at least this many rays, whatever the size
 
   // Empty if valid, else what is wrong.
