@@ -256,8 +256,10 @@ PlateObservation DetectCaltab(const GrayImage& image, const BoardSpec& board, co
     // A frame cut by the image border has no hole; if a dark region runs off
     // the image and a good share of the dots is seen, the plate is there.
     if (cut_dark_region) {
+      // Counted until there are enough: a textured part has thousands of
+      // contours and each cv::fitEllipse is an SVD.
       int dots = 0;
-      for (size_t i = 0; i < coarse.contours.size(); ++i) {
+      for (size_t i = 0; i < coarse.contours.size() && dots < n / 4; ++i) {
         if (coarse.hierarchy[i][2] >= 0) continue;  // dots have no holes
         const std::optional<Blob> blob = AsBlob(coarse.contours[i], size, options);
         dots += blob && !blob->touches_border;
