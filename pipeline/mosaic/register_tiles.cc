@@ -55,17 +55,21 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// Hartley's normalisation of 2-D points (columns): the similarity that moves
+// their centroid to 0 and their mean distance from it to sqrt(2).
+template <int Cols>
+Eigen::Matrix3d HartleyNormaliser(const Eigen::Matrix<double, 2, Cols>& p) {
+  const Eigen::Vector2d mean = p.rowwise().mean();
+  const double spread = (p.colwise() - mean).colwise().norm().mean();
+  const double s = spread > 0 ? std::sqrt(2.0) / spread : 1.0;
+  Eigen::Matrix3d t;
+  t << s, 0, -s * mean.x(), 0, s, -s * mean.y(), 0, 0, 1;
+  return t;
+}
+
 // Homography b ~ H a by the normalised DLT (Hartley & Zisserman, alg. 4.2).
 Eigen::Matrix3d FitHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b) {
-  const auto normaliser = [](const Eigen::Matrix2Xd& p) {
-    const Eigen::Vector2d mean = p.rowwise().mean();
-    const double spread = (p.colwise() - mean).colwise().norm().mean();
-    const double s = spread > 0 ? std::sqrt(2.0) / spread : 1.0;
-    Eigen::Matrix3d t;
-    t << s, 0, -s * mean.x(), 0, s, -s * mean.y(), 0, 0, 1;
-    return t;
-  };
-  const Eigen::Matrix3d ta = normaliser(a), tb = normaliser(b);
+  const Eigen::Matrix3d ta = HartleyNormaliser(a), tb = HartleyNormaliser(b);
   // The null vector of the DLT system M h = 0 as the eigenvector of M^T M
   // with the smallest eigenvalue: a 9 x 9 problem whatever the point count
   // (the SVD of the 2n x 9 M cost more than the matching in RANSAC). In
@@ -95,15 +99,7 @@ Eigen::Matrix3d FitHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd&
 // FitHomography's. Not finite if the points are degenerate.
 Eigen::Matrix3d FitHomography4(const Eigen::Matrix<double, 2, 4>& a,
                                const Eigen::Matrix<double, 2, 4>& b) {
-  const auto normaliser = [](const Eigen::Matrix<double, 2, 4>& p) {
-    const Eigen::Vector2d mean = p.rowwise().mean();
-    const double spread = (p.colwise() - mean).colwise().norm().mean();
-    const double s = spread > 0 ? std::sqrt(2.0) / spread : 1.0;
-    Eigen::Matrix3d t;
-    t << s, 0, -s * mean.x(), 0, s, -s * mean.y(), 0, 0, 1;
-    return t;
-  };
-  const Eigen::Matrix3d ta = normaliser(a), tb = normaliser(b);
+  const Eigen::Matrix3d ta = HartleyNormaliser(a), tb = HartleyNormaliser(b);
   Eigen::Matrix<double, 8, 8> m;
   Eigen::Matrix<double, 8, 1> rhs;
   for (int i = 0; i < 4; ++i) {
