@@ -113,7 +113,8 @@ struct EdgePass {
   // Profile anywhere (false off the image).
   double ProfileOnRay(const ImageF& image, size_t ray_index, double s) const {
     const Eigen::Vector2d p = bases[ray_index] + s * normals[ray_index];
-    return polarity * (InterpolateOnImage(image, p.x(), p.y()) - 0.5 * (inside.At(p) + outside.At(p)));
+    return polarity *
+           (InterpolateOnImage(image, p.x(), p.y()) - 0.5 * (inside.At(p) + outside.At(p)));
   }
   bool Profile(const ImageF& image, size_t ray_index, double s, double* f) const {
     const Eigen::Vector2d p = bases[ray_index] + s * normals[ray_index];
@@ -172,7 +173,8 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     const Eigen::Vector2d base = boundary.col(k), normal = boundary_normals.col(k);
     // Every sample of the ray lies between its ends.
     const Eigen::Vector2d first = base + pass.in_lo * normal, last = base + pass.out_hi * normal;
-    if (!InterpolationDomain(image, first.x(), first.y()) || !InterpolationDomain(image, last.x(), last.y())) {
+    if (!InterpolationDomain(image, first.x(), first.y()) ||
+        !InterpolationDomain(image, last.x(), last.y())) {
       ++edges.num_rays_off_image;
       continue;
     }
@@ -207,7 +209,8 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     int crossings = 0;
     double lo = 0, hi = 0, f_lo = 0, f_hi = 0;
     double s_prev = search_lo, f_prev = profile(ray, s_prev);
-    for (double s = search_lo + options.bracket_step_px; s <= search_hi + 1e-9; s += options.bracket_step_px) {
+    for (double s = search_lo + options.bracket_step_px; s <= search_hi + 1e-9;
+         s += options.bracket_step_px) {
       const double f = profile(ray, s);
       if (f_prev < 0.0 && f >= 0.0) {
         ++crossings;
@@ -239,8 +242,8 @@ EdgePass CastRays(const ImageF& image, const Ellipse& rough, const EllipseEdgeOp
     // difference): how far pixel noise moves the crossing.
     constexpr double kH = 0.05;
     double f_before, f_after;
-    if (!pass.Profile(image, ray, s_root - kH, &f_before) || !pass.Profile(image, ray, s_root + kH, &f_after) ||
-        !(f_after > f_before)) {
+    if (!pass.Profile(image, ray, s_root - kH, &f_before) ||
+        !pass.Profile(image, ray, s_root + kH, &f_after) || !(f_after > f_before)) {
       continue;
     }
     points.push_back(bases[ray] + s_root * normals[ray]);
@@ -363,8 +366,10 @@ std::string EllipseEdgeOptions::Check() const {
     return "plateau_px must be in (0, ray_half_length_px)";
   }
   if (!(ray_spacing_px > 0.0)) return "ray_spacing_px must be > 0";
-  if (!(plateau_step_px > 0.0 && plateau_step_px <= 1.0)) return "plateau_step_px must be in (0, 1]";
-  if (!(bracket_step_px > 0.0 && bracket_step_px <= 1.0)) return "bracket_step_px must be in (0, 1]";
+  if (!(plateau_step_px > 0.0 && plateau_step_px <= 1.0))
+    return "plateau_step_px must be in (0, 1]";
+  if (!(bracket_step_px > 0.0 && bracket_step_px <= 1.0))
+    return "bracket_step_px must be in (0, 1]";
   if (min_rays < 8) return "min_rays must be >= 8";
   return {};
 }

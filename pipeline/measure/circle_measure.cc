@@ -29,6 +29,7 @@ bool Covered(const ImageF& image, Eigen::Index row, Eigen::Index col) {
 double Bilinear(const ImageF& image, double x, double y) {
   const double fx = std::floor(x), fy = std::floor(y);
   const auto c = static_cast<Eigen::Index>(fx), r = static_cast<Eigen::Index>(fy);
+  // Covered() for the 2 x 2 block, its bounds tested once (a hot path).
   if (c < 0 || r < 0 || c + 1 >= image.cols() || r + 1 >= image.rows() || image(r, c) == 0.0f ||
       image(r, c + 1) == 0.0f || image(r + 1, c) == 0.0f || image(r + 1, c + 1) == 0.0f) {
     return kNaN;
@@ -183,7 +184,7 @@ template <Inner kInner>
 StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
                   double sigma) {
   constexpr bool kWall = kInner != Inner::kRamp;
-  constexpr int kLinear = 4;                                 // a, c0, go, and gi or c1
+  constexpr int kLinear = 4;                                  // a, c0, go, and gi or c1
   constexpr int kNonlinear = kInner == Inner::kFree ? 3 : 2;  // x0, [x1,] s
   constexpr int kParams = kNonlinear + kLinear;
   using Normal = Eigen::Matrix<double, kParams, kParams>;
@@ -222,8 +223,8 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
       if constexpr (kWall) {
         row(0) = -(c0 * pdf0 / p.s + go * cdf0) + (band ? l3 * pdf0 / p.s : 0.0);
         if constexpr (kInner == Inner::kFree) row(1) = band ? -l3 * pdf1 / p.s : 0.0;
-        row(kNonlinear - 1) = -c0 * z0 * pdf0 / p.s + go * pdf0 +
-                              (band ? l3 * (z0 * pdf0 - z1 * pdf1) / p.s : 0.0);
+        row(kNonlinear - 1) =
+            -c0 * z0 * pdf0 / p.s + go * pdf0 + (band ? l3 * (z0 * pdf0 - z1 * pdf1) / p.s : 0.0);
       } else {
         row(0) = -(c0 * pdf0 / p.s + go * cdf0 + l3 * (1.0 - cdf0));
         row(1) = -c0 * z0 * pdf0 / p.s + (go - l3) * pdf0;
@@ -314,12 +315,9 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
 StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
                 double sigma, Inner inner) {
   switch (inner) {
-    case Inner::kRamp:
-      return FitStepOf<Inner::kRamp>(d, v, x0, x1, sigma);
-    case Inner::kFree:
-      return FitStepOf<Inner::kFree>(d, v, x0, x1, sigma);
-    case Inner::kFixed:
-      return FitStepOf<Inner::kFixed>(d, v, x0, x1, sigma);
+    case Inner::kRamp: return FitStepOf<Inner::kRamp>(d, v, x0, x1, sigma);
+    case Inner::kFree: return FitStepOf<Inner::kFree>(d, v, x0, x1, sigma);
+    case Inner::kFixed: return FitStepOf<Inner::kFixed>(d, v, x0, x1, sigma);
   }
   return {};
 }
