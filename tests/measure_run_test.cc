@@ -1,15 +1,16 @@
 // `omm run` end to end on simulated projects against their truth (issue 5):
-//  - honesty of the uncertainty: over every distance and diameter of 30
-//    projects (six presets, five seeds each), z = error / sigma must
+//  - honesty of the uncertainty: over every distance and diameter of 35
+//    projects (seven presets, five seeds each), z = error / sigma must
 //    have a standard deviation in [0.7, 1.3] and |z| <= 2 for >= 90 %;
 //  - the report: CMM deviations, 3-sigma flags, the sigma breakdown;
 //  - with OMM_ACCURACY_BOUNDS (the binary omm_measure_run_accuracy_test,
 //    label `acceptance`: issue 5's accuracy goal, not yet met everywhere, so
 //    outside CI's gate): every error within 0.05 raw-pixel equivalents on
 //    projects whose metric scale the part itself carries (the caltab lying
-//    on it: `demo`), 0.1 on low-texture and lens-mismatch; without a scale
-//    on the part the table's random errors set the scale (sigma ~4.6e-5,
-//    ~0.14 raw px over 430 mm), so there the bound is on the diameters.
+//    on it: `demo`), 0.1 on low-texture (with or without exposure
+//    differences) and lens-mismatch; without a scale on the part the
+//    table's random errors set the scale (sigma ~4.6e-5, ~0.14 raw px over
+//    430 mm), so there the bound is on the diameters.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -37,8 +38,8 @@ struct ProjectSpec {
 // Seeds 101-105 of every preset: seeds no stage was tuned on.
 std::vector<ProjectSpec> Projects() {
   std::vector<ProjectSpec> projects;
-  for (const char* preset :
-       {"demo", "markers", "exposure", "low-texture", "sparse-texture", "lens-mismatch"}) {
+  for (const char* preset : {"demo", "markers", "exposure", "low-texture", "low-texture-exposure",
+                             "sparse-texture", "lens-mismatch"}) {
     for (std::uint64_t seed = 101; seed <= 105; ++seed) projects.push_back({preset, seed});
   }
   return projects;
@@ -66,11 +67,11 @@ double RawPxMm(const SimulationTruth& truth) {
 }
 
 // Every check in one test: ctest runs each test in its own process, and the
-// 30 renders and runs are shared by all of them.
+// 35 renders and runs are shared by all of them.
 #ifdef OMM_ACCURACY_BOUNDS
-TEST(MeasureRunAccuracy, ThirtyProjectsWithinTheIssuesBounds) {
+TEST(MeasureRunAccuracy, ThirtyFiveProjectsWithinTheIssuesBounds) {
 #else
-TEST(MeasureRun, ThirtyProjectsAgainstTheirTruth) {
+TEST(MeasureRun, ThirtyFiveProjectsAgainstTheirTruth) {
 #endif
   testing::TempDir dir;
   std::vector<Outcome> outcomes;
@@ -103,7 +104,7 @@ TEST(MeasureRun, ThirtyProjectsAgainstTheirTruth) {
       outcomes.push_back({name, spec.preset, m, truth->value_mm, RawPxMm(sim.truth)});
     }
   }
-  ASSERT_GE(reports.size(), 30u);
+  ASSERT_GE(reports.size(), 35u);
 
   // The issue's statistical test of sigma.
   double sum_z2 = 0.0;
@@ -128,7 +129,8 @@ TEST(MeasureRun, ThirtyProjectsAgainstTheirTruth) {
   // Accuracy where the part carries its own metric scale (the plate on it),
   // and for diameters everywhere.
   for (const Outcome& o : outcomes) {
-    const bool loose = o.preset == "low-texture" || o.preset == "lens-mismatch";
+    const bool loose = o.preset == "low-texture" || o.preset == "low-texture-exposure" ||
+                       o.preset == "lens-mismatch";
     const double bound_raw_px = loose ? 0.1 : 0.05;
     const bool scale_on_part = o.preset == "demo";
     if (!scale_on_part && o.measurement.type == MeasurementType::kDistance) continue;

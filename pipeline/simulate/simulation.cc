@@ -56,6 +56,9 @@ const std::vector<PresetSpec>& Presets() {
                  false, false, false});
     p.push_back({"exposure", "tiles of clearly different brightness and vignetting", false,
                  TextureStyle::kRich, false, false, true});
+    p.push_back({"low-texture-exposure",
+                 "weak, smooth texture and tiles of clearly different brightness", false,
+                 TextureStyle::kLow, false, false, true});
     p.push_back({"lens-mismatch", "a splined truth lens that OPENCV8 cannot represent", true,
                  TextureStyle::kRich, false, false, false});
     return p;

@@ -59,7 +59,7 @@ struct SimulationOptions {
 };
 
 // Names of the presets: "demo", "markers", "low-texture", "sparse-texture",
-// "exposure", "lens-mismatch".
+// "exposure", "low-texture-exposure", "lens-mismatch".
 std::vector<std::string> SimulationPresets();
 
 // What a preset changes.

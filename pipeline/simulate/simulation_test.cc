@@ -95,8 +95,8 @@ TEST(SimulationOptions, CheckNamesTheProblem) {
 
 TEST(SimulationPresets, HasTheRequiredOnes) {
   const std::vector<std::string> presets = SimulationPresets();
-  for (const char* name :
-       {"demo", "markers", "low-texture", "exposure", "lens-mismatch", "sparse-texture"}) {
+  for (const char* name : {"demo", "markers", "low-texture", "exposure", "low-texture-exposure",
+                           "lens-mismatch", "sparse-texture"}) {
     EXPECT_NE(std::find(presets.begin(), presets.end(), name), presets.end()) << name;
   }
 }
