@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -159,6 +160,14 @@ TEST(MeasureRun, ThirtyFiveProjectsAgainstTheirTruth) {
       ASSERT_NE(breakdown, nullptr) << name << " " << m.name;
       EXPECT_GT(AsNumber(Member(*breakdown, "calibration")).value_or(0.0), 0.0)
           << name << " " << m.name << " (" << report.calibration->lens_model << ")";
+      // Independent parts: their squares sum to sigma^2.
+      double sum_squares = 0.0;
+      for (const char* source : {"calibration", "registration", "table", "edges"}) {
+        const std::optional<double> part = AsNumber(Member(*breakdown, source));
+        ASSERT_TRUE(part.has_value()) << name << " " << m.name << " " << source;
+        sum_squares += *part * *part;
+      }
+      EXPECT_NEAR(std::sqrt(sum_squares), *m.sigma_mm, 1e-9 * *m.sigma_mm) << name << " " << m.name;
     }
   }
 }

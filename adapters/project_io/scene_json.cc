@@ -12,6 +12,34 @@ namespace omm {
 
 using nlohmann::json;
 
+namespace {
+
+// {"size": N, "values": [N x N, row-major]}, or null if empty.
+json SquareMatrixJson(const Eigen::MatrixXd& m) {
+  if (m.size() == 0) return nullptr;
+  json values = json::array();
+  for (Eigen::Index r = 0; r < m.rows(); ++r) {
+    for (Eigen::Index c = 0; c < m.cols(); ++c) values.push_back(m(r, c));
+  }
+  return {{"size", m.rows()}, {"values", values}};
+}
+
+// SquareMatrixJson's matrix at root[key] (empty if null), `expected` square.
+Eigen::MatrixXd SquareMatrixFromJson(const JsonReader& in, const json& root, const std::string& key,
+                                     int expected, const std::string& expected_for) {
+  const json& node = in.At(root, key, "");
+  if (node.is_null()) return {};
+  const int size = static_cast<int>(in.Number(node, "size", key));
+  if (size != expected) {
+    in.Fail(key + ".size", "expected " + std::to_string(expected) + " for " + expected_for);
+  }
+  const Eigen::VectorXd values = in.Vector(node, "values", key, size * size);
+  return Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+      values.data(), size, size);
+}
+
+}  // namespace
+
 std::string SceneToJson(const SavedScene& saved) {
   const PlaneScene& scene = saved.scene;
   json root;
@@ -41,16 +69,8 @@ std::string SceneToJson(const SavedScene& saved) {
   root["intrinsics"] = JsonArray(scene.intrinsics);
   root["intrinsics_refined"] = saved.intrinsics_refined;
   root["rms_px"] = saved.rms_px;
-  if (scene.covariance.size() == 0) {
-    root["covariance"] = nullptr;
-  } else {
-    json values = json::array();
-    for (Eigen::Index r = 0; r < scene.covariance.rows(); ++r) {
-      for (Eigen::Index c = 0; c < scene.covariance.cols(); ++c)
-        values.push_back(scene.covariance(r, c));
-    }
-    root["covariance"] = {{"size", scene.covariance.rows()}, {"values", values}};
-  }
+  root["intrinsics_information"] = SquareMatrixJson(saved.intrinsics_information);
+  root["covariance"] = SquareMatrixJson(scene.covariance);
   return root.dump(2) + "\n";
 }
 
@@ -72,6 +92,7 @@ SavedScene SceneFromJson(const std::string& text, const std::string& where) {
   scene.cam_from_part_r = in.Vector(pose, "r", "cam_from_part", 3);
   scene.cam_from_part_t_mm = in.Vector(pose, "t", "cam_from_part", 3);
   saved.table_sigma_mm = in.Number(root, "table_sigma_mm", "");
+  if (!(saved.table_sigma_mm > 0.0)) in.Fail("table_sigma_mm", "expected > 0");
   const json& tiles = in.Array(root, "tiles", "");
   for (size_t i = 0; i < tiles.size(); ++i) {
     const std::string path = "tiles[" + std::to_string(i) + "]";
@@ -108,21 +129,22 @@ SavedScene SceneFromJson(const std::string& text, const std::string& where) {
     saved.intrinsics_refined = refined.get<bool>();
   }
   saved.rms_px = in.Number(root, "rms_px", "");
-  const json& covariance = in.At(root, "covariance", "");
-  if (!covariance.is_null()) {
-    const int size = static_cast<int>(in.Number(covariance, "size", "covariance"));
-    const int expected =
-        PlaneSceneCovarianceSize(static_cast<int>(tiles.size()), static_cast<int>(plates.size()),
-                                 static_cast<int>(scene.intrinsics.size()));
-    if (size != expected) {
-      in.Fail("covariance.size", "expected " + std::to_string(expected) + " for " +
-                                     std::to_string(tiles.size()) + " tiles");
+  const int num_intrinsics = static_cast<int>(scene.intrinsics.size());
+  if (saved.intrinsics_refined) {
+    if (!root.contains("intrinsics_information")) {
+      in.Fail("intrinsics_information", "missing (the file predates it): run `omm mosaic` again");
     }
-    const Eigen::VectorXd values = in.Vector(covariance, "values", "covariance", size * size);
-    scene.covariance =
-        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
-            values.data(), size, size);
+    saved.intrinsics_information =
+        SquareMatrixFromJson(in, root, "intrinsics_information", num_intrinsics,
+                             std::to_string(num_intrinsics) + " intrinsics");
+    if (saved.intrinsics_information.size() == 0)
+      in.Fail("intrinsics_information", "null, but the intrinsics were refined");
   }
+  scene.covariance = SquareMatrixFromJson(
+      in, root, "covariance",
+      PlaneSceneCovarianceSize(static_cast<int>(tiles.size()), static_cast<int>(plates.size()),
+                               num_intrinsics),
+      std::to_string(tiles.size()) + " tiles");
   return saved;
 }
 

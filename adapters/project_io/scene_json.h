@@ -18,6 +18,9 @@
 //                               // joint with the rest; false: held at the
 //                               // calibration's values, that block is zero
 //   "rms_px": 0.03,             // the adjustment's RMS reprojection error
+//   "intrinsics_information": {"size": N, "values": [N x N, row-major]},
+//                               // the calibration prior's information matrix the
+//                               // intrinsics were refined under; null if held
 //   "covariance": {"size": N, "values": [N x N, row-major]}   // or null
 // }
 // The covariance is PlaneScene::covariance: the vector
@@ -50,6 +53,9 @@ struct SavedScene {
   double rms_px = 0.0;
   std::string lens_model;           // of scene.intrinsics ("" in files without it)
   bool intrinsics_refined = false;  // false in files without the key
+  // The prior the intrinsics were refined under (PlaneBundleInput::
+  // intrinsics_information, N x N); empty unless intrinsics_refined.
+  Eigen::MatrixXd intrinsics_information;
 };
 
 std::string SceneToJson(const SavedScene& saved);

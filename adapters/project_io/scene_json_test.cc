@@ -25,6 +25,8 @@ SavedScene Example() {
   saved.rms_px = 0.031;
   saved.lens_model = "LENSMODEL_OPENCV4";
   saved.intrinsics_refined = true;
+  const Eigen::MatrixXd b = Eigen::MatrixXd::Random(4, 4);
+  saved.intrinsics_information = b * b.transpose();
   return saved;
 }
 
@@ -46,6 +48,7 @@ TEST(SceneJson, RoundTripIsExact) {
   EXPECT_EQ(back.rms_px, saved.rms_px);
   EXPECT_EQ(back.lens_model, saved.lens_model);
   EXPECT_EQ(back.intrinsics_refined, saved.intrinsics_refined);
+  EXPECT_EQ(back.intrinsics_information, saved.intrinsics_information);
 }
 
 // A file from before lens_model and intrinsics_refined: the intrinsics were held.
@@ -66,6 +69,22 @@ TEST(SceneJson, NoCovarianceIsNull) {
   SavedScene saved = Example();
   saved.scene.covariance.resize(0, 0);
   EXPECT_EQ(SceneFromJson(SceneToJson(saved), "test").scene.covariance.size(), 0);
+}
+
+// Refined intrinsics need the prior they were refined under (the measure
+// stage's sigma breakdown reads it): a file without it says to rerun.
+TEST(SceneJson, RefinedIntrinsicsNeedTheirPriorsInformation) {
+  std::string text = SceneToJson(Example());
+  const size_t at = text.find("\"intrinsics_information\"");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, 24, "\"intrinsics_informatioX\"");
+  try {
+    SceneFromJson(text, "scene.json");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("intrinsics_information"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("omm mosaic"), std::string::npos) << e.what();
+  }
 }
 
 TEST(SceneJson, MalformedInputNamesTheKey) {

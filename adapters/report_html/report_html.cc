@@ -215,7 +215,9 @@ std::string MeasurementsSection(const Report& report) {
   }
   out += fmt::format(
       "<p>{} measurement(s): {} made, {} failed, {} beyond 3 sigma of the CMM "
-      "value (highlighted).</p>\n",
+      "value (highlighted). The 1-sigma by source are independent parts whose squares sum to "
+      "the 1-sigma's: the calibration images' noise, the registration's (the tiles' matches and "
+      "plate marks), the table positions' errors and the edge fits'.</p>\n",
       report.measurements->size(), report.measurements->size() - failed, failed, beyond);
   return out + table.Html("measurements-table");
 }

@@ -14,13 +14,6 @@
 namespace omm {
 namespace {
 
-double QuadraticForm(const Eigen::RowVectorXd& a, const Eigen::MatrixXd& covariance,
-                     Eigen::Index begin, Eigen::Index size) {
-  if (size <= 0) return 0.0;
-  const Eigen::RowVectorXd part = a.segment(begin, size);
-  return part * covariance.block(begin, begin, size, size) * part.transpose();
-}
-
 double Sqrt(double variance) { return std::sqrt(std::max(variance, 0.0)); }
 
 // G from S at the centre and num_rim_points rim points (header comment);
@@ -174,16 +167,20 @@ CombinedCircle CombineCircleViews(const std::vector<CircleFeatureValue>& views,
 }
 
 MeasurementPropagation::MeasurementPropagation(std::vector<CircleFeatureValue> features,
-                                               Eigen::MatrixXd scene_covariance,
-                                               int intrinsics_index)
+                                               Eigen::MatrixXd scene_covariance, ScenePriors priors)
     : features_(std::move(features)),
       scene_covariance_(std::move(scene_covariance)),
-      intrinsics_index_(intrinsics_index) {
+      priors_(std::move(priors)) {
   for ([[maybe_unused]] const CircleFeatureValue& f : features_) {
     assert(f.scene_sensitivity.rows() == 3 &&
            f.scene_sensitivity.cols() == scene_covariance_.rows());
   }
-  assert(intrinsics_index_ >= 0 && intrinsics_index_ <= scene_covariance_.rows());
+  [[maybe_unused]] const Eigen::Index n = scene_covariance_.rows();
+  assert(priors_.intrinsics_index >= 0 && priors_.intrinsics_index <= n);
+  assert(PlaneSceneCovarianceSize(priors_.num_tiles, 0, 0) <= priors_.intrinsics_index);
+  assert(priors_.intrinsics_information.size() == 0 ||
+         priors_.intrinsics_information.rows() == n - priors_.intrinsics_index);
+  assert(priors_.table_sigma_mm > 0.0 || priors_.num_tiles == 0);
 }
 
 SigmaBreakdown MeasurementPropagation::Propagate(const std::vector<FeatureGradient>& terms) const {
@@ -195,11 +192,23 @@ SigmaBreakdown MeasurementPropagation::Propagate(const std::vector<FeatureGradie
     a += term.gradient * f.scene_sensitivity;
     edges += term.gradient * f.edge_covariance * term.gradient.transpose();
   }
-  const double scene = n > 0 ? double(a * scene_covariance_ * a.transpose()) : 0.0;
+  // The sources' parts b' H_s b (header comment).
+  const Eigen::VectorXd b = scene_covariance_ * a.transpose();
+  const double scene = a.dot(b);
+  const int table_index = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
+  const double table = priors_.num_tiles > 0
+                           ? b.segment(table_index, 2 * priors_.num_tiles).squaredNorm() /
+                                 (priors_.table_sigma_mm * priors_.table_sigma_mm)
+                           : 0.0;
+  double calibration = 0.0;
+  if (priors_.intrinsics_information.size() > 0) {
+    const auto b_intrinsics = b.tail(n - priors_.intrinsics_index);
+    calibration = b_intrinsics.dot(priors_.intrinsics_information * b_intrinsics);
+  }
   SigmaBreakdown sigma;
-  sigma.calibration_mm =
-      Sqrt(QuadraticForm(a, scene_covariance_, intrinsics_index_, n - intrinsics_index_));
-  sigma.registration_mm = Sqrt(QuadraticForm(a, scene_covariance_, 0, intrinsics_index_));
+  sigma.calibration_mm = Sqrt(calibration);
+  sigma.table_mm = Sqrt(table);
+  sigma.registration_mm = Sqrt(scene - table - calibration);
   sigma.edges_mm = Sqrt(edges);
   sigma.total_mm = Sqrt(scene + edges);
   return sigma;

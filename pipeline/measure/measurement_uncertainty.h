@@ -15,11 +15,17 @@
 //    (when refined with the calibration's covariance as prior) intrinsics.
 // A value v = f(features) with gradient g_j (1 x 3) per feature j then has
 //    Var(v) = a Cov(theta) a' + sum_j g_j Cov_edge,j g_j',   a = sum_j g_j G_j.
-// Breakdown by source (reported beside sigma): calibration = a restricted to
-// the intrinsics' block of Cov(theta); registration = the plane pose, table
-// positions and plates' block; edges. The scene's cross terms between the two
-// blocks make calibration^2 + registration^2 + edges^2 differ slightly from
-// sigma^2, which includes them.
+// Breakdown by source (reported beside sigma), into independent parts whose
+// squares sum to sigma^2. The adjustment's Cov(theta) is (J'J)^-1 with
+//    J'J = H_images + H_table + H_calibration,
+// the information of the image observations (tracks, plate marks), of the
+// table prior (I / sigma_T^2 on each T_i) and of the calibration's prior on
+// the intrinsics. To first order the adjusted theta errs by Cov(theta) times
+// the sum of each source's J'W eps, so a's scene variance a Cov(theta) a' =
+// b' J'J b, b = Cov(theta) a', splits into the sources' b' H_s b:
+// calibration, table, registration (the images: the rest), and edges. Not
+// the blocks' marginal a_s Cov_ss a_s': intrinsics and plane distance are
+// strongly correlated, and those parts alone exceeded sigma.
 #pragma once
 
 #include <optional>
@@ -99,11 +105,24 @@ CombinedCircle CombineCircleViews(const std::vector<CircleFeatureValue>& views,
 // (0.97575, 1).
 double ChiSquareQuantile(double p, int dof);
 
+// total^2 = calibration^2 + registration^2 + table^2 + edges^2.
 struct SigmaBreakdown {
   double total_mm = 0.0;
-  double calibration_mm = 0.0;   // intrinsics (0 when they were held)
-  double registration_mm = 0.0;  // plane pose, table positions, plates
+  double calibration_mm = 0.0;   // the calibration's noise (0 when the intrinsics were held)
+  double registration_mm = 0.0;  // the noise of the tiles' matches and plate marks
+  double table_mm = 0.0;         // the table positions' random errors
   double edges_mm = 0.0;         // edge fits
+};
+
+// The adjustment's priors (the information they add to J'J, header comment).
+struct ScenePriors {
+  int num_tiles = 0;            // T_i in the scene vector
+  double table_sigma_mm = 0.0;  // of each commanded coordinate
+  // The intrinsics' first index in the scene vector
+  // (PlaneSceneCovarianceIntrinsicsIndex) and the calibration prior's
+  // information over them (N x N; empty if they were held).
+  int intrinsics_index = 0;
+  Eigen::MatrixXd intrinsics_information;
 };
 
 // One feature's part in a value: d value / d (cx, cy, D) of feature `feature`.
@@ -115,10 +134,9 @@ struct FeatureGradient {
 class MeasurementPropagation {
  public:
   // scene_covariance: PlaneScene::covariance (size(theta) square, zero rows
-  // for parameters held constant); intrinsics_index: where the intrinsics'
-  // block starts in it (PlaneSceneCovarianceIntrinsicsIndex).
+  // for parameters held constant); priors: the adjustment's that produced it.
   MeasurementPropagation(std::vector<CircleFeatureValue> features, Eigen::MatrixXd scene_covariance,
-                         int intrinsics_index);
+                         ScenePriors priors);
 
   const std::vector<CircleFeatureValue>& features() const { return features_; }
 
@@ -135,7 +153,7 @@ class MeasurementPropagation {
  private:
   std::vector<CircleFeatureValue> features_;
   Eigen::MatrixXd scene_covariance_;
-  int intrinsics_index_ = 0;
+  ScenePriors priors_;
 };
 
 }  // namespace omm

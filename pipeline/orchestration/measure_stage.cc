@@ -52,6 +52,7 @@ ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.
 ReportValue BreakdownReport(const SigmaBreakdown& sigma) {
   return ReportObject{{"calibration", sigma.calibration_mm},
                       {"registration", sigma.registration_mm},
+                      {"table", sigma.table_mm},
                       {"edges", sigma.edges_mm}};
 }
 
@@ -493,8 +494,12 @@ void RunMeasureStage(StageContext& context) {
     const int size = PlaneSceneCovarianceSize(num_tiles, num_plates, camera.intrinsics.size());
     scene_covariance = Eigen::MatrixXd::Zero(size, size);
   }
-  const MeasurementPropagation propagation(
-      values, scene_covariance, PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates));
+  ScenePriors priors;
+  priors.num_tiles = num_tiles;
+  priors.table_sigma_mm = saved.table_sigma_mm;
+  priors.intrinsics_index = PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates);
+  priors.intrinsics_information = saved.intrinsics_information;
+  const MeasurementPropagation propagation(values, scene_covariance, std::move(priors));
 
   for (LocatedFeature& feature : located) {
     if (feature.value_index < 0) continue;

@@ -331,6 +331,8 @@ void RunMosaicStage(StageContext& context) {
   saved.rms_px = registration.rms_px;
   saved.lens_model = camera.lens_model;
   saved.intrinsics_refined = adjusted.intrinsics_refined;
+  if (adjusted.intrinsics_refined)
+    saved.intrinsics_information = adjusted.input.intrinsics_information;
   fs::create_directories(context.staging_dir / "mosaic");
   WriteSceneJson(saved, context.staging_dir / kSceneName);
 
