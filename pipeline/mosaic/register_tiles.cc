@@ -17,6 +17,7 @@
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
+#include "pipeline/mosaic/homography.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 
 namespace omm {
@@ -54,80 +55,6 @@ std::string RegisterTilesOptions::Check() const {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-// Hartley's normalisation of 2-D points (columns): the similarity that moves
-// their centroid to 0 and their mean distance from it to sqrt(2).
-template <int Cols>
-Eigen::Matrix3d HartleyNormaliser(const Eigen::Matrix<double, 2, Cols>& p) {
-  const Eigen::Vector2d mean = p.rowwise().mean();
-  const double spread = (p.colwise() - mean).colwise().norm().mean();
-  const double s = spread > 0 ? std::sqrt(2.0) / spread : 1.0;
-  Eigen::Matrix3d t;
-  t << s, 0, -s * mean.x(), 0, s, -s * mean.y(), 0, 0, 1;
-  return t;
-}
-
-// Homography b ~ H a by the normalised DLT (Hartley & Zisserman, alg. 4.2).
-Eigen::Matrix3d FitHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b) {
-  const Eigen::Matrix3d ta = HartleyNormaliser(a), tb = HartleyNormaliser(b);
-  // The null vector of the DLT system M h = 0 as the eigenvector of M^T M
-  // with the smallest eigenvalue: a 9 x 9 problem whatever the point count
-  // (the SVD of the 2n x 9 M cost more than the matching in RANSAC). In
-  // Hartley's normalised coordinates M^T M's conditioning is harmless.
-  Eigen::Matrix<double, 9, 9> mtm = Eigen::Matrix<double, 9, 9>::Zero();
-  for (Eigen::Index i = 0; i < a.cols(); ++i) {
-    const Eigen::Vector3d x = ta * a.col(i).homogeneous();
-    const Eigen::Vector3d y = tb * b.col(i).homogeneous();
-    Eigen::Matrix<double, 9, 1> r0, r1;
-    r0 << 0, 0, 0, -y.z() * x, y.y() * x;
-    r1 << y.z() * x, 0, 0, 0, -y.x() * x;
-    mtm.selfadjointView<Eigen::Lower>().rankUpdate(r0);
-    mtm.selfadjointView<Eigen::Lower>().rankUpdate(r1);
-  }
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> eigen(
-      mtm.selfadjointView<Eigen::Lower>());
-  const Eigen::Matrix<double, 9, 1> h = eigen.eigenvectors().col(0);
-  Eigen::Matrix3d hn;
-  hn << h(0), h(1), h(2), h(3), h(4), h(5), h(6), h(7), h(8);
-  return tb.inverse() * hn * ta;
-}
-
-// The homography b ~ H a through exactly four points (RANSAC's samples), H(2,
-// 2) = 1: the 8 x 8 DLT system in Hartley's normalised coordinates (where
-// H(2, 2) is near 1 for the near-translations between tiles) solved
-// directly, a tenth of FitHomography's eigenproblem; its inlier sets are
-// FitHomography's. Not finite if the points are degenerate.
-Eigen::Matrix3d FitHomography4(const Eigen::Matrix<double, 2, 4>& a,
-                               const Eigen::Matrix<double, 2, 4>& b) {
-  const Eigen::Matrix3d ta = HartleyNormaliser(a), tb = HartleyNormaliser(b);
-  Eigen::Matrix<double, 8, 8> m;
-  Eigen::Matrix<double, 8, 1> rhs;
-  for (int i = 0; i < 4; ++i) {
-    const Eigen::Vector2d x = (ta * a.col(i).homogeneous()).head<2>();
-    const Eigen::Vector2d y = (tb * b.col(i).homogeneous()).head<2>();
-    m.row(2 * i) << x.x(), x.y(), 1, 0, 0, 0, -y.x() * x.x(), -y.x() * x.y();
-    m.row(2 * i + 1) << 0, 0, 0, x.x(), x.y(), 1, -y.y() * x.x(), -y.y() * x.y();
-    rhs.segment<2>(2 * i) = y;
-  }
-  const Eigen::Matrix<double, 8, 1> h = m.partialPivLu().solve(rhs);
-  Eigen::Matrix3d hn;
-  hn << h(0), h(1), h(2), h(3), h(4), h(5), h(6), h(7), 1;
-  return tb.inverse() * hn * ta;
-}
-
-Eigen::Vector2d Transfer(const Eigen::Matrix3d& h, const Eigen::Vector2d& a) {
-  return (h * a.homogeneous()).hnormalized();
-}
-
-// d Transfer / d a (2 x 2).
-Eigen::Matrix2d TransferJacobian(const Eigen::Matrix3d& h, const Eigen::Vector2d& a) {
-  const Eigen::Vector3d p = h * a.homogeneous();
-  Eigen::Matrix2d j;
-  for (int k = 0; k < 2; ++k) {
-    j.col(k) = (h.block<2, 1>(0, k) * p.z() - p.head<2>() * h(2, k)) / (p.z() * p.z());
-  }
-  return j;
-}
 
 // RANSAC on a homography b ~ H a; inliers where |Transfer(H, a) - b| * scale
 // <= threshold. Returns the inlier mask of the refitted model (empty if fewer

@@ -2,17 +2,16 @@
 
 #include <algorithm>
 #include <cmath>
-#include <complex>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <vector>
 
 #include <Eigen/Dense>
-#include <unsupported/Eigen/FFT>
 
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
+#include "pipeline/mosaic/cross_correlation.h"
 #include "pipeline/mosaic/tile_features.h"
 
 namespace omm {
@@ -131,58 +130,6 @@ double OverlapNcc(const ImageF& a, const ImageF& b, const WindowMoments& ma,
   if (overlap_fraction != nullptr) *overlap_fraction = static_cast<double>(n) / a.size();
   if (var_a <= 0 || var_b <= 0) return -2.0;
   return (sab - sa * sb * inv_n) / std::sqrt(var_a * var_b);
-}
-
-// The smallest n' >= n whose prime factors are 2, 3 and 5 (a fast FFT length).
-int FftSize(int n) {
-  for (int m = std::max(n, 1);; ++m) {
-    int r = m;
-    for (const int p : {2, 3, 5})
-      while (r % p == 0) r /= p;
-    if (r == 1) return m;
-  }
-}
-
-// The 2-D DFT of `image` zero-padded to rows x cols (row-major), in double.
-using Spectrum = std::vector<std::complex<double>>;
-Spectrum Fft2(const ImageF& image, int rows, int cols) {
-  Eigen::FFT<double> fft;
-  Spectrum out(static_cast<size_t>(rows) * cols);
-  std::vector<double> row(cols, 0.0);
-  Spectrum row_out, column(rows), column_out;
-  for (int r = 0; r < image.rows(); ++r) {
-    for (int c = 0; c < image.cols(); ++c) row[c] = image(r, c);
-    fft.fwd(row_out, row);
-    std::copy(row_out.begin(), row_out.end(), out.begin() + static_cast<size_t>(r) * cols);
-  }
-  for (int c = 0; c < cols; ++c) {  // the padding rows are zero already
-    for (int r = 0; r < rows; ++r) column[r] = out[static_cast<size_t>(r) * cols + c];
-    fft.fwd(column_out, column);
-    for (int r = 0; r < rows; ++r) out[static_cast<size_t>(r) * cols + c] = column_out[r];
-  }
-  return out;
-}
-
-// Every cyclic cross sum of the images whose Fft2 are fa and fb (rows x
-// cols): at [(dy mod rows) cols + (dx mod cols)], sum a(r, c) b(r + dy, c + dx).
-std::vector<double> CrossSums(const Spectrum& fa, const Spectrum& fb, int rows, int cols) {
-  Eigen::FFT<double> fft;
-  Spectrum product(fa.size());
-  for (size_t i = 0; i < fa.size(); ++i) product[i] = std::conj(fa[i]) * fb[i];
-  Spectrum column(rows), column_out, row(cols), row_out;
-  for (int c = 0; c < cols; ++c) {
-    for (int r = 0; r < rows; ++r) column[r] = product[static_cast<size_t>(r) * cols + c];
-    fft.inv(column_out, column);
-    for (int r = 0; r < rows; ++r) product[static_cast<size_t>(r) * cols + c] = column_out[r];
-  }
-  std::vector<double> out(product.size());
-  for (int r = 0; r < rows; ++r) {
-    std::copy(product.begin() + static_cast<size_t>(r) * cols,
-              product.begin() + static_cast<size_t>(r + 1) * cols, row.begin());
-    fft.inv(row_out, row);
-    for (int c = 0; c < cols; ++c) out[static_cast<size_t>(r) * cols + c] = row_out[c].real();
-  }
-  return out;
 }
 
 // One level of a tile's pyramid: box-downsampled by `factor`, with moments.
