@@ -37,9 +37,9 @@ Eigen::Matrix3d FitHomography(const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd&
 // 8 x 8 DLT system in Hartley's normalised coordinates with H(2, 2) = 1 there,
 // solved directly, a tenth of FitHomography's eigenproblem. That fixes the
 // scale unless H takes a's centroid to infinity (never so for the near-
-// translations between tiles). Not finite if two points coincide; three
-// collinear points leave the system singular only up to round-off, and the
-// result is a finite H that fits the sample and nothing else.
+// translations between tiles). Not finite if the sample is degenerate:
+// three of a's or of b's points collinear (to a triangle of 1e-9 of their
+// spread squared) or two coinciding.
 Eigen::Matrix3d FitHomography4(const Eigen::Matrix<double, 2, 4>& a,
                                const Eigen::Matrix<double, 2, 4>& b);
 

@@ -152,14 +152,27 @@ TEST(Homography, FitHomography4AgreesWithFitHomography) {
   RecordProperty("worst_agreement", ::testing::PrintToString(worst_agree));
 }
 
-// A repeated point leaves the 4-point system singular: a non-finite H.
-TEST(Homography, FitHomography4OfARepeatedPointIsNotFinite) {
+// Degenerate samples: three collinear points (in a and b, or in b only: no
+// homography of full rank maps them) or a repeated point leave the 4-point
+// system without a unique solution; FitHomography4 says so by a non-finite
+// H. (Before the check, the collinear ones gave a finite H through the
+// sample.)
+TEST(Homography, FitHomography4OfADegenerateSampleIsNotFinite) {
   std::mt19937 rng(5);
   for (const Case& c : Cases()) {
-    Eigen::Matrix<double, 2, 4> a = SpreadPoints(c, &rng);
-    Eigen::Matrix<double, 2, 4> b = TransferAll(c.h, a);
+    Eigen::Matrix<double, 2, 4> unit, a, b;
+    // (0.1, 0.2), (0.4, 0.35), (0.7, 0.5) of the region: collinear.
+    unit << 0.1, 0.4, 0.7, 0.3, 0.2, 0.35, 0.5, 0.9;
+    for (int i = 0; i < 4; ++i) a.col(i) = c.origin + unit.col(i).cwiseProduct(c.size);
+    b = TransferAll(c.h, a);
+    EXPECT_FALSE(FitHomography4(a, b).allFinite()) << c.name << ": collinear in a and b";
+    const Eigen::Matrix<double, 2, 4> spread = SpreadPoints(c, &rng);
+    EXPECT_FALSE(FitHomography4(spread, b).allFinite()) << c.name << ": collinear in b";
+    EXPECT_FALSE(FitHomography4(b, spread).allFinite()) << c.name << ": collinear in a";
+    a = spread;
+    b = TransferAll(c.h, a);
     a.col(3) = a.col(1), b.col(3) = b.col(1);
-    EXPECT_FALSE(FitHomography4(a, b).allFinite()) << c.name;
+    EXPECT_FALSE(FitHomography4(a, b).allFinite()) << c.name << ": a repeated point";
   }
 }
 
