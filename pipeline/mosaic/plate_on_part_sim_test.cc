@@ -246,7 +246,7 @@ TEST_F(PlateOnPartSim, HeightAndScaleCheckAgreeWithTheTruth) {
 
 // The intrinsics under the calibration's prior move by at most ~3 of their
 // calibration sigmas, the covariance is joint (intrinsics correlated with the
-// pose and the table), and scene.json carries it bit for bit.
+// pose and the table), and scene.json carries it and the prior bit for bit.
 TEST_F(PlateOnPartSim, IntrinsicsPriorAndJointCovarianceRoundTrip) {
   for (const Case& c : Cases()) {
     SCOPED_TRACE("seed " + std::to_string(c.seed));
@@ -272,10 +272,13 @@ TEST_F(PlateOnPartSim, IntrinsicsPriorAndJointCovarianceRoundTrip) {
       saved.tile_images.push_back(c.truth.tiles[i].image);
       saved.commanded_table_pos_mm.push_back(c.truth.tiles[i].commanded_mm);
     }
+    saved.table_sigma_mm = a.input.table_sigma_mm;
     saved.lens_model = c.camera.lens_model;
     saved.intrinsics_refined = true;
+    saved.intrinsics_information = a.input.intrinsics_information;
     const SavedScene back = SceneFromJson(SceneToJson(saved), "test");
     EXPECT_EQ(back.scene.covariance, a.scene.covariance);
+    EXPECT_EQ(back.intrinsics_information, a.input.intrinsics_information);
     EXPECT_EQ(back.scene.intrinsics, a.scene.intrinsics);
     EXPECT_EQ(back.scene.plates[0].height_mm, a.scene.plates[0].height_mm);
     EXPECT_TRUE(back.intrinsics_refined);
