@@ -173,9 +173,6 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     normalized[i] = NormalizeTileIntensity(tiles[i]);
     if (options.matching_blur_sigma_px > 0)
       normalized[i] = GaussianBlur(normalized[i], options.matching_blur_sigma_px);
-    // On the matching image, so that the texture test sees the templates.
-    if (options.features != FeatureSource::kSift)
-      corners[i] = DetectHarrisCorners(normalized[i], options.harris);
     spline[i] = CubicBSplineCoefficients(normalized[i]);
     coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
   });
@@ -247,16 +244,38 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     if (q.cols() == 0 || !UnprojectPixels(camera, q, &v)) return Eigen::Matrix2Xd(2, 0);
     return Eigen::Matrix2Xd(v.topRows<2>());
   };
+  const int h = options.patch.half_size_px;
+  const bool use_harris = options.features != FeatureSource::kSift;
+  // A corner of tile a is a candidate of the pair (a, b > a) when its pixel
+  // moved by shift_ab = A (T_b - T_a) lies this far inside b (below): the
+  // commanded positions and A alone decide, so a tile's corners are searched
+  // only in the boxes of its pairs as a (none for a tile that is b in all of
+  // its pairs): 46 % of the demo's pixels, in whole bucketing cells.
+  const int candidate_margin = h + options.probe_search_radius_px + 3;
+  const auto pair_shift = [&](const PairRegistration& pair) -> Eigen::Vector2d {
+    return a_px_per_mm *
+           (commanded_table_pos_mm[pair.tile_b] - commanded_table_pos_mm[pair.tile_a]);
+  };
+  std::vector<std::vector<Eigen::AlignedBox2i>> harris_regions(num_tiles);
+  for (const PairRegistration& pair : result.pairs) {
+    const Eigen::Vector2d shift = pair_shift(pair);
+    harris_regions[pair.tile_a].emplace_back(
+        Eigen::Vector2i(static_cast<int>(std::floor(candidate_margin - shift.x())),
+                        static_cast<int>(std::floor(candidate_margin - shift.y()))),
+        Eigen::Vector2i(static_cast<int>(std::ceil(width - candidate_margin - shift.x())),
+                        static_cast<int>(std::ceil(height - candidate_margin - shift.y()))));
+  }
   std::vector<Eigen::Matrix2Xd> corner_rays(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
+    // On the matching image, so that the texture test sees the templates.
+    if (use_harris && !harris_regions[i].empty())
+      corners[i] = DetectHarrisCorners(normalized[i], options.harris, harris_regions[i]);
     Eigen::Matrix2Xd q(2, corners[i].size());
     for (size_t k = 0; k < corners[i].size(); ++k) q.col(k) = corners[i][k].pixel.cast<double>();
     corner_rays[i] = unproject(q);
   });
 
-  const int h = options.patch.half_size_px;
   const double fx = camera.intrinsics(0);
-  const bool use_harris = options.features != FeatureSource::kSift;
   const bool use_sift = options.features != FeatureSource::kHarris;
   std::map<std::pair<int, int>, const ColmapPairMatches*> sift_of_pair;
   if (use_sift) {
@@ -301,9 +320,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     std::mt19937_64 rng(options.ransac_seed + p);
     std::vector<Candidate> todo;
     if (use_harris) {
-      const Eigen::Vector2d shift =
-          a_px_per_mm * (commanded_table_pos_mm[tb] - commanded_table_pos_mm[ta]);
-      const int margin = h + options.probe_search_radius_px + 3;
+      const Eigen::Vector2d shift = pair_shift(pair);
+      const int margin = candidate_margin;
       std::vector<int> candidates;
       for (size_t k = 0; k < corners[ta].size(); ++k) {
         const Eigen::Vector2d q = corners[ta][k].pixel.cast<double>() + shift;

@@ -3,9 +3,8 @@
 // (no file I/O).
 //
 // Pipeline (design.md, "Planar mosaic"; the paper's Harris + NCC method):
-// 1. Each tile is normalised (NormalizeTileIntensity), blurred for matching
-//    and its Harris corners found (textured, grid-bucketed); AprilTag 36h11
-//    markers are detected if enabled.
+// 1. Each tile is normalised (NormalizeTileIntensity) and blurred for
+//    matching; AprilTag 36h11 markers are detected if enabled.
 // 2. The image motion per table millimetre, A (2 x 2, px/mm: it holds the
 //    camera's unknown rotation about its axis, a possible mirror and the
 //    scale), from the tiles that are nearest neighbours on the table
@@ -13,8 +12,11 @@
 //    all neighbour pairs agree best, then shift_ij ~ A (T_j - T_i) fitted to
 //    the pairs' refined shifts.
 // 3. Every pair (i < j) that A and the commanded positions predict to
-//    overlap, diagonals too. Anchors (template centres in i) and their
-//    predictions in j come from
+//    overlap, diagonals too. Each tile's Harris corners (textured,
+//    grid-bucketed) are found only where they can be anchors: in the
+//    bucketing cells that meet the part of tile i that A puts inside a tile
+//    j > i (46 % of the demo's pixels). Anchors (template centres in i) and
+//    their predictions in j come from
 //    - Harris: a few strong corners of i are found in j with a wide NCC
 //      search (on downsampled images, then refined at full resolution), a
 //      pixel homography screens them (RANSAC), and the plane-induced

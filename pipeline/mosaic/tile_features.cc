@@ -138,17 +138,25 @@ std::string HarrisOptions::Check() const {
   return {};
 }
 
-std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options) {
+namespace {
+
+// R = det M - k tr(M)^2 at the pixels [x0, x1) x [y0, y1) into `response`,
+// the same values as over the whole image: the gradient products are zero on
+// the image's border rows and columns, the window is clamped at the image's
+// borders only (a box's rows and columns reach radius beyond it).
+void HarrisResponse(const ImageF& image, const std::vector<float>& kernel, float k, int x0, int x1,
+                    int y0, int y1, ImageF* response) {
   const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
   // The gradient products row by row, straight into the window's horizontal
   // pass, kept in a ring of the 2 radius + 1 rows the vertical pass needs,
   // whose output goes straight into R: no full-size product or blurred
   // images (their allocation and memory traffic cost more than the taps).
-  const std::vector<float> kernel = GaussianKernel(options.window_sigma_px);
   const int radius = static_cast<int>(kernel.size() / 2), ring_rows = 2 * radius + 1;
+  // The products' columns: the window's reach beyond the box.
+  const int px0 = std::max(0, x0 - radius), px1 = std::min(cols, x1 + radius);
   ImageF ring_xx(ring_rows, cols), ring_yy(ring_rows, cols), ring_xy(ring_rows, cols);
   std::vector<float> xx(cols), yy(cols), xy(cols);
-  int next_row = 0;  // the next row to blur horizontally into the ring
+  int next_row = std::max(0, y0 - radius);  // the next row to blur horizontally into the ring
   const auto blur_rows_through = [&](int last) {
     for (; next_row <= last; ++next_row) {
       const int r = next_row;
@@ -157,7 +165,7 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
         // below: a fill of the whole rows cost 3 % of the registration.
         for (std::vector<float>* v : {&xx, &yy, &xy}) v->front() = v->back() = 0.0f;
         const float* row = image.data() + static_cast<size_t>(r) * cols;
-        for (int c = 1; c + 1 < cols; ++c) {
+        for (int c = std::max(1, px0); c < std::min(cols - 1, px1); ++c) {
           const float gx = 0.5f * (row[c + 1] - row[c - 1]);
           const float gy = 0.5f * (row[c + cols] - row[c - cols]);
           xx[c] = gx * gx;
@@ -169,34 +177,95 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
         std::fill(yy.begin(), yy.end(), 0.0f);
         std::fill(xy.begin(), xy.end(), 0.0f);
       }
-      const size_t offset = static_cast<size_t>(r % ring_rows) * cols;
-      BlurRow(kernel, xx.data(), cols, ring_xx.data() + offset);
-      BlurRow(kernel, yy.data(), cols, ring_yy.data() + offset);
-      BlurRow(kernel, xy.data(), cols, ring_xy.data() + offset);
+      const size_t offset = static_cast<size_t>(r % ring_rows) * cols + px0;
+      BlurRow(kernel, xx.data() + px0, px1 - px0, ring_xx.data() + offset);
+      BlurRow(kernel, yy.data() + px0, px1 - px0, ring_yy.data() + offset);
+      BlurRow(kernel, xy.data() + px0, px1 - px0, ring_xy.data() + offset);
     }
   };
-  const float k = static_cast<float>(options.k);
-  ImageF response(rows, cols);
   std::vector<const float*> in_xx(ring_rows), in_yy(ring_rows), in_xy(ring_rows);
-  for (int r = 0; r < rows; ++r) {
+  for (int r = y0; r < y1; ++r) {
     blur_rows_through(std::min(r + radius, rows - 1));
     for (int j = 0; j < ring_rows; ++j) {
       const size_t offset =
-          static_cast<size_t>(std::clamp(r + j - radius, 0, rows - 1) % ring_rows) * cols;
+          static_cast<size_t>(std::clamp(r + j - radius, 0, rows - 1) % ring_rows) * cols + x0;
       in_xx[j] = ring_xx.data() + offset;
       in_yy[j] = ring_yy.data() + offset;
       in_xy[j] = ring_xy.data() + offset;
     }
-    BlurColumn(kernel, in_xx.data(), cols, xx.data());
-    BlurColumn(kernel, in_yy.data(), cols, yy.data());
-    BlurColumn(kernel, in_xy.data(), cols, xy.data());
-    float* out = response.data() + static_cast<size_t>(r) * cols;
-    for (int c = 0; c < cols; ++c)
+    BlurColumn(kernel, in_xx.data(), x1 - x0, xx.data() + x0);
+    BlurColumn(kernel, in_yy.data(), x1 - x0, yy.data() + x0);
+    BlurColumn(kernel, in_xy.data(), x1 - x0, xy.data() + x0);
+    float* out = response->data() + static_cast<size_t>(r) * cols;
+    for (int c = x0; c < x1; ++c)
       out[c] = xx[c] * yy[c] - xy[c] * xy[c] - k * ((xx[c] + yy[c]) * (xx[c] + yy[c]));
+  }
+}
+
+// The bucketing cells that meet a region (all of them without regions) as
+// disjoint pixel boxes: per row of cells the runs of such cells, a run
+// continuing one of the row above when it spans the same cells.
+std::vector<Eigen::AlignedBox2i> SearchedBoxes(int rows, int cols, int cell_px,
+                                               const std::vector<Eigen::AlignedBox2i>& regions) {
+  const int cells_x = (cols + cell_px - 1) / cell_px, cells_y = (rows + cell_px - 1) / cell_px;
+  std::vector<unsigned char> searched(static_cast<size_t>(cells_x) * cells_y, regions.empty());
+  const Eigen::AlignedBox2i image(Eigen::Vector2i(0, 0), Eigen::Vector2i(cols - 1, rows - 1));
+  for (const Eigen::AlignedBox2i& region : regions) {
+    const Eigen::AlignedBox2i box = region.intersection(image);
+    if (box.isEmpty()) continue;
+    for (int cy = box.min().y() / cell_px; cy <= box.max().y() / cell_px; ++cy)
+      for (int cx = box.min().x() / cell_px; cx <= box.max().x() / cell_px; ++cx)
+        searched[static_cast<size_t>(cy) * cells_x + cx] = 1;
+  }
+  std::vector<Eigen::AlignedBox2i> boxes;
+  std::vector<int> open;  // boxes ending at the row above
+  for (int cy = 0; cy < cells_y; ++cy) {
+    std::vector<int> now;
+    for (int cx = 0; cx < cells_x;) {
+      if (!searched[static_cast<size_t>(cy) * cells_x + cx]) {
+        ++cx;
+        continue;
+      }
+      const int cx0 = cx;
+      while (cx < cells_x && searched[static_cast<size_t>(cy) * cells_x + cx]) ++cx;
+      const int x0 = cx0 * cell_px, x1 = std::min(cols, cx * cell_px) - 1;
+      const int y1 = std::min(rows, (cy + 1) * cell_px) - 1;
+      const auto same = std::find_if(open.begin(), open.end(), [&](int b) {
+        return boxes[b].min().x() == x0 && boxes[b].max().x() == x1;
+      });
+      if (same != open.end()) {
+        boxes[*same].max().y() = y1;
+        now.push_back(*same);
+      } else {
+        boxes.emplace_back(Eigen::Vector2i(x0, cy * cell_px), Eigen::Vector2i(x1, y1));
+        now.push_back(static_cast<int>(boxes.size()) - 1);
+      }
+    }
+    open = std::move(now);
+  }
+  return boxes;
+}
+
+}  // namespace
+
+std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options,
+                                        const std::vector<Eigen::AlignedBox2i>& regions) {
+  const int rows = static_cast<int>(image.rows()), cols = static_cast<int>(image.cols());
+  const std::vector<float> kernel = GaussianKernel(options.window_sigma_px);
+  const float k = static_cast<float>(options.k);
+  const int b = std::max(options.border_px, options.nms_radius_px + 1), n = options.nms_radius_px;
+  // R where the maxima of the searched boxes are looked for and compared
+  // (n beyond them); the rest is never read.
+  ImageF response(rows, cols);
+  const std::vector<Eigen::AlignedBox2i> boxes =
+      SearchedBoxes(rows, cols, options.cell_px, regions);
+  for (const Eigen::AlignedBox2i& box : boxes) {
+    HarrisResponse(image, kernel, k, std::max(0, box.min().x() - n),
+                   std::min(cols, box.max().x() + 1 + n), std::max(0, box.min().y() - n),
+                   std::min(rows, box.max().y() + 1 + n), &response);
   }
 
   // Local maxima inside the border.
-  const int b = std::max(options.border_px, options.nms_radius_px + 1), n = options.nms_radius_px;
   // The texture test: the window's variance by direct sums, only for the
   // corners that reach the bucketing (a few per cell).
   const int t = options.texture_half_size_px;
@@ -218,34 +287,37 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
   };
   std::vector<Corner> maxima;
   std::vector<unsigned char> candidate(cols, 0);
-  for (int r = b; r < rows - b; ++r) {
-    // Most pixels fail against a direct neighbour: that test first, for a
-    // whole row without branches (it vectorises; the branches mispredicted).
-    const float* row = response.data() + static_cast<size_t>(r) * cols;
-    const float *up = row - cols, *down = row + cols;
-    for (int c = b; c < cols - b; ++c) {
-      const float v = row[c];
-      candidate[c] =
-          !(v <= 0) & !(row[c - 1] >= v) & !(row[c + 1] > v) & !(up[c] >= v) & !(down[c] > v);
-    }
-    for (int c = b; c < cols - b; ++c) {
-      if (!candidate[c]) continue;
-      const float v = row[c];
-      bool is_max = true;
-      for (int dr = -n; dr <= n && is_max; ++dr) {
-        for (int dc = -n; dc <= n; ++dc) {
-          const float w = response(r + dr, c + dc);
-          if (w > v || (w == v && (dr < 0 || (dr == 0 && dc < 0)))) {
-            is_max = false;
-            break;
+  for (const Eigen::AlignedBox2i& box : boxes) {
+    const int c0 = std::max(b, box.min().x()), c1 = std::min(cols - b, box.max().x() + 1);
+    for (int r = std::max(b, box.min().y()); r < std::min(rows - b, box.max().y() + 1); ++r) {
+      // Most pixels fail against a direct neighbour: that test first, for a
+      // whole row without branches (it vectorises; the branches mispredicted).
+      const float* row = response.data() + static_cast<size_t>(r) * cols;
+      const float *up = row - cols, *down = row + cols;
+      for (int c = c0; c < c1; ++c) {
+        const float v = row[c];
+        candidate[c] =
+            !(v <= 0) & !(row[c - 1] >= v) & !(row[c + 1] > v) & !(up[c] >= v) & !(down[c] > v);
+      }
+      for (int c = c0; c < c1; ++c) {
+        if (!candidate[c]) continue;
+        const float v = row[c];
+        bool is_max = true;
+        for (int dr = -n; dr <= n && is_max; ++dr) {
+          for (int dc = -n; dc <= n; ++dc) {
+            const float w = response(r + dr, c + dc);
+            if (w > v || (w == v && (dr < 0 || (dr == 0 && dc < 0)))) {
+              is_max = false;
+              break;
+            }
           }
         }
+        if (!is_max) continue;
+        Corner corner;
+        corner.pixel << c, r;
+        corner.response = v;
+        maxima.push_back(corner);
       }
-      if (!is_max) continue;
-      Corner corner;
-      corner.pixel << c, r;
-      corner.response = v;
-      maxima.push_back(corner);
     }
   }
   if (maxima.empty()) return maxima;
@@ -255,8 +327,11 @@ std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions
   const double threshold = options.min_response_fraction * NthValue(&responses, 0.9);
 
   // Bucketing: the strongest max_per_cell of each cell.
-  std::sort(maxima.begin(), maxima.end(),
-            [](const Corner& x, const Corner& y) { return x.response > y.response; });
+  // Ties by pixel, so that the order does not depend on the boxes'.
+  std::sort(maxima.begin(), maxima.end(), [](const Corner& x, const Corner& y) {
+    if (x.response != y.response) return x.response > y.response;
+    return std::make_pair(x.pixel.y(), x.pixel.x()) < std::make_pair(y.pixel.y(), y.pixel.x());
+  });
   const int cells_x = (cols + options.cell_px - 1) / options.cell_px;
   const int cells_y = (rows + options.cell_px - 1) / options.cell_px;
   std::vector<int> count(static_cast<size_t>(cells_x) * cells_y, 0);

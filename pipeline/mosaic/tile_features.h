@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include "pipeline/core/image.h"
 
@@ -66,9 +67,16 @@ struct Corner {
 // R = det M - k tr(M)^2, local maxima above the threshold, at most
 // max_per_cell per grid cell (well distributed), sub-pixel peak by a 3 x 3
 // quadratic fit; corners whose window fails the texture test are dropped
-// before the bucketing. Sorted by response, strongest first.
+// before the bucketing. Sorted by response, strongest first (ties by pixel,
+// row-major).
+// regions (pixel boxes, corners inclusive; empty: the whole image): only the
+// bucketing cells that meet one of them are searched, R computed there
+// alone. Those cells' corners are the whole image's but for the response
+// threshold, which comes from their own maxima; cells are kept whole so that
+// the bucketing chooses as over the whole image.
 // Precondition: options.Check() is empty.
-std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options);
+std::vector<Corner> DetectHarrisCorners(const ImageF& image, const HarrisOptions& options,
+                                        const std::vector<Eigen::AlignedBox2i>& regions = {});
 
 // The cubic B-spline interpolant of the image whose CubicBSplineCoefficients
 // (pipeline/core/cubic_bspline.h) are `coefficients`, at (x, y) px, with its

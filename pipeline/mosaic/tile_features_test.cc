@@ -90,6 +90,52 @@ TEST(DetectHarrisCorners, TextureTestDropsNoiseOnFlatAreas) {
   EXPECT_LT(leftmost(DetectHarrisCorners(image, options)), 64);
 }
 
+TEST(DetectHarrisCorners, RegionsSearchTheirCellsOnlyAndFindTheWholeImagesCornersThere) {
+  // A tile overlapping its neighbours in a known L: the right strip
+  // x >= 170 and the bottom strip y >= 200 (two regions meeting in the
+  // corner). Searched are the 64 px cells that meet them: x >= 128 or
+  // y >= 192. Texture everywhere (blurred noise), so that every cell has
+  // corners; no response threshold (fraction 0), the one thing that depends
+  // on the maxima outside.
+  std::mt19937 rng(3);
+  std::normal_distribution<float> noise(0.0f, 10.0f);  // std ~1.4 after the blur
+  ImageF image(256, 320);
+  for (Eigen::Index i = 0; i < image.size(); ++i) image.data()[i] = noise(rng);
+  image = GaussianBlur(image, 2.0);
+  HarrisOptions options;
+  options.min_response_fraction = 0;
+  const std::vector<Eigen::AlignedBox2i> regions = {
+      {Eigen::Vector2i(170, 0), Eigen::Vector2i(319, 255)},
+      {Eigen::Vector2i(0, 200), Eigen::Vector2i(400, 300)}};  // clipped to the image
+  const auto searched = [](const Corner& c) { return c.pixel.x() >= 128 || c.pixel.y() >= 192; };
+  const std::vector<Corner> whole = DetectHarrisCorners(image, options);
+  std::vector<Corner> expected;
+  for (const Corner& c : whole)
+    if (searched(c)) expected.push_back(c);
+  ASSERT_LT(expected.size(), whole.size());  // the whole image has corners outside
+  const std::vector<Corner> found = DetectHarrisCorners(image, options, regions);
+  // Corners in every cell that meets a region (4 x 5 cells, the 3 x 2 top
+  // left not searched), none outside.
+  std::vector<int> count(4 * 5, 0);
+  for (const Corner& c : found) {
+    EXPECT_TRUE(searched(c)) << c.pixel.transpose();
+    ++count[(c.pixel.y() / 64) * 5 + c.pixel.x() / 64];
+  }
+  for (int cell = 0; cell < 4 * 5; ++cell) {
+    if (cell / 5 >= 3 || cell % 5 >= 2) {
+      EXPECT_GE(count[cell], 1) << cell;
+    }
+  }
+  // The same corners, bit for bit and in the same order (R computed over
+  // boxes equals R over the whole image).
+  ASSERT_EQ(found.size(), expected.size());
+  for (size_t k = 0; k < found.size(); ++k) {
+    EXPECT_EQ(found[k].pixel, expected[k].pixel) << k;
+    EXPECT_EQ(found[k].q_px, expected[k].q_px) << k;
+    EXPECT_EQ(found[k].response, expected[k].response) << k;
+  }
+}
+
 TEST(BSpline, InterpolatesThePixelsExactly) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-2.0f, 2.0f);
