@@ -92,8 +92,9 @@ struct RegisterTilesOptions {
   // Quads found at 1/3 resolution: half the CPU of 1/2 (0.27 -> 0.16 s over
   // the demo's nine tiles, which have no tags) and the same tags on the
   // markers preset (20 mm tags, ~130 px; 1/4 loses some at the tile edges).
-  // Only the corners' ids matter: the matcher then locates them.
-  TagDetectorOptions tags = {.quad_decimate = 3.0};
+  // Only the corners' ids matter: the matcher then locates them. A first
+  // pass at 1/8 skips the tiles without tags (TagDetectorOptions).
+  TagDetectorOptions tags = {.quad_decimate = 3.0, .gate_decimate = 8.0};
 
   // Pairs whose predicted overlap is below this fraction of the image are not matched.
   double min_overlap_fraction = 0.03;

@@ -264,6 +264,34 @@ TEST(RegisterTiles, TilesThatDoNotShowTheirTablePositionFail) {
 }
 #endif
 
+#ifdef OMM_TEST_TAG_GATE
+// RegisterTiles' tag detection passes at 1/8 first and skips the tiles where
+// that finds nothing: it must still see every tile of the markers preset
+// (each holds tags), so that their tags and corners are the full pass's, bit
+// for bit, and skip the demo's tiles (no tags).
+TEST(RegisterTiles, TagGateSkipsTheDemoAndKeepsEveryMarkersTag) {
+  const TagDetectorOptions gated = RegisterTilesOptions().tags;
+  ASSERT_GT(gated.gate_decimate, 0);
+  TagDetectorOptions full = gated;
+  full.gate_decimate = 0;
+  int num_tags = 0;
+  for (const ImageF& tile : Render("markers-1").tiles) {
+    const std::vector<TagDetection> expected = DetectAprilTags36h11(tile, full);
+    const std::vector<TagDetection> found = DetectAprilTags36h11(tile, gated);
+    EXPECT_FALSE(expected.empty());
+    ASSERT_EQ(found.size(), expected.size());
+    for (size_t k = 0; k < found.size(); ++k) {
+      EXPECT_EQ(found[k].id, expected[k].id);
+      EXPECT_EQ(found[k].corners_px, expected[k].corners_px);
+    }
+    num_tags += static_cast<int>(found.size());
+  }
+  EXPECT_GT(num_tags, 9);
+  for (const ImageF& tile : Render("demo-1").tiles)
+    EXPECT_TRUE(DetectAprilTags36h11(tile, gated).empty());
+}
+#endif
+
 #ifdef OMM_TEST_WEAK_TILE
 // low-texture seed 12: tile 8's overlaps are faint texture and the part's
 // edge; its probe templates correlate well with their surroundings (smooth)
