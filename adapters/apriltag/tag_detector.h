@@ -25,12 +25,14 @@ struct TagDetectorOptions {
   // A first pass with quads found at this decimation (0: none): if it
   // detects nothing (whatever the decision margin), the tile is taken to
   // have no tags and the full pass is skipped; else the full pass runs as
-  // without it (the same detections). At 1/8 it costs the library a quarter
-  // of a pass at 1/3 (246 against 953 million instructions over the demo's
-  // nine tiles, which have no tags). It must see a tag in every tagged tile:
-  // at 1/8 it finds 174 of the 176 tags that 1/3 finds on the markers
-  // preset's 54 tiles (20 mm tags, ~130 px; seeds 1, 101-105), a tag in
-  // each tile. Much smaller tags need a finer first pass (not measured).
+  // without it (the same detections). Over the demo's nine tiles, which have
+  // no tags, the library spends 392 million instructions at 1/6 and 246 at
+  // 1/8 against 950 for a pass at 1/3. It must see a tag in every tagged
+  // tile. The markers preset's tiles (seeds 101-103, 27 tiles, 89 tags of
+  // ~130 px: both see a tag in every tile), scaled so that the tags span ~90,
+  // ~65 and ~45 px: at 1/8 a tag is seen in 27, 17 and 3 of the 27 tiles, at
+  // 1/6 in 27, 27 and 15; at 1/4 in all 27 at ~45 px (the full pass at 1/3
+  // finds 89-90 tags at every size). So 1/6 keeps tags down to ~65 px.
   double gate_decimate = 0.0;
   double quad_sigma_px = 0.0;  // Gaussian blur before quad detection, px (0: none)
   int max_hamming = 1;         // bit errors corrected (36h11: up to 3; 1 keeps false ids away)

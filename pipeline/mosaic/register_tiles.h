@@ -93,8 +93,8 @@ struct RegisterTilesOptions {
   // the demo's nine tiles, which have no tags) and the same tags on the
   // markers preset (20 mm tags, ~130 px; 1/4 loses some at the tile edges).
   // Only the corners' ids matter: the matcher then locates them. A first
-  // pass at 1/8 skips the tiles without tags (TagDetectorOptions).
-  TagDetectorOptions tags = {.quad_decimate = 3.0, .gate_decimate = 8.0};
+  // pass at 1/6 skips the tiles without tags (TagDetectorOptions).
+  TagDetectorOptions tags = {.quad_decimate = 3.0, .gate_decimate = 6.0};
 
   // Pairs whose predicted overlap is below this fraction of the image are not matched.
   double min_overlap_fraction = 0.03;
