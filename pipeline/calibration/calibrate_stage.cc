@@ -84,6 +84,30 @@ void CompareCorrections(const std::vector<Eigen::Matrix2Xd>& before,
   bias->max_px = max_px;
 }
 
+// From *result, solved on *corrected (the detections plus *corrections):
+// correct the detections with its camera and poses and re-solve, until the
+// corrections change by less than bias_settle_px (or max_bias_rounds more
+// rounds). A failed re-solve keeps the last consistent (observations, solve)
+// triple.
+void SettleBiasCorrection(const std::vector<PlateObservation>& detections, const BoardSpec& board,
+                          const CalibrationOptions& solve_options,
+                          const CalibrationStageOptions& options, CalibrationResult* result,
+                          std::vector<PlateObservation>* corrected,
+                          std::vector<Eigen::Matrix2Xd>* corrections, BiasCorrectionSummary* bias) {
+  for (int round = 1; round <= options.max_bias_rounds; ++round) {
+    std::vector<Eigen::Matrix2Xd> delta;
+    std::vector<PlateObservation> round_corrected = CorrectBias(detections, board, *result, &delta);
+    CalibrationResult next = CalibrateCamera(board, round_corrected, solve_options);
+    if (!next.usable) break;
+    CompareCorrections(*corrections, delta, bias);
+    ++bias->rounds;
+    *corrected = std::move(round_corrected);
+    *corrections = std::move(delta);
+    *result = std::move(next);
+    if (bias->last_change_px < options.bias_settle_px) break;
+  }
+}
+
 // Solve, then correct and re-solve until the corrections settle.
 CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& detections,
                                           const BoardSpec& board,
@@ -96,20 +120,8 @@ CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& d
   *corrected = detections;
   corrections->assign(detections.size(), Eigen::Matrix2Xd::Zero(2, board.rows * board.cols));
   if (!result.usable || board.type == BoardType::kChessboard) return result;
-  std::vector<Eigen::Matrix2Xd>& previous = *corrections;
-  for (int round = 1; round <= options.max_bias_rounds; ++round) {
-    std::vector<Eigen::Matrix2Xd> delta;
-    std::vector<PlateObservation> round_corrected = CorrectBias(detections, board, result, &delta);
-    CalibrationResult next = CalibrateCamera(board, round_corrected, solve_options);
-    // A failed re-solve keeps the last consistent (observations, solve) pair.
-    if (!next.usable) break;
-    CompareCorrections(previous, delta, bias);
-    bias->rounds = round;
-    *corrected = std::move(round_corrected);
-    previous = std::move(delta);
-    result = std::move(next);
-    if (bias->last_change_px < options.bias_settle_px) break;
-  }
+  SettleBiasCorrection(detections, board, solve_options, options, &result, corrected, corrections,
+                       bias);
   return result;
 }
 
@@ -368,22 +380,14 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     }
     if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;
     summary.lens_choice_seconds = SecondsSince(choice_start);
-    if (summary.lens.lens_model != working_model) {
-      // The corrections are recomputed from the detections with the chosen
-      // model's camera and poses (now in `result`), then the final solve.
+    if (summary.lens.lens_model != working_model && board.type != BoardType::kChessboard) {
+      // The corrections settle again with the chosen model's camera and
+      // poses (`result`, solved on the working model's corrections): the
+      // working model's were off by up to 0.03 px on a lens it cannot
+      // represent, and one recorrection left them moving by as much.
       solve_options.lens_model = summary.lens.lens_model;
-      std::vector<PlateObservation> recorrected = corrected;
-      if (board.type != BoardType::kChessboard) {
-        std::vector<Eigen::Matrix2Xd> delta;
-        recorrected = CorrectBias(detections, board, result, &delta);
-        CompareCorrections(corrections, delta, &summary.bias);
-        ++summary.bias.rounds;
-      }
-      CalibrationResult final_result = CalibrateCamera(board, recorrected, solve_options);
-      if (final_result.usable) {
-        result = std::move(final_result);
-        corrected = std::move(recorrected);
-      }
+      SettleBiasCorrection(detections, board, solve_options, options, &result, &corrected,
+                           &corrections, &summary.bias);
     }
   }
 

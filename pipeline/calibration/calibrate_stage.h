@@ -26,8 +26,8 @@
 //     F-test says its residual drop is more than its extra parameters would
 //     give on noise alone (the extra-sum-of-squares test, exact for nested
 //     models, OPENCV4 < 5 < 8; an approximation for the splined model). If it
-//     differs from the working model, the bias corrections are recomputed
-//     with it once and the final solve run.
+//     differs from the working model, the bias corrections settle again with
+//     it (step 3's rounds from the chosen model's solve).
 //     Why not cross-validation between halves (adapters/mrcal/cross_validation.h):
 //     it compares the halves over the WHOLE imager, where the plates rarely
 //     reach the corners; each half extrapolates there on its own, so it
