@@ -22,6 +22,7 @@
 
 #include "adapters/project_io/project_reader.h"
 #include "adapters/project_io/report_json.h"
+#include "pipeline/calibration/calibrate_stage.h"
 #include "pipeline/orchestration/run_project.h"
 #include "tests/sim_cache.h"
 #include "tests/test_util.h"
@@ -143,6 +144,14 @@ TEST(MeasureRun, ThirtyFiveProjectsAgainstTheirTruth) {
   // The CMM comparison (the simulator writes cmm.csv for every measurement).
   for (const auto& [name, report] : reports) {
     ASSERT_TRUE(report.features.has_value()) << name;
+    // The perspective-bias corrections settled with the lens model used
+    // (CalibrationStageOptions::bias_settle_px), a splined one included.
+    const ReportObject* bias =
+        AsObject(Member(report.calibration->extra, "perspective_bias_correction"));
+    ASSERT_NE(bias, nullptr) << name;
+    EXPECT_LT(AsNumber(Member(*bias, "last_change_px")).value_or(1.0),
+              CalibrationStageOptions{}.bias_settle_px)
+        << name << " (" << report.calibration->lens_model << ")";
     for (const MeasurementReport& m : *report.measurements) {
       if (!m.value_mm) continue;
       ASSERT_TRUE(m.cmm_mm.has_value()) << name << " " << m.name;
