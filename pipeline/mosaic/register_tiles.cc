@@ -117,7 +117,7 @@ struct Match {
   Eigen::Vector2i anchor_px = Eigen::Vector2i::Zero();
   Eigen::Vector2d ray_a = Eigen::Vector2d::Zero();  // the anchor's undistorted ray (x, y; z = 1)
   Eigen::Vector2d q_b = Eigen::Vector2d::Zero();
-  Eigen::Matrix2d db_da = Eigen::Matrix2d::Identity();  // affine of the last match
+  PatchWarp warp;                                            // of the last match
   Eigen::Matrix2d covariance_px2 = Eigen::Matrix2d::Zero();  // the last match's (PatchMatch)
   bool tag = false;
   bool sift = false;  // its anchor came from a SIFT match
@@ -282,34 +282,53 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     for (const ColmapPairMatches& m : sift_matches) sift_of_pair[{m.tile_a, m.tile_b}] = &m;
   }
   // An anchor of tile a to locate in tile b: its pixel and ray, the
-  // predicted position in b and the local affine there.
+  // predicted position in b and the local warp there.
   struct Candidate {
     Eigen::Vector2i pixel = Eigen::Vector2i::Zero();
     Eigen::Vector2d ray_a = Eigen::Vector2d::Zero();
     Eigen::Vector2d q_b = Eigen::Vector2d::Zero();
-    Eigen::Matrix2d db_da = Eigen::Matrix2d::Identity();
+    PatchWarp warp;
     bool sift = false;
   };
   // Predictions through a plane-induced homography between the rays (b ~ H
-  // a) and the lens, affine included: dq_b/dq_a = dq_b/dray_b dray_b/dray_a
-  // (dq_a/dray_a)^-1, a ray being (x, y, 1). False if the lens refuses.
+  // a) and the lens, to second order (PatchWarp): dq_b/dq_a = dq_b/dray_b
+  // dray_b/dray_a (dq_a/dray_a)^-1, a ray being (x, y, 1), at the anchor and
+  // at the rays h px from it along +-x and +-y (to first order: no
+  // unprojection), whose differences give the second derivatives. False if
+  // the lens refuses.
   const auto predict = [&](const Eigen::Matrix3d& h_rays, std::vector<Candidate>* todo) {
     const int n = static_cast<int>(todo->size());
-    Eigen::Matrix3Xd p_a(3, n), p_b(3, n);
-    for (int k = 0; k < n; ++k) {
-      p_a.col(k) = (*todo)[k].ray_a.homogeneous();
-      p_b.col(k) = Transfer(h_rays, (*todo)[k].ray_a).homogeneous();
-    }
+    if (n == 0) return true;
+    Eigen::Matrix3Xd anchors(3, n);
+    for (int k = 0; k < n; ++k) anchors.col(k) = (*todo)[k].ray_a.homogeneous();
     Eigen::Matrix2Xd q_a, q_b;
     Eigen::MatrixXd dqa_dp, dqb_dp;
-    if (n == 0) return true;
+    if (!ProjectPoints(camera, anchors, &q_a, &dqa_dp)) return false;
+    // Column 5 k: candidate k's ray; 5 k + 1..4: its neighbours.
+    const double s = h;
+    const Eigen::Vector2d steps[4] = {{s, 0}, {-s, 0}, {0, s}, {0, -s}};
+    Eigen::Matrix3Xd p_a(3, 5 * n), p_b(3, 5 * n);
+    for (int k = 0; k < n; ++k) {
+      const Eigen::Matrix2d dray_dqa = dqa_dp.block<2, 2>(2 * k, 0).inverse();
+      p_a.col(5 * k) = anchors.col(k);
+      for (int m = 0; m < 4; ++m)
+        p_a.col(5 * k + 1 + m) = ((*todo)[k].ray_a + dray_dqa * steps[m]).homogeneous();
+    }
+    for (int i = 0; i < 5 * n; ++i)
+      p_b.col(i) = Transfer(h_rays, p_a.col(i).head<2>()).homogeneous();
     if (!ProjectPoints(camera, p_a, &q_a, &dqa_dp) || !ProjectPoints(camera, p_b, &q_b, &dqb_dp))
       return false;
-    for (Eigen::Index k = 0; k < n; ++k) {
+    const auto db_da = [&](int i) {
+      return Eigen::Matrix2d(dqb_dp.block<2, 2>(2 * i, 0) *
+                             TransferJacobian(h_rays, p_a.col(i).head<2>()) *
+                             dqa_dp.block<2, 2>(2 * i, 0).inverse());
+    };
+    for (int k = 0; k < n; ++k) {
       Candidate& c = (*todo)[k];
-      c.q_b = q_b.col(k);
-      c.db_da = dqb_dp.block<2, 2>(2 * k, 0) * TransferJacobian(h_rays, c.ray_a) *
-                dqa_dp.block<2, 2>(2 * k, 0).inverse();
+      const int i = 5 * k;
+      c.q_b = q_b.col(i);
+      c.warp = PatchWarp::FromJacobians(db_da(i), db_da(i + 1), db_da(i + 2), db_da(i + 3),
+                                        db_da(i + 4), s);
     }
     return true;
   };
@@ -372,7 +391,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         if (probe_peak.ncc < options.probe_contradiction_ncc) ++pair.num_contradicting_probes;
         const PatchMatch m = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb],
                                         (f * probe_peak.q_px.array() + centre).matrix() + offset,
-                                        Eigen::Matrix2d::Identity(), f, options.patch);
+                                        PatchWarp(), f, options.patch);
         if (!m.ok) continue;
         probe_a.col(found) = c.pixel.cast<double>();
         probe_b.col(found) = m.q_px;
@@ -455,10 +474,10 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       if (!seen.insert(m.key).second) continue;
       m.anchor_px = c.pixel;
       m.ray_a = c.ray_a;
-      m.db_da = c.db_da;
+      m.warp = c.warp;
       m.sift = c.sift;
       const PatchMatch pm = MatchPatch(normalized[ta], c.pixel, normalized[tb], spline[tb], c.q_b,
-                                       m.db_da, options.search_radius_px, options.patch);
+                                       m.warp, options.search_radius_px, options.patch);
       if (!pm.ok) continue;
       m.q_b = pm.q_px;
       m.covariance_px2 = pm.covariance_px2;
@@ -509,8 +528,9 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         m.tag = true;
         const Eigen::Vector2d predicted =
             tags[tb][db].corners_px.col(k) + (anchor.cast<double>() - corner_a);
-        const PatchMatch pm = MatchPatch(normalized[ta], anchor, normalized[tb], spline[tb], predicted,
-                                         m.db_da, options.search_radius_px, options.patch);
+        const PatchMatch pm =
+            MatchPatch(normalized[ta], anchor, normalized[tb], spline[tb], predicted, m.warp,
+                       options.search_radius_px, options.patch);
         if (!pm.ok) continue;
         m.q_b = pm.q_px;
         m.covariance_px2 = pm.covariance_px2;
@@ -674,31 +694,52 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       Match& m = pair_matches[todo[n].first][todo[n].second];
       const int track = result.input.observations[obs_index[n]].track;
       const Eigen::Vector2d xy = scene.track_xy_mm.col(track);
-      Eigen::Matrix3Xd p_cam(3, 2);
-      p_cam.col(0) = r * Eigen::Vector3d(xy.x() + scene.table_pos_mm[m.tile_a].x(),
-                                         xy.y() + scene.table_pos_mm[m.tile_a].y(), 0) +
-                     scene.cam_from_part_t_mm;
-      p_cam.col(1) = r * Eigen::Vector3d(xy.x() + scene.table_pos_mm[m.tile_b].x(),
-                                         xy.y() + scene.table_pos_mm[m.tile_b].y(), 0) +
-                     scene.cam_from_part_t_mm;
+      // db/da at part point xy + dxy_mm: column 2 k its pixel in tile a, 2 k + 1 in b.
+      const auto fill = [&](Eigen::Matrix3Xd* p_cam, int k, const Eigen::Vector2d& dxy_mm) {
+        for (int e = 0; e < 2; ++e) {
+          const Eigen::Vector2d& t = scene.table_pos_mm[e == 0 ? m.tile_a : m.tile_b];
+          p_cam->col(2 * k + e) =
+              r * Eigen::Vector3d(xy.x() + dxy_mm.x() + t.x(), xy.y() + dxy_mm.y() + t.y(), 0) +
+              scene.cam_from_part_t_mm;
+        }
+      };
+      Eigen::Matrix3Xd p_cam(3, 10);
+      fill(&p_cam, 0, Eigen::Vector2d::Zero());
       Eigen::Matrix2Xd q;
-      Eigen::MatrixXd dq_dp, dq_dintrinsics;
-      if (!ProjectPoints(camera, p_cam, &q, &dq_dp, &dq_dintrinsics)) {
+      Eigen::MatrixXd dq_dp;
+      if (!ProjectPoints(camera, p_cam.leftCols(2), &q, &dq_dp)) {
         m.keep = false;
         return;
       }
-      const Eigen::Matrix2d dqa = dq_dp.block<2, 3>(0, 0) * r.leftCols<2>();
-      const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(2, 0) * r.leftCols<2>();
-      const Eigen::Matrix2d db_da = dqb * dqa.inverse();
-      // The template's corners move by at most |change| h sqrt(2): below a
-      // small fraction of a match's sigma, the match would not move.
-      const double change_px =
-          (db_da - m.db_da).norm() * options.patch.half_size_px * std::sqrt(2.0);
+      // The neighbours h px from the anchor along +-x and +-y of tile a (to
+      // first order) give the warp's second-order term (PatchWarp).
+      const Eigen::Matrix2d dxy_dqa = (dq_dp.block<2, 3>(0, 0) * r.leftCols<2>()).inverse();
+      const double s = options.patch.half_size_px;
+      const Eigen::Vector2d steps[4] = {{s, 0}, {-s, 0}, {0, s}, {0, -s}};
+      for (int k = 0; k < 4; ++k) fill(&p_cam, k + 1, dxy_dqa * steps[k]);
+      if (!ProjectPoints(camera, p_cam, &q, &dq_dp)) {
+        m.keep = false;
+        return;
+      }
+      const auto db_da = [&](int k) {
+        const Eigen::Matrix2d dqa = dq_dp.block<2, 3>(4 * k, 0) * r.leftCols<2>();
+        const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(4 * k + 2, 0) * r.leftCols<2>();
+        return Eigen::Matrix2d(dqb * dqa.inverse());
+      };
+      const PatchWarp warp =
+          PatchWarp::FromJacobians(db_da(0), db_da(1), db_da(2), db_da(3), db_da(4), s);
+      // The template's corners move by at most |change J| h sqrt(2) + |change
+      // H_k| h^2: below a small fraction of a match's sigma, the match would
+      // not move.
+      const double change_px = (warp.jacobian - m.warp.jacobian).norm() * s * std::sqrt(2.0) +
+                               std::hypot((warp.hessian[0] - m.warp.hessian[0]).norm(),
+                                          (warp.hessian[1] - m.warp.hessian[1]).norm()) *
+                                   s * s;
       if (change_px < options.relocation_min_change_px) return;
       ++num_relocated;
-      m.db_da = db_da;
+      m.warp = warp;
       const PatchMatch pm = MatchPatch(normalized[m.tile_a], m.anchor_px, normalized[m.tile_b],
-                                       spline[m.tile_b], m.q_b, m.db_da, 0, options.patch);
+                                       spline[m.tile_b], m.q_b, m.warp, 0, options.patch);
       if (!pm.ok) {
         m.keep = false;
         return;

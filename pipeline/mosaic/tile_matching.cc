@@ -563,11 +563,27 @@ NccPeak SearchNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int
   return peak;
 }
 
+PatchWarp PatchWarp::FromJacobians(const Eigen::Matrix2d& j, const Eigen::Matrix2d& j_px,
+                                   const Eigen::Matrix2d& j_mx, const Eigen::Matrix2d& j_py,
+                                   const Eigen::Matrix2d& j_my, double step_px) {
+  PatchWarp warp;
+  warp.jacobian = j;
+  // d J(k, i) / d q_m = H_k(i, m).
+  const Eigen::Matrix2d dj_dx = (j_px - j_mx) / (2 * step_px);
+  const Eigen::Matrix2d dj_dy = (j_py - j_my) / (2 * step_px);
+  for (int k = 0; k < 2; ++k) {
+    Eigen::Matrix2d h;
+    h.col(0) = dj_dx.row(k).transpose();
+    h.col(1) = dj_dy.row(k).transpose();
+    warp.hessian[k] = 0.5 * (h + h.transpose());
+  }
+  return warp;
+}
+
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
                       const ImageF& target, const ImageF& target_spline,
-                      const Eigen::Vector2d& predicted_q_px,
-                      const Eigen::Matrix2d& dtarget_dreference, int search_radius_px,
-                      const PatchMatchOptions& options) {
+                      const Eigen::Vector2d& predicted_q_px, const PatchWarp& warp,
+                      int search_radius_px, const PatchMatchOptions& options) {
   PatchMatch match;
   const int h = options.half_size_px, side = 2 * h + 1, n = side * side;
   const int ax = anchor_px.x(), ay = anchor_px.y();
@@ -599,7 +615,7 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
   // from the moments of the best integer window.
   std::vector<Eigen::Vector2d> offsets(static_cast<size_t>(n));
   for (int r = -h, i = 0; r <= h; ++r)
-    for (int c = -h; c <= h; ++c, ++i) offsets[i] = dtarget_dreference * Eigen::Vector2d(c, r);
+    for (int c = -h; c <= h; ++c, ++i) offsets[i] = warp.Offset(Eigen::Vector2d(c, r));
   Eigen::Vector2d q = start;
   double gain = t_std / std::max(peak.target_std, 1e-6);
   double offset = t_mean - gain * peak.target_mean;

@@ -131,6 +131,34 @@ struct PatchMatchOptions {
   std::string Check() const;
 };
 
+// The map of a template offset x (reference px, from the anchor) to the
+// target, about the anchor's image there, to second order:
+//   w(x) = J x + 1/2 (x^T H_0 x, x^T H_1 x),
+// J = dq_target / dq_reference, H_k = d^2 q_target,k / dq_reference^2. The
+// second-order term matters: a translation fitted under J alone lands at the
+// anchor's image plus the template's (gradient-weighted) mean of it, ~1/2
+// <x_i^2> (H_k(0, 0) + H_k(1, 1)) = 40 px^2 times the map's Laplacian for a
+// 31 x 31 template. Between two tiles the lens makes that Laplacian ~8 k1 d /
+// f^2 (displacement d, radial coefficient k1 over f^2 px^2), along d and the
+// same everywhere: every match's displacement comes out short or long by a
+// fixed fraction (barrel: short; 4 ppm on the demo's lens, 23 ppm on the
+// lens-mismatch preset's), which the adjustment reads as a height.
+struct PatchWarp {
+  Eigen::Matrix2d jacobian = Eigen::Matrix2d::Identity();
+  // H_0, H_1 (symmetric), px^-1.
+  Eigen::Matrix2d hessian[2] = {Eigen::Matrix2d::Zero(), Eigen::Matrix2d::Zero()};
+
+  Eigen::Vector2d Offset(const Eigen::Vector2d& x) const {
+    return jacobian * x + 0.5 * Eigen::Vector2d(x.dot(hessian[0] * x), x.dot(hessian[1] * x));
+  }
+  // The warp at the anchor from the map's Jacobians there (j) and at the
+  // anchor plus and minus step_px along x (j_px, j_mx) and along y (j_py,
+  // j_my): H by central differences of J, symmetrised.
+  static PatchWarp FromJacobians(const Eigen::Matrix2d& j, const Eigen::Matrix2d& j_px,
+                                 const Eigen::Matrix2d& j_mx, const Eigen::Matrix2d& j_py,
+                                 const Eigen::Matrix2d& j_my, double step_px);
+};
+
 struct PatchMatch {
   bool ok = false;
   Eigen::Vector2d q_px = Eigen::Vector2d::Zero();  // the anchor's position in the target tile
@@ -152,11 +180,12 @@ struct PatchMatch {
 // 2. least-squares template matching (Gruen 1985) from the best offset:
 //      min over q, g, o  sum_x (g T(q + J x) + o - R(anchor + x))^2,
 //    x over the template's integer offsets, R the reference tile's raw pixels,
-//    T the target's cubic B-spline interpolant (CubicBSplineCoefficients), J = dq_target /
-//    dq_reference the local affine of the tile-to-tile map (the prediction's
-//    Jacobian, e.g. from the plane-induced homography), held fixed: only the
-//    position, gain and offset are estimated. The template is never resampled,
-//    so the anchor is exact and only the target is interpolated;
+//    T the target's cubic B-spline interpolant (CubicBSplineCoefficients), J x
+//    standing for warp.Offset(x): the tile-to-tile map about the anchor to
+//    second order (the prediction's, e.g. through the plane-induced
+//    homography and the lens), held fixed: only the position, gain and offset
+//    are estimated. The template is never resampled, so the anchor is exact
+//    and only the target is interpolated;
 // 3. (options.robust_tukey_c > 0) the same, iteratively reweighted from step
 //    2's solution with Tukey's biweight of each pixel's residual (scale
 //    1.4826 MAD), to its fixed point: pixels whose content differs between
@@ -166,8 +195,7 @@ struct PatchMatch {
 // `target_spline` is CubicBSplineCoefficients(target).
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
                       const ImageF& target, const ImageF& target_spline,
-                      const Eigen::Vector2d& predicted_q_px,
-                      const Eigen::Matrix2d& dtarget_dreference, int search_radius_px,
-                      const PatchMatchOptions& options);
+                      const Eigen::Vector2d& predicted_q_px, const PatchWarp& warp,
+                      int search_radius_px, const PatchMatchOptions& options);
 
 }  // namespace omm
