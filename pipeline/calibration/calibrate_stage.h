@@ -14,7 +14,9 @@
 //     are computed from the DETECTED centres with the latest camera and poses,
 //     and the solve repeated, until the corrections change by less than
 //     bias_settle_px between rounds (they depend on the pose only to second
-//     order, so one or two rounds suffice) or max_bias_rounds is reached.
+//     order, so one or two rounds suffice with OPENCV8; a splined model,
+//     which bends to each round's corrections, takes up to ~9: lens-mismatch
+//     seed 102) or max_bias_rounds is reached.
 //  4. Lens model (when the user forced none), by the structure of the
 //     residuals: each candidate (OPENCV4, OPENCV5, OPENCV8, and a splined
 //     stereographic model sized for the observed marks, SplinedModelFor) is
@@ -60,8 +62,9 @@ struct CalibrationStageOptions {
   PlateDetectionOptions detection;
   int num_threads = 2;  // detection threads
 
-  // Perspective-bias rounds (correction + re-solve) after the first solve.
-  int max_bias_rounds = 3;
+  // Perspective-bias rounds (correction + re-solve) after the first solve,
+  // and again after a change of lens model.
+  int max_bias_rounds = 10;
   double bias_settle_px = 0.001;  // stop when no correction moved more than this, px
 
   // Lens-model choice (only when camera.lens_model is not given).
