@@ -340,11 +340,11 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     std::vector<Candidate> todo;
     if (use_harris) {
       const Eigen::Vector2d shift = pair_shift(pair);
-      const int margin = candidate_margin;
       std::vector<int> candidates;
       for (size_t k = 0; k < corners[ta].size(); ++k) {
         const Eigen::Vector2d q = corners[ta][k].pixel.cast<double>() + shift;
-        if (q.x() >= margin && q.y() >= margin && q.x() < width - margin && q.y() < height - margin)
+        if (q.x() >= candidate_margin && q.y() >= candidate_margin &&
+            q.x() < width - candidate_margin && q.y() < height - candidate_margin)
           candidates.push_back(static_cast<int>(k));
       }
       pair.num_candidates += static_cast<int>(candidates.size());
