@@ -379,13 +379,27 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   solver_options.num_threads = options.num_threads;
   solver_options.logging_type = ceres::SILENT;
   if (has_observations) {
+    // Ceres orders a group's blocks by address (a std::set<double*>), and
+    // that order lays out the reduced system and orders its sums: with the
+    // heap's layout, which differs between runs, the solution's last bits
+    // did. So every scene block has a group of its own, in the scene
+    // vector's order. The points share group 0: columns of one matrix, they
+    // are in track order.
     auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
     for (int k = 0; k < input.num_tracks; ++k) ordering->AddElementToGroup(b.point(scene, k), 0);
-    std::vector<double*> blocks;
-    problem.GetParameterBlocks(&blocks);
-    for (double* block : blocks) {
-      if (!ordering->IsMember(block)) ordering->AddElementToGroup(block, 1);
+    int group = 1;
+    const auto add_group = [&](double* block) {
+      if (problem.HasParameterBlock(block)) ordering->AddElementToGroup(block, group++);
+    };
+    add_group(b.r.data());
+    add_group(b.t.data());
+    for (std::array<double, 2>& pos : b.table_pos) add_group(pos.data());
+    for (int g = 0; g < num_plates; ++g) {
+      add_group(b.plate_pose[g].data());
+      add_group(&b.plate_height[g]);
+      add_group(&b.plate_scale[g]);
     }
+    add_group(b.intrinsics.data());
     solver_options.linear_solver_ordering = ordering;
   } else {
     solver_options.linear_solver_type = ceres::DENSE_QR;  // priors alone: no points
