@@ -158,6 +158,8 @@ bool SchurCovariance(ceres::Problem* problem,
                      Eigen::MatrixXd* scene_covariance,
                      std::vector<Eigen::Matrix2d>* track_covariance) {
   ceres::Problem::EvaluateOptions evaluate;
+  // The Jacobian alone: each block has its own place in it, so its bits do
+  // not depend on the threads (a cost or gradient, summed per thread, would).
   evaluate.num_threads = num_threads;
   // Variable blocks only (the others are constant in the evaluation): the
   // tracks' points first, 2 columns each, then the scene's tangent columns.
@@ -376,7 +378,11 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   solver_options.function_tolerance = options.function_tolerance;
   solver_options.gradient_tolerance = options.gradient_tolerance;
   solver_options.parameter_tolerance = options.parameter_tolerance;
-  solver_options.num_threads = options.num_threads;
+  // One thread: Ceres sums the cost and gradient per thread and adds into
+  // the reduced system under locks, in the threads' order, so the last bits
+  // of every solve differed between runs. Two threads were slower in every
+  // solve of the demo and lens-mismatch here (2 shared cores).
+  solver_options.num_threads = 1;
   solver_options.logging_type = ceres::SILENT;
   if (has_observations) {
     // Ceres orders a group's blocks by address (a std::set<double*>), and

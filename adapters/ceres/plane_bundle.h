@@ -27,9 +27,11 @@ namespace omm {
 // Adjusts *scene, which holds the initial values (sizes: one table position
 // per tile, one column of track_xy_mm per track, one PlatePose per plate,
 // lens.NumIntrinsics() intrinsics; PlaneSceneSeed gives them), and fills its
-// residuals and covariance. `lens` is evaluated concurrently
-// (options.num_threads). Invalid input, config or options give an unusable
-// summary whose brief says what is wrong; the stage checks them first.
+// residuals and covariance. The solve runs on one thread, so that its
+// result is the same to the bit in every run; the covariance's Jacobian
+// evaluates `lens` concurrently (options.num_threads; each block in its own
+// slot). Invalid input, config or options give an unusable summary whose
+// brief says what is wrong; the stage checks them first.
 PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundleInput& input,
                                     const PlaneBundleConfig& config,
                                     const PlaneBundleOptions& options, PlaneScene* scene);

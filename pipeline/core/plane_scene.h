@@ -144,7 +144,7 @@ struct PlaneBundleOptions {
   double function_tolerance = 1e-12;   // relative cost change to stop
   double gradient_tolerance = 1e-12;   // max-norm of the scaled gradient to stop
   double parameter_tolerance = 1e-10;  // relative step size to stop
-  int num_threads = 2;                 // for evaluation, linear solve, covariance
+  int num_threads = 2;                 // for the covariance's Jacobian (the solve uses one)
   // Largest acceptable inlier RMS reprojection error for a usable result, px.
   double max_usable_rms_px = 1.0;
 
