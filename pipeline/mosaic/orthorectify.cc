@@ -353,12 +353,11 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
   char line[320];
   std::snprintf(line, sizeof(line),
                 "mosaic %d x %d px at %.4g mm (origin %.3f, %.3f mm), %.1f %% covered, "
-                "%.2f tile px per mosaic px, map error <= %.1e px, %.3f s%s%s",
+                "%.2f tile px per mosaic px, map error <= %.1e px%s%s",
                 geometry.grid.size_px.x(), geometry.grid.size_px.y(), geometry.grid.gsd_mm,
                 geometry.grid.origin_mm.x(), geometry.grid.origin_mm.y(),
                 100.0 * summary.covered_fraction, summary.tile_px_per_mosaic_px,
-                summary.lens_table_max_error_px, SecondsSince(start),
-                options.compensate_exposure ? "; " : "",
+                summary.lens_table_max_error_px, options.compensate_exposure ? "; " : "",
                 options.compensate_exposure ? summary.exposure.brief.c_str() : "");
   summary.brief = line;
   result.mosaic.grid = geometry.grid;

@@ -156,7 +156,7 @@ struct OrthoMosaic {
 
 struct OrthoSummary {
   bool usable = false;
-  std::string brief;  // one line: size, gsd, coverage, exposure fit, time
+  std::string brief;  // one line: size, gsd, coverage, exposure fit (no time: reproducible)
 
   double lens_table_max_error_px = 0.0;  // the map's interpolation error bound, px
   int lens_table_nodes = 0;
