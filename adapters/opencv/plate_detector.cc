@@ -11,6 +11,7 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "adapters/opencv/adaptive_threshold.h"
 #include "pipeline/core/error.h"
 
 namespace omm {
@@ -46,8 +47,7 @@ Coarse Threshold(const GrayImage& image, const PlateDetectionOptions& options) {
   coarse.gray8 = ToGray8(image);
   int window = static_cast<int>(options.threshold_window_fraction * std::max(image.width(), image.height()));
   window = std::max(3, window | 1);
-  cv::adaptiveThreshold(coarse.gray8, coarse.dark, 255, cv::ADAPTIVE_THRESH_MEAN_C, cv::THRESH_BINARY_INV, window,
-                        options.threshold_offset * 255.0);
+  coarse.dark = AdaptiveDarkMask(coarse.gray8, window, options.threshold_offset * 255.0);
   cv::findContours(coarse.dark, coarse.contours, coarse.hierarchy, cv::RETR_TREE, cv::CHAIN_APPROX_NONE);
   return coarse;
 }
