@@ -4,7 +4,6 @@
 #include <cassert>
 #include <cmath>
 #include <cstdio>
-#include <map>
 #include <utility>
 
 #include <Eigen/Dense>
@@ -34,36 +33,57 @@ std::string ExposureOptions::Check() const {
 
 namespace {
 
-// Consensus radiance of each sample given the exposures (weighted least squares).
-void SolveRadiance(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
-                   const std::vector<TileExposure>& exposure, const std::vector<double>& weight,
-                   std::vector<double>* radiance) {
-  const int num_samples = static_cast<int>(start.size()) - 1;
-  radiance->resize(num_samples);
-  for (int s = 0; s < num_samples; ++s) {
-    double num = 0.0, den = 0.0;
-    for (int k = start[s]; k < start[s + 1]; ++k) {
-      const double f = exposure[obs[k].tile].Factor(obs[k].rho2);
-      num += weight[k] * f * obs[k].value;
-      den += weight[k] * f * f;
-    }
-    (*radiance)[s] = den > 0.0 ? num / den : 0.0;
-  }
+// Each observation's exposure factor F_i(rho^2) under `exposure`, computed
+// once per exposure instead of in every pass over the observations.
+void Factors(const std::vector<ExposureObservation>& obs, const std::vector<TileExposure>& exposure,
+             std::vector<double>* factor) {
+  factor->resize(obs.size());
+  for (size_t k = 0; k < obs.size(); ++k) (*factor)[k] = exposure[obs[k].tile].Factor(obs[k].rho2);
 }
 
-// Relative residual of each observation from its sample's consensus.
-std::vector<double> RelativeResiduals(const std::vector<ExposureObservation>& obs,
-                                      const std::vector<int>& start,
-                                      const std::vector<TileExposure>& exposure,
-                                      const std::vector<double>& radiance) {
-  std::vector<double> e(obs.size());
+// Consensus radiance of sample s given the factors (weighted least squares).
+double Radiance(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
+                const std::vector<double>& factor, const std::vector<double>& weight, size_t s) {
+  double num = 0.0, den = 0.0;
+  for (int k = start[s]; k < start[s + 1]; ++k) {
+    const double f = factor[k];
+    num += weight[k] * f * obs[k].value;
+    den += weight[k] * f * f;
+  }
+  return den > 0.0 ? num / den : 0.0;
+}
+
+// The weighted cost sum w (I - F L)^2 with each sample's radiance re-solved
+// for these factors.
+double Cost(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
+            const std::vector<double>& factor, const std::vector<double>& weight) {
+  double cost = 0.0;
   for (size_t s = 0; s + 1 < start.size(); ++s) {
+    const double l = Radiance(obs, start, factor, weight, s);
     for (int k = start[s]; k < start[s + 1]; ++k) {
-      const double predicted = exposure[obs[k].tile].Factor(obs[k].rho2) * radiance[s];
-      e[k] = predicted > 0.0 ? obs[k].value / predicted - 1.0 : 0.0;
+      const double r = obs[k].value - factor[k] * l;
+      cost += weight[k] * r * r;
     }
   }
-  return e;
+  return cost;
+}
+
+// The consensus radiances for these factors and the relative residual of
+// each observation from its sample's consensus.
+void RadianceAndResiduals(const std::vector<ExposureObservation>& obs,
+                          const std::vector<int>& start, const std::vector<double>& factor,
+                          const std::vector<double>& weight, std::vector<double>* radiance,
+                          std::vector<double>* e) {
+  radiance->resize(start.size() - 1);
+  e->resize(obs.size());
+  for (size_t s = 0; s + 1 < start.size(); ++s) {
+    const double l = Radiance(obs, start, factor, weight, s);
+    (*radiance)[s] = l;
+    for (int k = start[s]; k < start[s + 1]; ++k) {
+      const double predicted = factor[k] * l;
+      (*e)[k] = predicted > 0.0 ? obs[k].value / predicted - 1.0 : 0.0;
+    }
+  }
 }
 
 // 1.4826 median |e|. With `near_sigma` (the previous iteration's), the
@@ -95,20 +115,21 @@ double RobustSigma(const std::vector<double>& e, double near_sigma = 0.0) {
 
 // Largest |median log ratio| of compensated intensities over tile pairs.
 double MaxPairStep(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
-                   const std::vector<TileExposure>& exposure) {
-  std::map<std::pair<int, int>, std::vector<double>> ratios;
+                   const std::vector<double>& factor, int num_tiles) {
+  // ratios[i * num_tiles + j]: the pair (i, j), i < j.
+  std::vector<std::vector<double>> ratios(static_cast<size_t>(num_tiles) * num_tiles);
   for (size_t s = 0; s + 1 < start.size(); ++s) {
     for (int a = start[s]; a < start[s + 1]; ++a) {
       for (int b = a + 1; b < start[s + 1]; ++b) {
-        const ExposureObservation& i = obs[a].tile < obs[b].tile ? obs[a] : obs[b];
-        const ExposureObservation& j = obs[a].tile < obs[b].tile ? obs[b] : obs[a];
-        ratios[{i.tile, j.tile}].push_back(std::log((i.value / exposure[i.tile].Factor(i.rho2)) /
-                                                    (j.value / exposure[j.tile].Factor(j.rho2))));
+        const int i = obs[a].tile < obs[b].tile ? a : b;
+        const int j = obs[a].tile < obs[b].tile ? b : a;
+        ratios[static_cast<size_t>(obs[i].tile) * num_tiles + obs[j].tile].push_back(
+            std::log((obs[i].value / factor[i]) / (obs[j].value / factor[j])));
       }
     }
   }
   double step = 0.0;
-  for (auto& [pair, r] : ratios) {
+  for (std::vector<double>& r : ratios) {
     if (r.size() >= 100) step = std::max(step, std::abs(Median(std::move(r))));
   }
   return step;
@@ -145,13 +166,20 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
   }
 
   std::vector<TileExposure>& exposure = summary.tiles;
-  std::vector<double> weight(obs.size(), 1.0), radiance;
-  SolveRadiance(obs, start, exposure, weight, &radiance);
-  summary.relative_sigma_before = RobustSigma(RelativeResiduals(obs, start, exposure, radiance));
-  summary.max_pair_step_before = MaxPairStep(obs, start, exposure);
+  std::vector<double> weight(obs.size(), 1.0), factor, trial_factor, radiance, e;
+  Factors(obs, exposure, &factor);
+  RadianceAndResiduals(obs, start, factor, weight, &radiance, &e);
+  summary.relative_sigma_before = RobustSigma(e);
+  summary.max_pair_step_before = MaxPairStep(obs, start, factor, num_tiles);
 
   double sigma = 0.0;  // robust sigma of the last iteration's residuals
   const int num_params = 2 * num_tiles;
+  // A sample's H_xL entries: parameter index and value, two per observation.
+  int max_per_sample = 0;
+  for (size_t s = 0; s + 1 < start.size(); ++s)
+    max_per_sample = std::max(max_per_sample, start[s + 1] - start[s]);
+  std::vector<int> xl_index(2 * static_cast<size_t>(max_per_sample));
+  std::vector<double> xl_value(xl_index.size());
   for (summary.iterations = 1; summary.iterations <= options.max_iterations; ++summary.iterations) {
     // One Gauss-Newton step in (a_i, b_i) = (g_i, g_i v_i) with the
     // radiances eliminated (variable projection): r = I - (a - b rho^2) L,
@@ -159,31 +187,35 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
     // reduced gradient is the exposures' own and the reduced normal matrix is
     // H_xx - sum over samples of H_xL H_LL^-1 H_Lx. The alternation this
     // replaces (exposures, then radiances) converged linearly at ~0.7 per
-    // step: 35 steps on the demo.
+    // step: 35 steps on the demo. The lower triangle of h is filled.
     Eigen::MatrixXd h = Eigen::MatrixXd::Zero(num_params, num_params);
     Eigen::VectorXd g = Eigen::VectorXd::Zero(num_params);
-    std::vector<std::pair<int, double>> h_xl;  // this sample's H_xL entries
-    std::vector<double> trial_radiance;
     for (size_t s = 0; s + 1 < start.size(); ++s) {
       const double l = radiance[s];
       double h_ll = 0.0;
-      h_xl.clear();
+      int num_xl = 0;
       for (int k = start[s]; k < start[s + 1]; ++k) {
         const ExposureObservation& o = obs[k];
-        const double w = weight[k], f = exposure[o.tile].Factor(o.rho2);
+        const double w = weight[k], f = factor[k];
         const double r = o.value - f * l;
         const int ia = 2 * o.tile, ib = ia + 1;
         const double ja = -l, jb = o.rho2 * l, jl = -f;  // dr/da, dr/db, dr/dL
         h(ia, ia) += w * ja * ja, h(ib, ia) += w * jb * ja, h(ib, ib) += w * jb * jb;
         g(ia) += w * ja * r, g(ib) += w * jb * r;
         h_ll += w * jl * jl;
-        h_xl.emplace_back(ia, w * ja * jl);
-        h_xl.emplace_back(ib, w * jb * jl);
+        xl_index[num_xl] = ia, xl_value[num_xl++] = w * ja * jl;
+        xl_index[num_xl] = ib, xl_value[num_xl++] = w * jb * jl;
       }
       if (!(h_ll > 0.0)) continue;
-      for (const auto& [p, hp] : h_xl) {
-        for (const auto& [q, hq] : h_xl) {
-          if (q <= p) h(p, q) -= hp * hq / h_ll;
+      // Every ordered pair of entries whose element is in the lower triangle,
+      // as unordered pairs: a pair of one parameter (a tile seen twice) is
+      // both orders.
+      for (int u = 0; u < num_xl; ++u) {
+        for (int v = 0; v <= u; ++v) {
+          const int p = std::max(xl_index[u], xl_index[v]), q = std::min(xl_index[u], xl_index[v]);
+          const double term = xl_value[u] * xl_value[v] / h_ll;
+          h(p, q) -= term;
+          if (p == q && u != v) h(p, q) -= term;
         }
       }
     }
@@ -213,19 +245,8 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
     // The step, halved until the weighted cost (radiances re-solved) goes
     // down: far from the solution (exposure differences of 2x) a full step
     // can overshoot.
-    auto cost_of = [&](const std::vector<TileExposure>& trial) {
-      SolveRadiance(obs, start, trial, weight, &trial_radiance);
-      double cost = 0.0;
-      for (size_t s = 0; s + 1 < start.size(); ++s) {
-        for (int k = start[s]; k < start[s + 1]; ++k) {
-          const double r = obs[k].value - trial[obs[k].tile].Factor(obs[k].rho2) * trial_radiance[s];
-          cost += weight[k] * r * r;
-        }
-      }
-      return cost;
-    };
     std::vector<TileExposure> next = exposure;
-    const double current_cost = cost_of(exposure);
+    const double current_cost = Cost(obs, start, factor, weight);
     for (double scale = 1.0; step.allFinite() && scale > 1e-3; scale *= 0.5) {
       std::vector<TileExposure> trial = exposure;
       bool valid = true;
@@ -239,7 +260,9 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
         trial[i].gain = a;
         trial[i].vignetting = b / a;
       }
-      if (valid && cost_of(trial) < current_cost) {
+      if (!valid) continue;
+      Factors(obs, trial, &trial_factor);
+      if (Cost(obs, start, trial_factor, weight) < current_cost) {
         next = trial;
         break;
       }
@@ -262,16 +285,17 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
                          std::abs(next[i].vignetting - exposure[i].vignetting)});
     }
     exposure = next;
-    SolveRadiance(obs, start, exposure, weight, &radiance);
-    const std::vector<double> e = RelativeResiduals(obs, start, exposure, radiance);
+    Factors(obs, exposure, &factor);
+    RadianceAndResiduals(obs, start, factor, weight, &radiance, &e);
     sigma = RobustSigma(e, sigma);
     const double c = options.cauchy_sigmas * std::max(sigma, 1e-6);
     for (size_t k = 0; k < obs.size(); ++k) weight[k] = 1.0 / (1.0 + (e[k] / c) * (e[k] / c));
     if (change < options.tolerance) break;
   }
   summary.iterations = std::min(summary.iterations, options.max_iterations);
-  summary.relative_sigma_after = RobustSigma(RelativeResiduals(obs, start, exposure, radiance));
-  summary.max_pair_step_after = MaxPairStep(obs, start, exposure);
+  // e: the residuals of the final exposures and radiances.
+  summary.relative_sigma_after = RobustSigma(e);
+  summary.max_pair_step_after = MaxPairStep(obs, start, factor, num_tiles);
   summary.usable = summary.tiles_without_samples.empty();
   char line[256];
   std::snprintf(line, sizeof(line),
