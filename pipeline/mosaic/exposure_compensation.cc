@@ -8,6 +8,7 @@
 
 #include <Eigen/Dense>
 
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
 
 namespace omm {
@@ -28,26 +29,53 @@ std::string ExposureOptions::Check() const {
   if (max_iterations < 1) return "max_iterations must be >= 1";
   if (!(tolerance > 0.0)) return "tolerance must be > 0";
   if (!(cauchy_sigmas > 0.0)) return "cauchy_sigmas must be > 0";
+  if (num_threads < 1) return "num_threads must be >= 1";
   return "";
 }
 
 namespace {
 
+// The observations grouped by sample, and how a pass over them is split
+// between threads: in fixed blocks of samples, a sum over the samples being
+// the blocks' partial sums added in block order, so that the result does not
+// depend on the number of threads.
+struct Samples {
+  static constexpr int kPerBlock = 2048;
+  const std::vector<ExposureObservation>& obs;
+  std::vector<int> start;  // sample s: obs[start[s]] .. obs[start[s + 1] - 1]
+  int max_per_sample = 0;  // observations
+  int num_threads = 1;
+
+  int num_samples() const { return static_cast<int>(start.size()) - 1; }
+  int num_blocks() const { return (num_samples() + kPerBlock - 1) / kPerBlock; }
+  // fn(s0, s1, block) for the samples [s0, s1) of every block.
+  template <typename Fn>
+  void ForEachBlock(Fn fn) const {
+    ParallelFor(num_blocks(), num_threads, [&](int block) {
+      fn(block * kPerBlock, std::min(num_samples(), (block + 1) * kPerBlock), block);
+    });
+  }
+};
+
 // Each observation's exposure factor F_i(rho^2) under `exposure`, computed
 // once per exposure instead of in every pass over the observations.
-void Factors(const std::vector<ExposureObservation>& obs, const std::vector<TileExposure>& exposure,
+void Factors(const Samples& samples, const std::vector<TileExposure>& exposure,
              std::vector<double>* factor) {
+  const std::vector<ExposureObservation>& obs = samples.obs;
   factor->resize(obs.size());
-  for (size_t k = 0; k < obs.size(); ++k) (*factor)[k] = exposure[obs[k].tile].Factor(obs[k].rho2);
+  samples.ForEachBlock([&](int s0, int s1, int) {
+    for (int k = samples.start[s0]; k < samples.start[s1]; ++k)
+      (*factor)[k] = exposure[obs[k].tile].Factor(obs[k].rho2);
+  });
 }
 
 // Consensus radiance of sample s given the factors (weighted least squares).
-double Radiance(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
-                const std::vector<double>& factor, const std::vector<double>& weight, size_t s) {
+double Radiance(const Samples& samples, const std::vector<double>& factor,
+                const std::vector<double>& weight, int s) {
   double num = 0.0, den = 0.0;
-  for (int k = start[s]; k < start[s + 1]; ++k) {
+  for (int k = samples.start[s]; k < samples.start[s + 1]; ++k) {
     const double f = factor[k];
-    num += weight[k] * f * obs[k].value;
+    num += weight[k] * f * samples.obs[k].value;
     den += weight[k] * f * f;
   }
   return den > 0.0 ? num / den : 0.0;
@@ -55,34 +83,99 @@ double Radiance(const std::vector<ExposureObservation>& obs, const std::vector<i
 
 // The weighted cost sum w (I - F L)^2 with each sample's radiance re-solved
 // for these factors.
-double Cost(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
-            const std::vector<double>& factor, const std::vector<double>& weight) {
-  double cost = 0.0;
-  for (size_t s = 0; s + 1 < start.size(); ++s) {
-    const double l = Radiance(obs, start, factor, weight, s);
-    for (int k = start[s]; k < start[s + 1]; ++k) {
-      const double r = obs[k].value - factor[k] * l;
-      cost += weight[k] * r * r;
+double Cost(const Samples& samples, const std::vector<double>& factor,
+            const std::vector<double>& weight) {
+  std::vector<double> block_cost(samples.num_blocks(), 0.0);
+  samples.ForEachBlock([&](int s0, int s1, int block) {
+    double cost = 0.0;
+    for (int s = s0; s < s1; ++s) {
+      const double l = Radiance(samples, factor, weight, s);
+      for (int k = samples.start[s]; k < samples.start[s + 1]; ++k) {
+        const double r = samples.obs[k].value - factor[k] * l;
+        cost += weight[k] * r * r;
+      }
     }
-  }
+    block_cost[block] = cost;
+  });
+  double cost = 0.0;
+  for (const double c : block_cost) cost += c;
   return cost;
 }
 
 // The consensus radiances for these factors and the relative residual of
 // each observation from its sample's consensus.
-void RadianceAndResiduals(const std::vector<ExposureObservation>& obs,
-                          const std::vector<int>& start, const std::vector<double>& factor,
+void RadianceAndResiduals(const Samples& samples, const std::vector<double>& factor,
                           const std::vector<double>& weight, std::vector<double>* radiance,
                           std::vector<double>* e) {
-  radiance->resize(start.size() - 1);
-  e->resize(obs.size());
-  for (size_t s = 0; s + 1 < start.size(); ++s) {
-    const double l = Radiance(obs, start, factor, weight, s);
-    (*radiance)[s] = l;
-    for (int k = start[s]; k < start[s + 1]; ++k) {
-      const double predicted = factor[k] * l;
-      (*e)[k] = predicted > 0.0 ? obs[k].value / predicted - 1.0 : 0.0;
+  radiance->resize(samples.num_samples());
+  e->resize(samples.obs.size());
+  samples.ForEachBlock([&](int s0, int s1, int) {
+    for (int s = s0; s < s1; ++s) {
+      const double l = Radiance(samples, factor, weight, s);
+      (*radiance)[s] = l;
+      for (int k = samples.start[s]; k < samples.start[s + 1]; ++k) {
+        const double predicted = factor[k] * l;
+        (*e)[k] = predicted > 0.0 ? samples.obs[k].value / predicted - 1.0 : 0.0;
+      }
     }
+  });
+}
+
+// The reduced normal equations of one Gauss-Newton step in (a_i, b_i) =
+// (g_i, g_i v_i) with the radiances eliminated (variable projection):
+// r = I - (a - b rho^2) L, and the radiances are optimal for the current
+// exposures, so the reduced gradient g is the exposures' own and the reduced
+// normal matrix h is H_xx - sum over samples of H_xL H_LL^-1 H_Lx (its lower
+// triangle is filled). The alternation this replaces (exposures, then
+// radiances) converged linearly at ~0.7 per step: 35 steps on the demo.
+void ReducedNormalEquations(const Samples& samples, const std::vector<double>& factor,
+                            const std::vector<double>& weight, const std::vector<double>& radiance,
+                            int num_params, Eigen::MatrixXd* h, Eigen::VectorXd* g) {
+  const std::vector<ExposureObservation>& obs = samples.obs;
+  std::vector<Eigen::MatrixXd> block_h(samples.num_blocks());
+  std::vector<Eigen::VectorXd> block_g(samples.num_blocks());
+  samples.ForEachBlock([&](int s0, int s1, int block) {
+    Eigen::MatrixXd& hb = block_h[block];
+    Eigen::VectorXd& gb = block_g[block];
+    hb.setZero(num_params, num_params);
+    gb.setZero(num_params);
+    // A sample's H_xL entries: parameter index and value, two per observation.
+    std::vector<int> xl_index(2 * static_cast<size_t>(samples.max_per_sample));
+    std::vector<double> xl_value(xl_index.size());
+    for (int s = s0; s < s1; ++s) {
+      const double l = radiance[s];
+      double h_ll = 0.0;
+      int n = 0;
+      for (int k = samples.start[s]; k < samples.start[s + 1]; ++k) {
+        const ExposureObservation& o = obs[k];
+        const double w = weight[k], f = factor[k];
+        const double r = o.value - f * l;
+        const int ia = 2 * o.tile, ib = ia + 1;
+        const double ja = -l, jb = o.rho2 * l, jl = -f;  // dr/da, dr/db, dr/dL
+        hb(ia, ia) += w * ja * ja, hb(ib, ia) += w * jb * ja, hb(ib, ib) += w * jb * jb;
+        gb(ia) += w * ja * r, gb(ib) += w * jb * r;
+        h_ll += w * jl * jl;
+        xl_index[n] = ia, xl_value[n++] = w * ja * jl;
+        xl_index[n] = ib, xl_value[n++] = w * jb * jl;
+      }
+      if (!(h_ll > 0.0)) continue;
+      // H_xL H_LL^-1 H_Lx over the lower triangle: each unordered pair of
+      // entries once, twice where both are one parameter (a tile seen twice).
+      for (int u = 0; u < n; ++u) {
+        for (int v = 0; v < u; ++v) {
+          const int p = std::max(xl_index[u], xl_index[v]), q = std::min(xl_index[u], xl_index[v]);
+          const double term = xl_value[u] * xl_value[v] / h_ll;
+          hb(p, q) -= p == q ? term + term : term;
+        }
+        hb(xl_index[u], xl_index[u]) -= xl_value[u] * xl_value[u] / h_ll;
+      }
+    }
+  });
+  h->setZero(num_params, num_params);
+  g->setZero(num_params);
+  for (int block = 0; block < samples.num_blocks(); ++block) {
+    *h += block_h[block];
+    *g += block_g[block];
   }
 }
 
@@ -114,8 +207,9 @@ double RobustSigma(const std::vector<double>& e, double near_sigma = 0.0) {
 }
 
 // Largest |median log ratio| of compensated intensities over tile pairs.
-double MaxPairStep(const std::vector<ExposureObservation>& obs, const std::vector<int>& start,
-                   const std::vector<double>& factor, int num_tiles) {
+double MaxPairStep(const Samples& samples, const std::vector<double>& factor, int num_tiles) {
+  const std::vector<ExposureObservation>& obs = samples.obs;
+  const std::vector<int>& start = samples.start;
   // ratios[i * num_tiles + j]: the pair (i, j), i < j.
   std::vector<std::vector<double>> ratios(static_cast<size_t>(num_tiles) * num_tiles);
   for (size_t s = 0; s + 1 < start.size(); ++s) {
@@ -142,7 +236,8 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
   assert(options.Check().empty());
   ExposureSummary summary;
   summary.tiles.assign(num_tiles, TileExposure{});
-  std::vector<int> start;
+  Samples samples{obs, {}, 0, options.num_threads};
+  std::vector<int>& start = samples.start;
   for (size_t k = 0; k < obs.size(); ++k) {
     assert(obs[k].tile >= 0 && obs[k].tile < num_tiles);
     assert(obs[k].value > 0.0);
@@ -152,7 +247,9 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
     }
   }
   start.push_back(static_cast<int>(obs.size()));
-  summary.num_samples = static_cast<int>(start.size()) - 1;
+  for (int s = 0; s < samples.num_samples(); ++s)
+    samples.max_per_sample = std::max(samples.max_per_sample, start[s + 1] - start[s]);
+  summary.num_samples = samples.num_samples();
   summary.num_observations = static_cast<int>(obs.size());
 
   std::vector<int> tile_count(num_tiles, 0);
@@ -167,58 +264,17 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
 
   std::vector<TileExposure>& exposure = summary.tiles;
   std::vector<double> weight(obs.size(), 1.0), factor, trial_factor, radiance, e;
-  Factors(obs, exposure, &factor);
-  RadianceAndResiduals(obs, start, factor, weight, &radiance, &e);
+  Factors(samples, exposure, &factor);
+  RadianceAndResiduals(samples, factor, weight, &radiance, &e);
   summary.relative_sigma_before = RobustSigma(e);
-  summary.max_pair_step_before = MaxPairStep(obs, start, factor, num_tiles);
+  summary.max_pair_step_before = MaxPairStep(samples, factor, num_tiles);
 
   double sigma = 0.0;  // robust sigma of the last iteration's residuals
   const int num_params = 2 * num_tiles;
-  // A sample's H_xL entries: parameter index and value, two per observation.
-  int max_per_sample = 0;
-  for (size_t s = 0; s + 1 < start.size(); ++s)
-    max_per_sample = std::max(max_per_sample, start[s + 1] - start[s]);
-  std::vector<int> xl_index(2 * static_cast<size_t>(max_per_sample));
-  std::vector<double> xl_value(xl_index.size());
   for (summary.iterations = 1; summary.iterations <= options.max_iterations; ++summary.iterations) {
-    // One Gauss-Newton step in (a_i, b_i) = (g_i, g_i v_i) with the
-    // radiances eliminated (variable projection): r = I - (a - b rho^2) L,
-    // and the radiances are optimal for the current exposures, so the
-    // reduced gradient is the exposures' own and the reduced normal matrix is
-    // H_xx - sum over samples of H_xL H_LL^-1 H_Lx. The alternation this
-    // replaces (exposures, then radiances) converged linearly at ~0.7 per
-    // step: 35 steps on the demo. The lower triangle of h is filled.
-    Eigen::MatrixXd h = Eigen::MatrixXd::Zero(num_params, num_params);
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(num_params);
-    for (size_t s = 0; s + 1 < start.size(); ++s) {
-      const double l = radiance[s];
-      double h_ll = 0.0;
-      int num_xl = 0;
-      for (int k = start[s]; k < start[s + 1]; ++k) {
-        const ExposureObservation& o = obs[k];
-        const double w = weight[k], f = factor[k];
-        const double r = o.value - f * l;
-        const int ia = 2 * o.tile, ib = ia + 1;
-        const double ja = -l, jb = o.rho2 * l, jl = -f;  // dr/da, dr/db, dr/dL
-        h(ia, ia) += w * ja * ja, h(ib, ia) += w * jb * ja, h(ib, ib) += w * jb * jb;
-        g(ia) += w * ja * r, g(ib) += w * jb * r;
-        h_ll += w * jl * jl;
-        xl_index[num_xl] = ia, xl_value[num_xl++] = w * ja * jl;
-        xl_index[num_xl] = ib, xl_value[num_xl++] = w * jb * jl;
-      }
-      if (!(h_ll > 0.0)) continue;
-      // Every ordered pair of entries whose element is in the lower triangle,
-      // as unordered pairs: a pair of one parameter (a tile seen twice) is
-      // both orders.
-      for (int u = 0; u < num_xl; ++u) {
-        for (int v = 0; v <= u; ++v) {
-          const int p = std::max(xl_index[u], xl_index[v]), q = std::min(xl_index[u], xl_index[v]);
-          const double term = xl_value[u] * xl_value[v] / h_ll;
-          h(p, q) -= term;
-          if (p == q && u != v) h(p, q) -= term;
-        }
-      }
-    }
+    Eigen::MatrixXd h;
+    Eigen::VectorXd g;
+    ReducedNormalEquations(samples, factor, weight, radiance, num_params, &h, &g);
     // Free: a and b of tiles with samples, except the gauge's a (the
     // scale of g L is undetermined) and b without vignetting.
     std::vector<int> free;
@@ -246,7 +302,7 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
     // down: far from the solution (exposure differences of 2x) a full step
     // can overshoot.
     std::vector<TileExposure> next = exposure;
-    const double current_cost = Cost(obs, start, factor, weight);
+    const double current_cost = Cost(samples, factor, weight);
     for (double scale = 1.0; step.allFinite() && scale > 1e-3; scale *= 0.5) {
       std::vector<TileExposure> trial = exposure;
       bool valid = true;
@@ -261,8 +317,8 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
         trial[i].vignetting = b / a;
       }
       if (!valid) continue;
-      Factors(obs, trial, &trial_factor);
-      if (Cost(obs, start, trial_factor, weight) < current_cost) {
+      Factors(samples, trial, &trial_factor);
+      if (Cost(samples, trial_factor, weight) < current_cost) {
         next = trial;
         break;
       }
@@ -285,8 +341,8 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
                          std::abs(next[i].vignetting - exposure[i].vignetting)});
     }
     exposure = next;
-    Factors(obs, exposure, &factor);
-    RadianceAndResiduals(obs, start, factor, weight, &radiance, &e);
+    Factors(samples, exposure, &factor);
+    RadianceAndResiduals(samples, factor, weight, &radiance, &e);
     sigma = RobustSigma(e, sigma);
     const double c = options.cauchy_sigmas * std::max(sigma, 1e-6);
     for (size_t k = 0; k < obs.size(); ++k) weight[k] = 1.0 / (1.0 + (e[k] / c) * (e[k] / c));
@@ -295,7 +351,7 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
   summary.iterations = std::min(summary.iterations, options.max_iterations);
   // e: the residuals of the final exposures and radiances.
   summary.relative_sigma_after = RobustSigma(e);
-  summary.max_pair_step_after = MaxPairStep(obs, start, factor, num_tiles);
+  summary.max_pair_step_after = MaxPairStep(samples, factor, num_tiles);
   summary.usable = summary.tiles_without_samples.empty();
   char line[256];
   std::snprintf(line, sizeof(line),

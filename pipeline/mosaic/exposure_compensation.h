@@ -73,6 +73,9 @@ struct ExposureOptions {
   int max_iterations = 100;         // Gauss-Newton steps
   double tolerance = 1e-5;          // stop when no g or v changes more
   double cauchy_sigmas = 3.0;       // Cauchy scale in robust sigmas of the relative residual
+  // Passes over the samples are split between this many threads, in fixed
+  // blocks of samples: the result does not depend on it.
+  int num_threads = 2;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;

@@ -334,8 +334,10 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
 
   const Clock::time_point exposure_start = Clock::now();
   if (options.compensate_exposure) {
+    ExposureOptions exposure_options = options.exposure;
+    exposure_options.num_threads = options.num_threads;
     summary.exposure = EstimateExposure(CollectExposureObservations(geometry, tiles, options),
-                                        static_cast<int>(tiles.size()), options.exposure);
+                                        static_cast<int>(tiles.size()), exposure_options);
   }
   summary.exposure_seconds = SecondsSince(exposure_start);
 

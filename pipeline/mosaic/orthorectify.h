@@ -95,7 +95,9 @@ struct OrthoOptions {
   OrthoInterpolator interpolator = OrthoInterpolator::kCubicBSpline;
   bool compensate_exposure = true;  // false: tiles are blended as recorded
   ExposureOptions exposure;
-  int num_threads = 2;  // rows are split between threads; the result does not depend on it
+  // Rows, and the exposure fit's passes (exposure.num_threads is set from
+  // this), are split between threads; the result does not depend on it.
+  int num_threads = 2;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
