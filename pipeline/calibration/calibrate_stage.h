@@ -60,7 +60,7 @@ namespace omm {
 
 struct CalibrationStageOptions {
   PlateDetectionOptions detection;
-  int num_threads = 2;  // detection threads
+  int num_threads = 2;  // threads for the detection and the perspective-bias corrections
 
   // Perspective-bias rounds (correction + re-solve) after the first solve,
   // and again after a change of lens model.
