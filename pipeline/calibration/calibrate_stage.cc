@@ -293,6 +293,12 @@ UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distan
   summary.typical_px = over_imager.typical_worst_stdev_px;
   summary.worst_px = over_imager.max_worst_stdev_px;
   summary.observed_sigma_px = uncertainty->observed_sigma_px();
+  summary.grid_nx = grid_nx;
+  summary.grid_ny = grid_ny;
+  summary.grid_q_px = over_imager.q_px;
+  summary.grid_worst_px.resize(static_cast<Eigen::Index>(over_imager.points.size()));
+  for (size_t i = 0; i < over_imager.points.size(); ++i)
+    summary.grid_worst_px(static_cast<Eigen::Index>(i)) = over_imager.points[i].worst_stdev_px;
   return summary;
 }
 

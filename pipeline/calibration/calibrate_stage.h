@@ -126,6 +126,12 @@ struct UncertaintySummary {
   double typical_px = 0.0;         // median over the imager, worst-direction stdev
   double worst_px = 0.0;           // max over the imager
   double observed_sigma_px = 0.0;  // input noise estimated from the residuals
+  // The grid the summary was taken over (grid_nx x grid_ny pixels spanning
+  // the imager, row-major, x fastest) and the worst-direction stdev at each:
+  // what the uncertainty map draws, px.
+  int grid_nx = 0, grid_ny = 0;
+  Eigen::Matrix2Xd grid_q_px;
+  Eigen::VectorXd grid_worst_px;
 };
 
 struct MarkOutlier {

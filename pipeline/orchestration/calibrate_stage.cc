@@ -4,10 +4,8 @@
 // the report's calibration section. With `calibration.from`, the earlier
 // calibration is taken instead and calib/ is not read.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -130,29 +128,17 @@ std::vector<NamedImage> CalibImages(const Project& project, const ProgressCallba
   return images;
 }
 
-// calibration/uncertainty.svg: the map of the projection uncertainty whose
-// median and max `uncertainty` summarises (same grid, same distance: the
-// plates' median range). The covariance is computed again here, as the
-// stage's summary keeps only those two numbers; it is cheap (0.025 s on the
-// demo: OPENCV8, 18 plates). Returns false (and writes nothing) when the
-// uncertainty is unavailable.
+// calibration/uncertainty.svg: the map of the projection uncertainty over
+// the grid that `uncertainty` summarises. Returns false (and writes nothing)
+// when the uncertainty is unavailable.
 bool WriteUncertaintyMap(const fs::path& staging_dir, const CalibrationResult& result,
-                         const UncertaintySummary& uncertainty, int grid_nx, int grid_ny) {
+                         const UncertaintySummary& uncertainty) {
   if (!uncertainty.available) return false;
-  const auto start = std::chrono::steady_clock::now();
-  const std::optional<CalibrationUncertainty> covariance =
-      CalibrationUncertainty::Compute(result.record);
-  if (!covariance) return false;
-  const ImagerUncertainty grid = ProjectionUncertaintyOverImager(
-      *covariance, result.camera, uncertainty.distance_mm, grid_nx, grid_ny);
-  Eigen::VectorXd worst_px(static_cast<Eigen::Index>(grid.points.size()));
-  for (size_t i = 0; i < grid.points.size(); ++i) worst_px(i) = grid.points[i].worst_stdev_px;
   WriteTextFileAtomically(
       staging_dir / kUncertaintyPlotName,
-      UncertaintyMapSvg(grid.q_px, worst_px, grid_nx, grid_ny, result.camera.width_px,
-                        result.camera.height_px, grid.distance_mm));
-  spdlog::debug("calibrate: uncertainty map in {:.3f} s",
-                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      UncertaintyMapSvg(uncertainty.grid_q_px, uncertainty.grid_worst_px, uncertainty.grid_nx,
+                        uncertainty.grid_ny, result.camera.width_px, result.camera.height_px,
+                        uncertainty.distance_mm));
   return true;
 }
 
@@ -161,8 +147,7 @@ bool WriteUncertaintyMap(const fs::path& staging_dir, const CalibrationResult& r
 // rms is of WEIGHTED residuals (weight = nominal / estimated mark sigma, up to
 // 4 for sharp marks), so it is reported beside it, not as it.
 CalibrationReport ReportFromSolve(const fs::path& staging_dir, const CalibrationResult& result,
-                                  const UncertaintySummary& uncertainty,
-                                  const CalibrationStageOptions& options) {
+                                  const UncertaintySummary& uncertainty) {
   Eigen::Matrix2Xd q_px, residual_px;
   ResidualVectors(result, &q_px, &residual_px);
   const double rms_px = residual_px.cols() > 0
@@ -183,8 +168,7 @@ CalibrationReport ReportFromSolve(const fs::path& staging_dir, const Calibration
   report.extra.emplace_back("num_outliers", result.num_outliers);
   report.extra.emplace_back("projection_uncertainty", Uncertainty(uncertainty));
   report.extra.emplace_back("residuals_plot", kResidualsPlotName);
-  if (WriteUncertaintyMap(staging_dir, result, uncertainty, options.uncertainty_grid_nx,
-                          options.uncertainty_grid_ny)) {
+  if (WriteUncertaintyMap(staging_dir, result, uncertainty)) {
     report.extra.emplace_back("uncertainty_plot", kUncertaintyPlotName);
   }
   return report;
@@ -252,7 +236,7 @@ void CalibrateFromImages(StageContext& context) {
   WriteCameraModel(context.staging_dir / kCameraModelName, summary.result.camera);
   WriteSolveRecord(context.staging_dir / kSolveRecordName, summary.result.record);
   CalibrationReport report =
-      ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty, options);
+      ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty);
   report.images_rejected = rejected;
   report.extra.emplace_back("source", "calib/");
   ReportValue::Array outliers;
@@ -305,7 +289,7 @@ void ReuseProjectCalibration(StageContext& context, const fs::path& from) {
   const CalibrationStageOptions options;
   const UncertaintySummary uncertainty = SummarizeUncertainty(
       record, WorkingDistanceMm(result), options.uncertainty_grid_nx, options.uncertainty_grid_ny);
-  CalibrationReport report = ReportFromSolve(context.staging_dir, result, uncertainty, options);
+  CalibrationReport report = ReportFromSolve(context.staging_dir, result, uncertainty);
   report.lens_model = camera.lens_model;
   // The earlier run's rejections, if its report is there.
   const fs::path earlier_report = from / "out" / "report.json";
