@@ -37,7 +37,11 @@ void PairEquations(const Pair& p, Eigen::Matrix<double, 2, 18>* rows, Eigen::Vec
   *rhs = -cross * p.m_i;
 }
 
-// Least squares for vec(K) over the pairs with keep[n].
+// Least squares for vec(K) over the pairs with keep[n]. Only the normal
+// matrix's lower triangle is summed (all that ldlt(), Lower by default,
+// reads), element by element: as an 18 x 2 by 2 x 18 product each pair went
+// through Eigen's blocked GEMM, half of the seed's time, for the same
+// two-term sums.
 Eigen::Matrix<double, 18, 1> SolveK(const std::vector<Pair>& pairs, const std::vector<bool>& keep) {
   Eigen::Matrix<double, 18, 18> normal = Eigen::Matrix<double, 18, 18>::Zero();
   Eigen::Matrix<double, 18, 1> rhs_sum = Eigen::Matrix<double, 18, 1>::Zero();
@@ -46,7 +50,10 @@ Eigen::Matrix<double, 18, 1> SolveK(const std::vector<Pair>& pairs, const std::v
     Eigen::Matrix<double, 2, 18> rows;
     Eigen::Vector2d rhs;
     PairEquations(pairs[n], &rows, &rhs);
-    normal += rows.transpose() * rows;
+    for (int j = 0; j < 18; ++j) {
+      for (int i = j; i < 18; ++i)
+        normal(i, j) += rows(0, i) * rows(0, j) + rows(1, i) * rows(1, j);
+    }
     rhs_sum += rows.transpose() * rhs;
   }
   return normal.ldlt().solve(rhs_sum);
