@@ -1,7 +1,5 @@
 #include "adapters/opencv/image_io.h"
 
-#include <dlfcn.h>
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -9,7 +7,6 @@
 #include <fstream>
 #include <optional>
 #include <stdexcept>
-#include <string>
 #include <system_error>
 #include <vector>
 
@@ -22,47 +19,6 @@
 
 namespace omm {
 namespace {
-
-// OpenCV's imgcodecs, loaded on first use instead of with the program: it
-// links ~140 libraries (GDAL, GDCM, Poppler, HEIF, ...), whose loading,
-// relocation and initialisers took ~70 ms of every start of omm (3 % of
-// `omm run` on the demo), and omm needs it only for the images adapters/png
-// does not read (colour and palette PNGs, TIFF, JPEG) and to write TIFF. The
-// pointer types are checked against the header's declarations; the symbols
-// are looked up by their C++ ABI names in the library of the OpenCV omm was
-// built against (OMM_IMGCODECS_LIBRARY, its soname).
-struct Imgcodecs {
-  using Imdecode = decltype(static_cast<cv::Mat (*)(cv::InputArray, int)>(&cv::imdecode));
-  using Imwrite =
-      decltype(static_cast<bool (*)(const cv::String&, cv::InputArray, const std::vector<int>&)>(
-          &cv::imwrite));
-  Imdecode imdecode = nullptr;
-  Imwrite imwrite = nullptr;
-  std::string why_not;  // set when the library or a function is missing
-};
-
-const Imgcodecs& LoadImgcodecs() {
-  static const Imgcodecs loaded = [] {
-    Imgcodecs codecs;
-    // Never closed: the functions stay in use until the program ends.
-    void* library = dlopen(OMM_IMGCODECS_LIBRARY, RTLD_NOW | RTLD_LOCAL);
-    if (library) {
-      codecs.imdecode = reinterpret_cast<Imgcodecs::Imdecode>(
-          dlsym(library, "_ZN2cv8imdecodeERKNS_11_InputArrayEi"));
-      codecs.imwrite = reinterpret_cast<Imgcodecs::Imwrite>(
-          dlsym(library,
-                "_ZN2cv7imwriteERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEERKNS_11_"
-                "InputArrayERKSt6vectorIiSaIiEE"));
-    }
-    if (!codecs.imdecode || !codecs.imwrite) {
-      const char* error = dlerror();
-      codecs.why_not = std::string("OpenCV's imgcodecs (") + OMM_IMGCODECS_LIBRARY +
-                       ") cannot be loaded: " + (error ? error : "unknown error");
-    }
-    return codecs;
-  }();
-  return loaded;
-}
 
 // The decoded file as gray samples at its own depth; `raw` empty: not decodable.
 StoredImage ToStored(cv::Mat raw, const std::filesystem::path& path) {
@@ -115,12 +71,10 @@ StoredImage DecodeImage(std::string_view file_bytes, const std::filesystem::path
   // Gray PNGs (every image omm writes, and the usual camera image) without
   // OpenCV's libpng path: ~40 % less CPU (adapters/png).
   if (std::optional<StoredImage> png = DecodeGrayPng(file_bytes, path)) return std::move(*png);
-  const Imgcodecs& codecs = LoadImgcodecs();
-  if (!codecs.imdecode) throw InputError(path.string(), "cannot decode image: " + codecs.why_not);
   try {
     const cv::Mat bytes(1, static_cast<int>(file_bytes.size()), CV_8U,
                         const_cast<char*>(file_bytes.data()));
-    return ToStored(codecs.imdecode(bytes, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR), path);
+    return ToStored(cv::imdecode(bytes, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR), path);
   } catch (const cv::Exception& e) {
     throw InputError(path.string(), std::string("cannot decode image: ") + e.what());
   }
@@ -172,10 +126,8 @@ void WriteStoredImage(const std::filesystem::path& path, const StoredImage& imag
     ok = static_cast<bool>(out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()))) &&
          static_cast<bool>(out.flush());
   } else {
-    const Imgcodecs& codecs = LoadImgcodecs();
-    if (!codecs.imwrite) throw InputError(path.string(), "cannot write image: " + codecs.why_not);
     try {
-      ok = codecs.imwrite(tmp.string(), SamplesMat(image), {});
+      ok = cv::imwrite(tmp.string(), SamplesMat(image));
     } catch (const cv::Exception&) {
       ok = false;
     }

@@ -1,6 +1,5 @@
-// Reading and writing images (PNG, TIFF, JPEG): gray 8- and 16-bit PNGs
-// through adapters/png, the others through OpenCV's imgcodecs, which is
-// loaded when first needed (image_io.cc).
+// Reading and writing images (PNG, TIFF, JPEG) through OpenCV's imgcodecs;
+// gray 8- and 16-bit PNGs through adapters/png.
 #pragma once
 
 #include <filesystem>

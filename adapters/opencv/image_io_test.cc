@@ -18,38 +18,6 @@ std::filesystem::path TempDir() {
   return dir;
 }
 
-// Whether OpenCV's imgcodecs is mapped into this process.
-bool ImgcodecsLoaded() {
-  std::ifstream maps("/proc/self/maps");
-  const std::string text((std::istreambuf_iterator<char>(maps)), std::istreambuf_iterator<char>());
-  return text.find("libopencv_imgcodecs") != std::string::npos;
-}
-
-// Gray PNGs never load imgcodecs (its ~140 libraries cost every start of omm
-// ~70 ms); a TIFF loads it, and goes through it exactly both ways. (CTest runs
-// each test in a process of its own; run alone, this test comes first.)
-TEST(ImageIo, ImgcodecsIsLoadedOnlyForFilesThatNeedIt) {
-  ASSERT_FALSE(ImgcodecsLoaded());
-  ImageF pixels(4, 6);
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 6; ++c) pixels(r, c) = static_cast<float>(r * 6 + c) / 23.f;
-  const StoredImage png_written = QuantizeImage(pixels, 16);
-  WriteStoredImage(TempDir() / "gray.png", png_written);
-  EXPECT_EQ(ReadStoredImage(TempDir() / "gray.png").samples, png_written.samples);
-  EXPECT_FALSE(ImgcodecsLoaded());
-  for (const int bits : {8, 16}) {
-    const StoredImage written = QuantizeImage(pixels, bits);
-    const auto path = TempDir() / ("gray_" + std::to_string(bits) + ".tif");
-    WriteStoredImage(path, written);
-    const StoredImage read = ReadStoredImage(path);
-    EXPECT_EQ(read.bit_depth, bits);
-    EXPECT_EQ(read.width, 6);
-    EXPECT_EQ(read.height, 4);
-    EXPECT_EQ(read.samples, written.samples) << bits << " bit";
-  }
-  EXPECT_TRUE(ImgcodecsLoaded());
-}
-
 TEST(ImageIo, SixteenBitRoundTripIsExact) {
   ImageF pixels(3, 5);
   for (int r = 0; r < 3; ++r)
