@@ -19,10 +19,6 @@ using ::testing::HasSubstr;
 namespace omm {
 namespace {
 
-testing::CommandResult Omm(const std::string& arguments) {
-  return testing::RunCommand(testing::OmmProgram().string() + " " + arguments);
-}
-
 // (Built by append: GCC 12's -Wrestrict misfires on "'" + std::string at -O3.)
 std::string Quoted(const fs::path& path) {
   return std::string("'").append(path.string()).append("'");
@@ -35,7 +31,7 @@ class CalibrateCliTest : public ::testing::Test {
     dir_ = new testing::TempDir();
     const testing::CachedProject sim = testing::SimulatedProject("demo", 1);
     testing::CopyProject(sim.project_dir, Calibrated());
-    calibrate_ = new testing::CommandResult(Omm("calibrate " + Quoted(Calibrated())));
+    calibrate_ = new testing::CommandResult(testing::RunOmm("calibrate " + Quoted(Calibrated())));
     std::cout << calibrate_->output;
   }
   static void TearDownTestSuite() {
@@ -131,7 +127,7 @@ TEST_F(CalibrateCliTest, ReuseFromAProjectCopiesTheCameraAndTheSolveRecord) {
   ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
   const fs::path dir = Reusing("reuse-project", Calibrated());
   fs::remove_all(dir / "calib");  // not needed
-  const auto result = Omm("calibrate " + Quoted(dir));
+  const auto result = testing::RunOmm("calibrate " + Quoted(dir));
   ASSERT_EQ(result.exit_code, 0) << result.output;
   for (const char* file : {"camera.cameramodel", "calibration/solve.json"}) {
     EXPECT_EQ(testing::ReadTextFile(dir / "out" / file),
@@ -152,7 +148,7 @@ TEST_F(CalibrateCliTest, ReuseFromAProjectCopiesTheCameraAndTheSolveRecord) {
 TEST_F(CalibrateCliTest, ReuseFromACameraModelSaysItsUncertaintyIsNotIncluded) {
   ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
   const fs::path dir = Reusing("reuse-model", Calibrated() / "out" / "camera.cameramodel");
-  const auto result = Omm("calibrate " + Quoted(dir));
+  const auto result = testing::RunOmm("calibrate " + Quoted(dir));
   ASSERT_EQ(result.exit_code, 0) << result.output;
   EXPECT_EQ(testing::ReadTextFile(dir / "out" / "camera.cameramodel"),
             testing::ReadTextFile(Calibrated() / "out" / "camera.cameramodel"));
@@ -172,7 +168,7 @@ TEST_F(CalibrateCliTest, ReuseFromAProjectWithoutCalibrationIsABadInput) {
   const fs::path uncalibrated = dir_->path() / "uncalibrated";
   testing::CopyProject(testing::SimulatedProject("demo", 1).project_dir, uncalibrated);
   const fs::path dir = Reusing("reuse-nothing", uncalibrated);
-  const auto result = Omm("calibrate " + Quoted(dir));
+  const auto result = testing::RunOmm("calibrate " + Quoted(dir));
   EXPECT_EQ(result.exit_code, 2) << result.output;
   EXPECT_THAT(result.output, HasSubstr("has no calibration"));
   EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));

@@ -12,10 +12,6 @@ using ::testing::HasSubstr;
 namespace omm {
 namespace {
 
-testing::CommandResult Omm(const std::string& arguments) {
-  return testing::RunCommand(testing::OmmProgram().string() + " " + arguments);
-}
-
 std::string Quoted(const fs::path& path) { return "'" + path.string() + "'"; }
 
 class CliTest : public ::testing::Test {
@@ -31,28 +27,28 @@ class CliTest : public ::testing::Test {
 TEST(Cli, EverySubcommandHasHelpSayingWhatItReadsAndWrites) {
   for (const std::string command :
        {"run", "calibrate", "mosaic", "measure", "batch", "simulate", "report"}) {
-    const auto result = Omm(command + " --help");
+    const auto result = testing::RunOmm(command + " --help");
     EXPECT_EQ(result.exit_code, 0) << command;
     EXPECT_THAT(result.output, HasSubstr("Usage: omm " + command)) << command;
     EXPECT_THAT(result.output, HasSubstr("Writes")) << command;
   }
-  const auto top = Omm("--help");
+  const auto top = testing::RunOmm("--help");
   EXPECT_EQ(top.exit_code, 0);
   EXPECT_THAT(top.output, HasSubstr("Exit codes:"));
 }
 
 TEST(Cli, VersionAndUsageErrors) {
-  const auto version = Omm("--version");
+  const auto version = testing::RunOmm("--version");
   EXPECT_EQ(version.exit_code, 0);
   EXPECT_THAT(version.output, HasSubstr("omm 0."));
-  EXPECT_EQ(Omm("").exit_code, 2);
-  EXPECT_EQ(Omm("frobnicate").exit_code, 2);
-  EXPECT_EQ(Omm("run").exit_code, 2);  // PROJECT missing
+  EXPECT_EQ(testing::RunOmm("").exit_code, 2);
+  EXPECT_EQ(testing::RunOmm("frobnicate").exit_code, 2);
+  EXPECT_EQ(testing::RunOmm("run").exit_code, 2);  // PROJECT missing
 }
 
 TEST_F(CliTest, BadProjectExitsTwoAndNamesFileAndKey) {
   testing::ReplaceInFile(project_.dir / "project.yaml", "pitch_mm: 12.5", "pitch_mm: -12.5");
-  const auto result = Omm("run " + Quoted(project_.dir));
+  const auto result = testing::RunOmm("run " + Quoted(project_.dir));
   EXPECT_EQ(result.exit_code, 2) << result.output;
   EXPECT_THAT(result.output, HasSubstr("project.yaml:"));
   EXPECT_THAT(result.output, HasSubstr("board.pitch_mm"));
@@ -60,21 +56,22 @@ TEST_F(CliTest, BadProjectExitsTwoAndNamesFileAndKey) {
 }
 
 TEST_F(CliTest, SimulateRefusesTooFewCalibImagesBeforeWriting) {
-  const auto result = Omm("simulate " + Quoted(dir_.path() / "sim") + " --calib-images 2");
+  const auto result =
+      testing::RunOmm("simulate " + Quoted(dir_.path() / "sim") + " --calib-images 2");
   EXPECT_EQ(result.exit_code, 2) << result.output;
   EXPECT_THAT(result.output, HasSubstr("num_calib_images must be in 3..100"));
   EXPECT_FALSE(fs::exists(dir_.path() / "sim"));
 }
 
 TEST_F(CliTest, MissingProjectExitsTwo) {
-  const auto result = Omm("run " + Quoted(dir_.path() / "nowhere"));
+  const auto result = testing::RunOmm("run " + Quoted(dir_.path() / "nowhere"));
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_THAT(result.output, HasSubstr("nowhere"));
 }
 
 TEST_F(CliTest, CorruptTileIsNamedAndLeavesNoReport) {
   testing::WriteTextFile(project_.TilePath("Part_03.png"), "\x89PNG\r\n\x1a\n cut short");
-  const auto result = Omm("run " + Quoted(project_.dir));
+  const auto result = testing::RunOmm("run " + Quoted(project_.dir));
   EXPECT_NE(result.exit_code, 0);
   EXPECT_THAT(result.output, HasSubstr("Part_03.png"));
   EXPECT_FALSE(fs::exists(project_.OutDir() / "report.json"));
@@ -86,7 +83,7 @@ TEST_F(CliTest, FailedRunKeepsAnEarlierReportByteForByte) {
   fs::create_directories(project_.OutDir());
   WriteReportJson(project_.OutDir() / "report.json", earlier);
   const std::string before = testing::ReadTextFile(project_.OutDir() / "report.json");
-  const auto result = Omm("run " + Quoted(project_.dir));
+  const auto result = testing::RunOmm("run " + Quoted(project_.dir));
   EXPECT_NE(result.exit_code, 0);
   EXPECT_EQ(testing::ReadTextFile(project_.OutDir() / "report.json"), before);
   std::vector<std::string> left;
@@ -97,14 +94,14 @@ TEST_F(CliTest, FailedRunKeepsAnEarlierReportByteForByte) {
 }
 
 TEST_F(CliTest, PlainImagesFailCalibrationWithTheirReasons) {
-  const auto result = Omm("run " + Quoted(project_.dir));
+  const auto result = testing::RunOmm("run " + Quoted(project_.dir));
   EXPECT_EQ(result.exit_code, 1) << result.output;
   EXPECT_THAT(result.output, HasSubstr("stage 'calibrate' failed"));
   // One line per reason, not per image.
   EXPECT_THAT(result.output, HasSubstr("; plate not found: calib_01.png, calib_02.png"));
   EXPECT_FALSE(fs::exists(project_.OutDir()));
   // No calibrated camera: the mosaic stage says which stage must run first.
-  const auto mosaic = Omm("mosaic " + Quoted(project_.dir));
+  const auto mosaic = testing::RunOmm("mosaic " + Quoted(project_.dir));
   EXPECT_EQ(mosaic.exit_code, 2);
   EXPECT_THAT(mosaic.output, HasSubstr("no calibrated camera: run `omm calibrate`"));
 }
@@ -113,7 +110,7 @@ TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
   Project bad = testing::TinyProject(dir_.path() / "bad");
   testing::WriteTinyProject(bad);
   testing::ReplaceInFile(bad.dir / "table.csv", "image,x_mm,y_mm", "image,x,y");
-  const auto result = Omm("batch " + Quoted(dir_.path()));  // a folder of projects
+  const auto result = testing::RunOmm("batch " + Quoted(dir_.path()));  // a folder of projects
   EXPECT_EQ(result.exit_code, 1) << result.output;
   EXPECT_THAT(result.output, HasSubstr("2 projects, 2 failed"));
   EXPECT_THAT(result.output, HasSubstr("FAILED (2)"));  // bad: table.csv header
@@ -122,7 +119,7 @@ TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
 }
 
 TEST_F(CliTest, ReportPrintsTheMeasurements) {
-  EXPECT_EQ(Omm("report " + Quoted(project_.dir)).exit_code, 2);  // no report yet
+  EXPECT_EQ(testing::RunOmm("report " + Quoted(project_.dir)).exit_code, 2);  // no report yet
   Report report;
   report.project = "tiny";
   MeasurementReport m;
@@ -132,11 +129,11 @@ TEST_F(CliTest, ReportPrintsTheMeasurements) {
   report.measurements = std::vector<MeasurementReport>{m};
   fs::create_directories(project_.OutDir());
   WriteReportJson(project_.OutDir() / "report.json", report);
-  const auto text = Omm("report " + Quoted(project_.dir));
+  const auto text = testing::RunOmm("report " + Quoted(project_.dir));
   EXPECT_EQ(text.exit_code, 0);
   EXPECT_THAT(text.output, HasSubstr("A_to_B"));
   EXPECT_THAT(text.output, HasSubstr("202.6021"));
-  const auto json = Omm("report --json " + Quoted(project_.dir));
+  const auto json = testing::RunOmm("report --json " + Quoted(project_.dir));
   EXPECT_THAT(json.output, HasSubstr("\"format\": \"omm-report/1\""));
 }
 

@@ -104,6 +104,10 @@ CommandResult RunCommand(const std::string& command) {
 
 fs::path OmmProgram() { return OMM_PROGRAM; }
 
+CommandResult RunOmm(const std::string& arguments) {
+  return RunCommand(OmmProgram().string() + " " + arguments);
+}
+
 fs::path SharedDataDir() {
   const char* source = std::getenv("OMM_SOURCE_DIR");
   return fs::path(source ? source : ".") / ".." / "shared" / "data";

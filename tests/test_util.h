@@ -55,6 +55,9 @@ CommandResult RunCommand(const std::string& command);
 // The built `omm` program of this build tree.
 std::filesystem::path OmmProgram();
 
+// Runs that program with a command line's arguments and captures its output.
+CommandResult RunOmm(const std::string& arguments);
+
 // The real images from public sources in ../shared/data beside the
 // repository (OMM_SOURCE_DIR, set by omm_test; read in place, never copied).
 std::filesystem::path SharedDataDir();

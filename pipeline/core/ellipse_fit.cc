@@ -240,15 +240,18 @@ EllipseFit FitEllipse(const Eigen::Matrix2Xd& points_px, const EllipseFitOptions
   }
   Ellipse ellipse = *direct;
   std::vector<int> use;
-  for (int round = 0; round <= options.max_rejection_rounds; ++round) {
+  // The inliers' indices into `use`; false when too few are left to fit.
+  const auto collect_inliers = [&] {
     use.clear();
     for (int i = 0; i < n; ++i) {
       if (fit.inlier[static_cast<size_t>(i)]) use.push_back(i);
     }
-    if (static_cast<int>(use.size()) < options.min_points) {
-      fit.why_failed = "too few edge points after outlier rejection";
-      return fit;
-    }
+    if (static_cast<int>(use.size()) >= options.min_points) return true;
+    fit.why_failed = "too few edge points after outlier rejection";
+    return false;
+  };
+  for (int round = 0; round <= options.max_rejection_rounds; ++round) {
+    if (!collect_inliers()) return fit;
     ellipse = RefineGeometric(ellipse, points_px, use, options);
     const Eigen::VectorXd d = EllipseSampsonDistances(ellipse, points_px);
     std::vector<double> abs_inlier;
@@ -263,14 +266,7 @@ EllipseFit FitEllipse(const Eigen::Matrix2Xd& points_px, const EllipseFitOptions
     }
     if (!changed) break;
   }
-  use.clear();
-  for (int i = 0; i < n; ++i) {
-    if (fit.inlier[static_cast<size_t>(i)]) use.push_back(i);
-  }
-  if (static_cast<int>(use.size()) < options.min_points) {
-    fit.why_failed = "too few edge points after outlier rejection";
-    return fit;
-  }
+  if (!collect_inliers()) return fit;
   Eigen::VectorXd d;
   Eigen::Matrix<double, Eigen::Dynamic, 5> jacobian;
   SampsonResiduals(ellipse, points_px, use, &d, &jacobian);

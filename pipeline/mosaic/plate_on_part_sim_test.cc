@@ -26,6 +26,7 @@
 #include "pipeline/calibration/calibrate_stage.h"
 #include "pipeline/mosaic/plate_on_part.h"
 #include "pipeline/mosaic/register_tiles.h"
+#include "pipeline/mosaic/synthetic_plane.h"
 #include "tests/sim_cache.h"
 
 namespace omm {
@@ -34,22 +35,6 @@ namespace {
 // Seed 2's registration fails at the time of writing (the image-motion
 // consensus, not the plate); a failed registration fails the suite's setup.
 constexpr int kSeeds[] = {1, 3, 4};
-
-// Scale of the least-squares similarity fit of `adjusted` to `actual`, minus 1, ppm.
-double ScaleErrorPpm(const std::vector<Eigen::Vector2d>& adjusted,
-                     const std::vector<Eigen::Vector2d>& actual) {
-  const int n = static_cast<int>(actual.size());
-  Eigen::Vector2d mean_a = Eigen::Vector2d::Zero(), mean_t = Eigen::Vector2d::Zero();
-  for (int i = 0; i < n; ++i) mean_a += adjusted[i] / n, mean_t += actual[i] / n;
-  double dot = 0, cross = 0, norm = 0;
-  for (int i = 0; i < n; ++i) {
-    const Eigen::Vector2d a = adjusted[i] - mean_a, t = actual[i] - mean_t;
-    dot += t.dot(a);
-    cross += t.x() * a.y() - t.y() * a.x();
-    norm += t.squaredNorm();
-  }
-  return (std::hypot(dot, cross) / norm - 1) * 1e6;
-}
 
 struct Case {
   int seed = 0;

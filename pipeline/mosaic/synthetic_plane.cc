@@ -121,4 +121,20 @@ SyntheticPlane MakeSyntheticPlane(const SyntheticPlaneOptions& options) {
   return s;
 }
 
+double ScaleErrorPpm(const std::vector<Eigen::Vector2d>& adjusted,
+                     const std::vector<Eigen::Vector2d>& actual) {
+  const int n = static_cast<int>(actual.size());
+  Eigen::Vector2d mean_a = Eigen::Vector2d::Zero(), mean_t = Eigen::Vector2d::Zero();
+  for (int i = 0; i < n; ++i) mean_a += adjusted[i] / n, mean_t += actual[i] / n;
+  // Similarity adjusted ~ s Rot actual + d: s = |sum conj(t) a| / sum |t|^2 in complex form.
+  double dot = 0, cross = 0, norm = 0;
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d a = adjusted[i] - mean_a, t = actual[i] - mean_t;
+    dot += t.dot(a);
+    cross += t.x() * a.y() - t.y() * a.x();
+    norm += t.squaredNorm();
+  }
+  return (std::hypot(dot, cross) / norm - 1) * 1e6;
+}
+
 }  // namespace omm

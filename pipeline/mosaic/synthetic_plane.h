@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -45,5 +46,10 @@ SyntheticPlane MakeSyntheticPlane(const SyntheticPlaneOptions& options);
 Eigen::Vector2d ProjectPartPoint(const CameraModel& camera, const PlaneScene& scene,
                                  const Eigen::Vector3d& part_mm,
                                  const Eigen::Vector2d& table_pos_mm);
+
+// Scale of the least-squares similarity fit of `adjusted` to `actual` table
+// positions, minus 1, ppm: the scale error a mosaic built on `adjusted` has.
+double ScaleErrorPpm(const std::vector<Eigen::Vector2d>& adjusted,
+                     const std::vector<Eigen::Vector2d>& actual);
 
 }  // namespace omm
