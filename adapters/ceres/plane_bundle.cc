@@ -308,11 +308,29 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   std::unique_ptr<ceres::LossFunction> loss(MakeLoss(options, input.observation_sigma_px));
   const double inv_sigma = 1.0 / input.observation_sigma_px;
 
-  std::vector<int> tile_observations(num_tiles, 0);
-  for (const TrackObservation& obs : input.observations) {
+  // A track of exactly two observations (two tiles): the first has no loss.
+  // With both robust, a pair that disagreed by more than twice the loss scale
+  // had a segment of minima (both residuals on Huber's linear branch pulling
+  // opposite ways: the cost is flat between the ends where one of them is at
+  // the scale), and Ceres' model (it drops the loss's negative curvature)
+  // crawled along it: lens-mismatch's first solve hit 100 iterations. Without
+  // the first loss the minimum is the end where the first residual is at the
+  // scale, with the same cost and the same pull on the scene; a consistent
+  // pair is on the quadratic branch either way.
+  std::vector<int> num_used(input.num_tracks, 0), first_used(input.num_tracks, -1);
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    const TrackObservation& obs = input.observations[n];
     if (obs.weight <= 0.0) continue;
+    if (num_used[obs.track]++ == 0) first_used[obs.track] = static_cast<int>(n);
+  }
+  std::vector<int> tile_observations(num_tiles, 0);
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    const TrackObservation& obs = input.observations[n];
+    if (obs.weight <= 0.0) continue;
+    const bool robust = num_used[obs.track] != 2 || first_used[obs.track] != static_cast<int>(n);
     problem.AddResidualBlock(
-        new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma * obs.shape), loss.get(),
+        new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma * obs.shape),
+        robust ? loss.get() : nullptr,
         {b.r.data(), b.t.data(), b.table_pos[obs.tile].data(), b.point(scene, obs.track),
          b.intrinsics.data()});
     ++tile_observations[obs.tile];

@@ -8,7 +8,10 @@
 //   + |U (k - k_calibrated)|^2                  (if the intrinsics are refined;
 //                                                k_calibrated: the input's prior
 //                                                mean, else the initial k)
-// with rho the robust loss (PlaneBundleOptions). Cost functions:
+// with rho the robust loss (PlaneBundleOptions), but for the first
+// observation of a track of exactly two, whose term is |.|^2: with both
+// robust, a pair that disagrees by more than twice the loss scale has no
+// unique minimum (plane_bundle.cc). Cost functions:
 // plane_costs.h. Points are eliminated by the Schur complement (ordering:
 // track points first, then pose, table positions, plates, intrinsics).
 //
