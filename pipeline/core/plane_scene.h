@@ -130,7 +130,8 @@ enum class LinearSolver { kSparseSchur, kDenseSchur };
 struct PlaneBundleOptions {
   RobustLoss loss = RobustLoss::kHuber;
   // Residual norm where the loss leaves the quadratic, px (of a weight-1
-  // observation; the loss acts on weight * |q - q_px|).
+  // observation; the loss acts on weight * |q - q_px|, of every observation
+  // but the first of a two-observation track: adapters/ceres/plane_bundle.h).
   double loss_scale_px = 0.5;
   // Points are eliminated by the Schur complement either way; sparse scales
   // with the number of tiles and plates, dense is fine for a few.
