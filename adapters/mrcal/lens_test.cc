@@ -1,11 +1,29 @@
 #include "adapters/mrcal/lens.h"
 
+#include <cmath>
+#include <vector>
+
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/mrcal_lens_projection.h"
 
 namespace omm {
 namespace {
+
+// mrcal's cubic splined model with 10 x 8 knots (what lens-mismatch's
+// calibration picks, fov 38 deg: knots ~255 px apart) over the 12 mm camera's
+// core; the knots' offsets up to 1e-3 in u (~3 px).
+CameraModel SplinedCamera() {
+  CameraModel camera;
+  camera.lens_model = "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38";
+  camera.intrinsics.resize(4 + 2 * 10 * 8);
+  camera.intrinsics.head<4>() << 2670.0, 2668.0, 812.0, 590.0;
+  for (int k = 4; k < camera.intrinsics.size(); ++k)
+    camera.intrinsics[k] = 1e-3 * std::sin(0.7 * k);
+  camera.width_px = 1600;
+  camera.height_px = 1200;
+  return camera;
+}
 
 CameraModel TwelveMillimetreCamera() {
   CameraModel camera;
@@ -112,6 +130,71 @@ TEST(Lens, MrcalLensProjectionIsProjectPoints) {
   Eigen::Vector2d q;
   EXPECT_FALSE(
       MrcalLensProjection(wrong).Project(p, wrong.intrinsics.data(), &q, nullptr, nullptr));
+}
+
+// The blocks near a point hold every intrinsic that the projection of any
+// point whose pixel is within the radius depends on (a nonzero column of
+// dq/dintrinsics), over the image and beyond it (where mrcal clamps to the
+// outer knots). Radius 20 px, neighbours up to 19 px away: "to first order"
+// ignores the spline's slope, < 2 % here.
+TEST(Lens, SplinedBlocksNearHoldEveryKnotANeighbourUses) {
+  const CameraModel camera = SplinedCamera();
+  const MrcalLensProjection lens(camera);
+  const int n = static_cast<int>(camera.intrinsics.size());
+  const std::vector<int> starts = lens.IntrinsicsBlockStarts();
+  // The core, then each row of 10 knots (20 values) in two blocks of 5 knots.
+  ASSERT_EQ(starts.size(), 2u + 8 * 2);
+  EXPECT_EQ(starts[0], 0);
+  for (int row = 0; row < 8; ++row) {
+    EXPECT_EQ(starts[1 + 2 * row], 4 + 20 * row);
+    EXPECT_EQ(starts[2 + 2 * row], 14 + 20 * row);
+  }
+  EXPECT_EQ(starts.back(), n);
+  constexpr double kRadiusPx = 20.0;
+  const double z = 390.0, f = camera.intrinsics[0];
+  int checked = 0;
+  for (double x = -0.4; x <= 0.4; x += 0.0131) {
+    for (double y = -0.3; y <= 0.3; y += 0.0137) {
+      const Eigen::Vector3d p(x * z, y * z, z);
+      Eigen::Vector2d q;
+      ASSERT_TRUE(lens.Project(p, camera.intrinsics.data(), &q, nullptr, nullptr));
+      const std::vector<int> near =
+          lens.IntrinsicsBlocksNear(p, camera.intrinsics.data(), kRadiusPx);
+      ASSERT_FALSE(near.empty());
+      EXPECT_EQ(near[0], 0);  // the core
+      std::vector<bool> listed(n, false);
+      for (size_t k = 0; k < near.size(); ++k) {
+        if (k > 0) {
+          ASSERT_GT(near[k], near[k - 1]);
+        }
+        for (int j = starts[near[k]]; j < starts[near[k] + 1]; ++j) listed[j] = true;
+      }
+      // Alone, a point's 4 rows of 4 knots are in at most 2 blocks per row.
+      EXPECT_LE(lens.IntrinsicsBlocksNear(p, camera.intrinsics.data(), 0.0).size(), 1u + 4 * 2);
+      for (double dx = -19.0; dx <= 19.0; dx += 4.75) {
+        for (double dy = -19.0; dy <= 19.0; dy += 4.75) {
+          const Eigen::Vector3d p2 = p + Eigen::Vector3d(dx * z / f, dy * z / f, 0.0);
+          Eigen::Vector2d q2;
+          RowMajorMatrix2Xd dq_di;
+          ASSERT_TRUE(lens.Project(p2, camera.intrinsics.data(), &q2, nullptr, &dq_di));
+          if ((q2 - q).norm() > 0.95 * kRadiusPx) continue;
+          ++checked;
+          for (int j = 0; j < n; ++j) {
+            if (dq_di.col(j).isZero(0.0)) continue;
+            ASSERT_TRUE(listed[j]) << "intrinsic " << j << " at " << q2.transpose() << ", "
+                                   << (q2 - q).norm() << " px from " << q.transpose();
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked, 100000);
+  // Other models: one block, all of it near every point.
+  const MrcalLensProjection opencv(TwelveMillimetreCamera());
+  EXPECT_EQ(opencv.IntrinsicsBlockStarts(), (std::vector<int>{0, 12}));
+  EXPECT_EQ(opencv.IntrinsicsBlocksNear(Eigen::Vector3d(10, 20, 400),
+                                        TwelveMillimetreCamera().intrinsics.data(), 5.0),
+            std::vector<int>{0});
 }
 
 }  // namespace

@@ -6,6 +6,8 @@
 // interface (adapters/mrcal/mrcal_lens_projection.h wraps mrcal_project).
 #pragma once
 
+#include <vector>
+
 #include <Eigen/Core>
 
 namespace omm {
@@ -29,6 +31,24 @@ class LensProjection {
   virtual bool Project(const Eigen::Vector3d& p_cam, const double* intrinsics,
                        Eigen::Vector2d* q_px, Matrix23d* dq_dp,
                        RowMajorMatrix2Xd* dq_dintrinsics) const = 0;
+
+  // The intrinsics in blocks over which dq_dintrinsics is sparse (a splined
+  // model's projection depends on its core and the few knots around the
+  // point): block b is intrinsics [starts[b], starts[b + 1]), starts running
+  // from 0 to NumIntrinsics(). An optimiser that gives each block its own
+  // parameters sees that sparsity. Default: one block.
+  virtual std::vector<int> IntrinsicsBlockStarts() const { return {0, NumIntrinsics()}; }
+
+  // The blocks (ascending indices into IntrinsicsBlockStarts()) that q
+  // depends on at p_cam and at every point whose pixel is within radius_px of
+  // its pixel (to first order in the projection). Default: all.
+  virtual std::vector<int> IntrinsicsBlocksNear(const Eigen::Vector3d& /*p_cam*/,
+                                                const double* /*intrinsics*/,
+                                                double /*radius_px*/) const {
+    std::vector<int> all(IntrinsicsBlockStarts().size() - 1);
+    for (int b = 0; b < static_cast<int>(all.size()); ++b) all[b] = b;
+    return all;
+  }
 };
 
 }  // namespace omm
