@@ -1,6 +1,9 @@
 #include "adapters/ceres/plane_costs.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <vector>
 
@@ -10,6 +13,8 @@
 #include <Eigen/Geometry>
 
 #include "adapters/mrcal/lens.h"
+#include "adapters/mrcal/mrcal_lens_projection.h"
+#include "pipeline/core/plane_scene.h"
 
 namespace omm {
 namespace {
@@ -46,6 +51,20 @@ CameraModel TwelveMillimetreCamera() {
   camera.intrinsics.resize(12);
   camera.intrinsics << 2667.0, 2665.0, 805.0, 596.0, -0.11, 0.08, 0.0004, -0.0003, 0.01,
       0.002, -0.001, 0.003;
+  camera.width_px = 1600;
+  camera.height_px = 1200;
+  return camera;
+}
+
+// mrcal's cubic splined model with 10 x 8 knots (lens-mismatch's calibration)
+// over the 12 mm camera's core, knot offsets up to 1e-3 in u (~3 px).
+CameraModel SplinedCamera() {
+  CameraModel camera;
+  camera.lens_model = "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38";
+  camera.intrinsics.resize(4 + 2 * 10 * 8);
+  camera.intrinsics.head<4>() << 2667.0, 2665.0, 805.0, 596.0;
+  for (int k = 4; k < camera.intrinsics.size(); ++k)
+    camera.intrinsics[k] = 1e-3 * std::sin(0.7 * k);
   camera.width_px = 1600;
   camera.height_px = 1200;
   return camera;
@@ -138,6 +157,74 @@ TEST(PlaneCosts, PlateMarkReprojectionJacobiansMatchNumeric) {
                               &scale, intrinsics.data()});
 }
 
+// A splined lens's intrinsics in blocks (IntrinsicsBlocks): the cost is the
+// one-block cost to the bit (the values in no block are NaN here: not read
+// where the projection does not depend on them); a point that needs a knot
+// outside its blocks fails the evaluation and counts.
+TEST(PlaneCosts, ReprojectionInIntrinsicsBlocksIsTheOneBlockCost) {
+  const CameraModel camera = SplinedCamera();
+  const MrcalLensProjection lens(camera);
+  Eigen::Vector3d r = LookingDownR();
+  Eigen::Vector3d t(1.5, -2.0, 391.0);
+  Eigen::Vector2d table_pos(140.2, -104.9);
+  Eigen::Vector2d point(-180.0, 60.0);
+  Eigen::VectorXd k = camera.intrinsics;
+  const Eigen::Vector3d p_cam =
+      RotationFromAngleAxis(r) * MovedTrackPoint(table_pos.data(), point.data()) + t;
+  const std::vector<int> starts = lens.IntrinsicsBlockStarts();
+  // 50 px: room for the numeric differentiation's steps.
+  const std::vector<int> near = lens.IntrinsicsBlocksNear(p_cam, k.data(), 50.0);
+  ASSERT_LT(near.size(), starts.size() - 1);
+  std::atomic<int> num_outside{0};
+  Eigen::VectorXd others = k;
+  IntrinsicsBlocks blocks{{}, others.data(), &num_outside};
+  std::vector<double*> params = {r.data(), t.data(), table_pos.data(), point.data()};
+  for (int b : near) {
+    const int size = starts[b + 1] - starts[b];
+    blocks.ranges.emplace_back(starts[b], size);
+    params.push_back(k.data() + starts[b]);
+    others.segment(starts[b], size).setConstant(std::numeric_limits<double>::quiet_NaN());
+  }
+  Eigen::Matrix2d scale;
+  scale << 0.9, 0.3, 0.3, 0.2;
+  scale /= 0.07;
+  const Eigen::Vector2d q_px(300.0, 900.0);
+  const TrackReprojectionCost split(lens, q_px, scale, blocks);
+  const TrackReprojectionCost whole(lens, q_px, scale);
+  ASSERT_EQ(split.parameter_block_sizes().size(), 4 + near.size());
+  ExpectJacobiansMatch(split, params);
+
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  std::vector<RowMajor> j_split, j_whole;
+  for (int size : split.parameter_block_sizes()) j_split.push_back(RowMajor::Zero(2, size));
+  for (int size : whole.parameter_block_sizes()) j_whole.push_back(RowMajor::Zero(2, size));
+  std::vector<double*> j_split_ptr, j_whole_ptr;
+  for (RowMajor& j : j_split) j_split_ptr.push_back(j.data());
+  for (RowMajor& j : j_whole) j_whole_ptr.push_back(j.data());
+  const double* whole_params[] = {r.data(), t.data(), table_pos.data(), point.data(), k.data()};
+  Eigen::Vector2d res_split, res_whole;
+  ASSERT_TRUE(split.Evaluate(params.data(), res_split.data(), j_split_ptr.data()));
+  ASSERT_TRUE(whole.Evaluate(whole_params, res_whole.data(), j_whole_ptr.data()));
+  EXPECT_EQ(res_split, res_whole);
+  for (int b = 0; b < 4; ++b) EXPECT_EQ(j_split[b], j_whole[b]) << "block " << b;
+  RowMajor j_intrinsics = RowMajor::Zero(2, k.size());
+  for (size_t b = 0; b < near.size(); ++b)
+    j_intrinsics.middleCols(starts[near[b]], j_split[4 + b].cols()) = j_split[4 + b];
+  EXPECT_EQ(j_intrinsics, j_whole[4]);
+  EXPECT_EQ(num_outside, 0);
+
+  // The core and a block the point does not use: it fails, and counts.
+  int unused = 1;
+  while (std::find(near.begin(), near.end(), unused) != near.end()) ++unused;
+  const IntrinsicsBlocks wrong{
+      {{0, 4}, {starts[unused], starts[unused + 1] - starts[unused]}}, k.data(), &num_outside};
+  const TrackReprojectionCost outside(lens, q_px, scale, wrong);
+  const double* outside_params[] = {r.data(),     t.data(), table_pos.data(),
+                                    point.data(), k.data(), k.data() + starts[unused]};
+  EXPECT_FALSE(outside.Evaluate(outside_params, res_split.data(), nullptr));
+  EXPECT_EQ(num_outside, 1);
+}
+
 TEST(PlaneCosts, PriorJacobiansMatchNumericAndCostIsTheGaussian) {
   const TablePriorCost table_prior(Eigen::Vector2d(140.0, -105.0), 0.02);
   Eigen::Vector2d table_pos(140.013, -105.021);
@@ -168,6 +255,15 @@ TEST(PlaneCosts, PriorJacobiansMatchNumericAndCostIsTheGaussian) {
   ASSERT_TRUE(held_prior.Evaluate(params, free_residual.data(), nullptr));
   EXPECT_NEAR(free_residual.squaredNorm(),
               (k - calibrated).dot(held_information * (k - calibrated)), 1e-9);
+
+  // In blocks {0}, {1, 2}, {3}: the same residual, to the bit.
+  const IntrinsicsPriorCost blocks_prior(calibrated, held_information, {1, 3}, {0, 1, 3, 4});
+  ASSERT_EQ(blocks_prior.parameter_block_sizes(), (std::vector<int>{1, 2, 1}));
+  ExpectJacobiansMatch(blocks_prior, {k.data(), k.data() + 1, k.data() + 3});
+  Eigen::Vector2d blocks_residual;
+  const double* blocks_params[] = {k.data(), k.data() + 1, k.data() + 3};
+  ASSERT_TRUE(blocks_prior.Evaluate(blocks_params, blocks_residual.data(), nullptr));
+  EXPECT_EQ(blocks_residual, free_residual);
 }
 
 }  // namespace
