@@ -1,6 +1,7 @@
 #include "adapters/ceres/plane_bundle.h"
 
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -302,12 +303,8 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   const double outlier_px = 3.0 * options.loss_scale_px;
   summary.initial_rms_px = Stats(input, *scene, outlier_px).rms_px;
 
-  ceres::Problem::Options problem_options;
-  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  ceres::Problem problem(problem_options);
   std::unique_ptr<ceres::LossFunction> loss(MakeLoss(options, input.observation_sigma_px));
   const double inv_sigma = 1.0 / input.observation_sigma_px;
-
   // A track of exactly two observations (two tiles): the first has no loss.
   // With both robust, a pair that disagreed by more than twice the loss scale
   // had a segment of minima (both residuals on Huber's linear branch pulling
@@ -324,68 +321,144 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
     if (num_used[obs.track]++ == 0) first_used[obs.track] = static_cast<int>(n);
   }
   std::vector<int> tile_observations(num_tiles, 0);
-  for (size_t n = 0; n < input.observations.size(); ++n) {
-    const TrackObservation& obs = input.observations[n];
+  for (const TrackObservation& obs : input.observations) {
     if (obs.weight <= 0.0) continue;
-    const bool robust = num_used[obs.track] != 2 || first_used[obs.track] != static_cast<int>(n);
-    problem.AddResidualBlock(
-        new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma * obs.shape),
-        robust ? loss.get() : nullptr,
-        {b.r.data(), b.t.data(), b.table_pos[obs.tile].data(), b.point(scene, obs.track),
-         b.intrinsics.data()});
     ++tile_observations[obs.tile];
     ++summary.num_observations;
   }
   for (const PlateMarkObservation& obs : input.plate_observations) {
     if (obs.weight <= 0.0) continue;
-    problem.AddResidualBlock(
-        new PlateMarkReprojectionCost(lens, input.plates[obs.plate].mark_uv_mm.col(obs.mark),
-                                      obs.q_px, obs.weight * inv_sigma),
-        loss.get(),
-        {b.r.data(), b.t.data(), b.table_pos[obs.tile].data(), b.plate_pose[obs.plate].data(),
-         &b.plate_height[obs.plate], &b.plate_scale[obs.plate], b.intrinsics.data()});
     ++tile_observations[obs.tile];
     ++summary.num_observations;
   }
-  for (int i = 0; i < num_tiles; ++i) {
-    problem.AddResidualBlock(
-        new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
-        b.table_pos[i].data());
+  for (int i = 0; i < num_tiles; ++i)
     if (tile_observations[i] == 0) summary.tiles_without_observations.push_back(i);
-    if (!config.refine_table_positions) problem.SetParameterBlockConstant(b.table_pos[i].data());
-  }
   const bool has_observations = summary.num_observations > 0;
-  if (has_observations) {
-    if (!config.refine_plane_pose) {
-      problem.SetParameterBlockConstant(b.r.data());
-      problem.SetParameterBlockConstant(b.t.data());
-    } else if (config.gauge == PlaneGauge::kOriginOnOpticalAxis) {
-      problem.SetManifold(b.t.data(), new ceres::SubsetManifold(3, {0, 1}));
-    }
-    if (config.refine_intrinsics) {
-      problem.AddResidualBlock(
-          new IntrinsicsPriorCost(calibrated_intrinsics, input.intrinsics_information,
-                                  input.intrinsics_held),
-          nullptr, b.intrinsics.data());
-      if (!input.intrinsics_held.empty()) {
-        problem.SetManifold(b.intrinsics.data(),
-                            new ceres::SubsetManifold(num_intrinsics, input.intrinsics_held));
+
+  // Refined intrinsics in the lens's blocks (IntrinsicsBlockStarts): each
+  // observation lists only the blocks its projection depends on (within
+  // options.intrinsics_block_margin_px), so that the reduced system sees the
+  // sparsity: a splined model's 2 x 164 Jacobian rows have 2 x 36 nonzeros,
+  // and Ceres formed 164 x 164 products per observation. The intrinsics
+  // outside an observation's blocks are read from `initial_intrinsics`; a
+  // step that needs them fails (IntrinsicsBlocks), and then the solve runs
+  // again with one block.
+  const std::vector<int> lens_block_starts = lens.IntrinsicsBlockStarts();
+  const Eigen::VectorXd initial_intrinsics = b.intrinsics;
+  std::atomic<int> num_outside{0};
+  // The intrinsics' blocks of the problem: starts, {0, N} for one block.
+  std::vector<int> block_starts;
+  // Held intrinsics in blocks held constant: Ceres counts them in
+  // num_effective_parameters (a SubsetManifold's held values it does not).
+  int held_in_constant_blocks = 0;
+  const auto intrinsics_block = [&](size_t k) { return b.intrinsics.data() + block_starts[k]; };
+  const auto build = [&](bool split) {
+    block_starts = split ? lens_block_starts : std::vector<int>{0, num_intrinsics};
+    held_in_constant_blocks = 0;
+    const size_t num_blocks = block_starts.size() - 1;
+    const Eigen::Matrix3d cam_from_part = RotationFromAngleAxis(Eigen::Vector3d(b.r.data()));
+    const Eigen::Vector3d t(b.t.data());
+    // An observation's intrinsics blocks, given its part-frame point.
+    std::vector<double*> blocks;
+    const auto intrinsics_of = [&](const Eigen::Vector3d& x_part) {
+      blocks.clear();
+      if (!split) {
+        blocks.push_back(b.intrinsics.data());
+        return IntrinsicsBlocks{};
       }
-    } else {
-      problem.SetParameterBlockConstant(b.intrinsics.data());
+      IntrinsicsBlocks of{{}, initial_intrinsics.data(), &num_outside};
+      for (int k : lens.IntrinsicsBlocksNear(cam_from_part * x_part + t, b.intrinsics.data(),
+                                             options.intrinsics_block_margin_px)) {
+        of.ranges.emplace_back(block_starts[k], block_starts[k + 1] - block_starts[k]);
+        blocks.push_back(intrinsics_block(k));
+      }
+      return of;
+    };
+    ceres::Problem::Options problem_options;
+    problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    auto problem = std::make_unique<ceres::Problem>(problem_options);
+    for (size_t n = 0; n < input.observations.size(); ++n) {
+      const TrackObservation& obs = input.observations[n];
+      if (obs.weight <= 0.0) continue;
+      const bool robust = num_used[obs.track] != 2 || first_used[obs.track] != static_cast<int>(n);
+      double* table_pos = b.table_pos[obs.tile].data();
+      double* point = b.point(scene, obs.track);
+      IntrinsicsBlocks of = intrinsics_of(MovedTrackPoint(table_pos, point));
+      std::vector<double*> parameters = {b.r.data(), b.t.data(), table_pos, point};
+      parameters.insert(parameters.end(), blocks.begin(), blocks.end());
+      problem->AddResidualBlock(
+          new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma * obs.shape,
+                                    std::move(of)),
+          robust ? loss.get() : nullptr, parameters);
     }
-    if (config.gauge == PlaneGauge::kFixedTrack) {
-      problem.SetParameterBlockConstant(b.point(scene, config.gauge_track));
+    for (const PlateMarkObservation& obs : input.plate_observations) {
+      if (obs.weight <= 0.0) continue;
+      const Eigen::Vector2d mark_uv = input.plates[obs.plate].mark_uv_mm.col(obs.mark);
+      double* table_pos = b.table_pos[obs.tile].data();
+      double* pose = b.plate_pose[obs.plate].data();
+      IntrinsicsBlocks of = intrinsics_of(MovedPlateMark(table_pos, pose, b.plate_height[obs.plate],
+                                                         b.plate_scale[obs.plate], mark_uv));
+      std::vector<double*> parameters = {b.r.data(),
+                                         b.t.data(),
+                                         table_pos,
+                                         pose,
+                                         &b.plate_height[obs.plate],
+                                         &b.plate_scale[obs.plate]};
+      parameters.insert(parameters.end(), blocks.begin(), blocks.end());
+      problem->AddResidualBlock(new PlateMarkReprojectionCost(
+                                    lens, mark_uv, obs.q_px, obs.weight * inv_sigma, std::move(of)),
+                                loss.get(), parameters);
     }
-  }
-  for (int g = 0; g < num_plates; ++g) {
-    if (!problem.HasParameterBlock(b.plate_pose[g].data())) continue;
-    if (input.plates[g].height_mm.has_value()) {
-      b.plate_height[g] = *input.plates[g].height_mm;
-      problem.SetParameterBlockConstant(&b.plate_height[g]);
+    for (int i = 0; i < num_tiles; ++i) {
+      problem->AddResidualBlock(
+          new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
+          b.table_pos[i].data());
+      if (!config.refine_table_positions) problem->SetParameterBlockConstant(b.table_pos[i].data());
     }
-    if (!config.refine_plate_scale) problem.SetParameterBlockConstant(&b.plate_scale[g]);
-  }
+    if (has_observations) {
+      if (!config.refine_plane_pose) {
+        problem->SetParameterBlockConstant(b.r.data());
+        problem->SetParameterBlockConstant(b.t.data());
+      } else if (config.gauge == PlaneGauge::kOriginOnOpticalAxis) {
+        problem->SetManifold(b.t.data(), new ceres::SubsetManifold(3, {0, 1}));
+      }
+      if (config.refine_intrinsics) {
+        std::vector<double*> all_blocks;
+        for (size_t k = 0; k < num_blocks; ++k) all_blocks.push_back(intrinsics_block(k));
+        problem->AddResidualBlock(
+            new IntrinsicsPriorCost(calibrated_intrinsics, input.intrinsics_information,
+                                    input.intrinsics_held, block_starts),
+            nullptr, all_blocks);
+        // The held intrinsics: each block's, in its own indices.
+        for (size_t k = 0; k < num_blocks; ++k) {
+          const int first = block_starts[k], size = block_starts[k + 1] - first;
+          std::vector<int> held;
+          for (int j : input.intrinsics_held)
+            if (j >= first && j < first + size) held.push_back(j - first);
+          if (static_cast<int>(held.size()) == size) {
+            problem->SetParameterBlockConstant(intrinsics_block(k));
+            held_in_constant_blocks += size;
+          } else if (!held.empty()) {
+            problem->SetManifold(intrinsics_block(k), new ceres::SubsetManifold(size, held));
+          }
+        }
+      } else {
+        problem->SetParameterBlockConstant(b.intrinsics.data());
+      }
+      if (config.gauge == PlaneGauge::kFixedTrack) {
+        problem->SetParameterBlockConstant(b.point(scene, config.gauge_track));
+      }
+    }
+    for (int g = 0; g < num_plates; ++g) {
+      if (!problem->HasParameterBlock(b.plate_pose[g].data())) continue;
+      if (input.plates[g].height_mm.has_value()) {
+        b.plate_height[g] = *input.plates[g].height_mm;
+        problem->SetParameterBlockConstant(&b.plate_height[g]);
+      }
+      if (!config.refine_plate_scale) problem->SetParameterBlockConstant(&b.plate_scale[g]);
+    }
+    return problem;
+  };
 
   ceres::Solver::Options solver_options;
   solver_options.linear_solver_type = options.linear_solver == LinearSolver::kSparseSchur
@@ -402,13 +475,13 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   // solve of the demo and lens-mismatch here (2 shared cores).
   solver_options.num_threads = 1;
   solver_options.logging_type = ceres::SILENT;
-  if (has_observations) {
-    // Ceres orders a group's blocks by address (a std::set<double*>), and
-    // that order lays out the reduced system and orders its sums: with the
-    // heap's layout, which differs between runs, the solution's last bits
-    // did. So every scene block has a group of its own, in the scene
-    // vector's order. The points share group 0: columns of one matrix, they
-    // are in track order.
+  if (!has_observations) solver_options.linear_solver_type = ceres::DENSE_QR;  // priors alone
+  // Ceres orders a group's blocks by address (a std::set<double*>), and that
+  // order lays out the reduced system and orders its sums: with the heap's
+  // layout, which differs between runs, the solution's last bits did. So
+  // every scene block has a group of its own, in the scene vector's order.
+  // The points share group 0: columns of one matrix, they are in track order.
+  const auto ordering_of = [&](const ceres::Problem& problem) {
     auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
     for (int k = 0; k < input.num_tracks; ++k) ordering->AddElementToGroup(b.point(scene, k), 0);
     int group = 1;
@@ -423,16 +496,25 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
       add_group(&b.plate_height[g]);
       add_group(&b.plate_scale[g]);
     }
-    add_group(b.intrinsics.data());
-    solver_options.linear_solver_ordering = ordering;
-  } else {
-    solver_options.linear_solver_type = ceres::DENSE_QR;  // priors alone: no points
-  }
+    for (size_t k = 0; k + 1 < block_starts.size(); ++k) add_group(intrinsics_block(k));
+    return ordering;
+  };
+  const bool split = has_observations && config.refine_intrinsics && lens_block_starts.size() > 2;
+  std::unique_ptr<ceres::Problem> problem = build(split);
+  if (has_observations) solver_options.linear_solver_ordering = ordering_of(*problem);
   ceres::Solver::Summary solver_summary;
-  ceres::Solve(solver_options, &problem, &solver_summary);
-  summary.iterations = static_cast<int>(solver_summary.iterations.size()) - 1;
+  ceres::Solve(solver_options, problem.get(), &solver_summary);
+  int iterations = static_cast<int>(solver_summary.iterations.size()) - 1;
+  summary.intrinsics_block_exits = num_outside;
+  if (num_outside > 0) {  // from where it stopped, with the intrinsics in one block
+    problem = build(false);
+    solver_options.linear_solver_ordering = ordering_of(*problem);
+    ceres::Solve(solver_options, problem.get(), &solver_summary);
+    iterations += static_cast<int>(solver_summary.iterations.size()) - 1;
+  }
+  summary.iterations = iterations;
   summary.num_residuals = solver_summary.num_residuals;
-  summary.num_parameters = solver_summary.num_effective_parameters;
+  summary.num_parameters = solver_summary.num_effective_parameters - held_in_constant_blocks;
   summary.solve_seconds = SecondsSince(start);
 
   BlocksToScene(b, scene);
@@ -460,7 +542,7 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
     const Clock::time_point covariance_start = Clock::now();
     std::vector<std::pair<double*, int>> scene_blocks;  // block, offset in the scene vector
     auto add_block = [&](double* block, int offset) {
-      if (problem.HasParameterBlock(block)) scene_blocks.push_back({block, offset});
+      if (problem->HasParameterBlock(block)) scene_blocks.push_back({block, offset});
     };
     add_block(b.r.data(), 0);
     add_block(b.t.data(), 3);
@@ -471,21 +553,24 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
       add_block(&b.plate_height[g], offset + 3);
       add_block(&b.plate_scale[g], offset + 4);
     }
-    add_block(b.intrinsics.data(), PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates));
+    for (size_t k = 0; k + 1 < block_starts.size(); ++k) {
+      add_block(intrinsics_block(k),
+                PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates) + block_starts[k]);
+    }
     const int size = PlaneSceneCovarianceSize(num_tiles, num_plates, num_intrinsics);
     scene->covariance.resize(0, 0);
     scene->track_covariance_mm2.clear();
     Eigen::MatrixXd scene_covariance;
     std::vector<Eigen::Matrix2d> track_covariance;
     summary.covariance_ok =
-        SchurCovariance(&problem, scene_blocks, b, scene, config.covariance_tracks,
+        SchurCovariance(problem.get(), scene_blocks, b, scene, config.covariance_tracks,
                         options.num_threads, &scene_covariance, &track_covariance);
     if (summary.covariance_ok) {
       scene->covariance = Eigen::MatrixXd::Zero(size, size);
       for (size_t m = 0, row = 0; m < scene_blocks.size(); ++m) {
-        const int size_m = problem.ParameterBlockSize(scene_blocks[m].first);
+        const int size_m = problem->ParameterBlockSize(scene_blocks[m].first);
         for (size_t n = 0, col = 0; n < scene_blocks.size(); ++n) {
-          const int size_n = problem.ParameterBlockSize(scene_blocks[n].first);
+          const int size_n = problem->ParameterBlockSize(scene_blocks[n].first);
           scene->covariance.block(scene_blocks[m].second, scene_blocks[n].second, size_m, size_n) =
               scene_covariance.block(row, col, size_m, size_n);
           col += size_n;

@@ -14,6 +14,10 @@
 // unique minimum (plane_bundle.cc). Cost functions:
 // plane_costs.h. Points are eliminated by the Schur complement (ordering:
 // track points first, then pose, table positions, plates, intrinsics).
+// Refined intrinsics are a parameter block per block of the lens
+// (LensProjection::IntrinsicsBlockStarts), each observation taking those its
+// pixel depends on: a splined model's sparsity, which the reduced system then
+// keeps.
 //
 // Gauge. Without it the normal equations are singular (plane_scene.h, (a)):
 // kOriginOnOpticalAxis holds t_x, t_y (t on a SubsetManifold), kFixedTrack

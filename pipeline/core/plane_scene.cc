@@ -41,6 +41,7 @@ std::string PlaneBundleOptions::Check() const {
   }
   if (num_threads < 1) return "num_threads must be >= 1";
   if (!(max_usable_rms_px > 0.0)) return "max_usable_rms_px must be > 0";
+  if (!(intrinsics_block_margin_px >= 0.0)) return "intrinsics_block_margin_px must be >= 0";
   return "";
 }
 

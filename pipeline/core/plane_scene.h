@@ -148,6 +148,13 @@ struct PlaneBundleOptions {
   int num_threads = 2;                 // for the covariance's Jacobian (the solve uses one)
   // Largest acceptable inlier RMS reprojection error for a usable result, px.
   double max_usable_rms_px = 1.0;
+  // Refined intrinsics of a lens with blocks (LensProjection::
+  // IntrinsicsBlockStarts, a splined model's knots): each observation takes
+  // the blocks its projection depends on within this distance of its initial
+  // pixel, px. (The final adjustment's pixels moved < 0.2 px on
+  // lens-mismatch.) One that needs more makes the solve run again with the
+  // intrinsics in one block (PlaneBundleSummary::intrinsics_block_exits).
+  double intrinsics_block_margin_px = 20.0;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
@@ -219,6 +226,10 @@ struct PlaneBundleSummary {
   std::vector<int> tiles_without_observations;
   double plane_tilt_deg = 0.0;  // angle between the camera's z axis and -Z
   bool covariance_ok = false;
+  // Evaluations that needed intrinsics outside an observation's blocks
+  // (PlaneBundleOptions::intrinsics_block_margin_px); if any, the solve was
+  // run again from where it stopped with the intrinsics in one block.
+  int intrinsics_block_exits = 0;
   double solve_seconds = 0.0;
   double covariance_seconds = 0.0;
 };
