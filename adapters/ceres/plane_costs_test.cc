@@ -14,6 +14,7 @@
 
 #include "adapters/mrcal/lens.h"
 #include "adapters/mrcal/mrcal_lens_projection.h"
+#include "adapters/mrcal/synthetic_plates.h"
 #include "pipeline/core/plane_scene.h"
 
 namespace omm {
@@ -51,20 +52,6 @@ CameraModel TwelveMillimetreCamera() {
   camera.intrinsics.resize(12);
   camera.intrinsics << 2667.0, 2665.0, 805.0, 596.0, -0.11, 0.08, 0.0004, -0.0003, 0.01,
       0.002, -0.001, 0.003;
-  camera.width_px = 1600;
-  camera.height_px = 1200;
-  return camera;
-}
-
-// mrcal's cubic splined model with 10 x 8 knots (lens-mismatch's calibration)
-// over the 12 mm camera's core, knot offsets up to 1e-3 in u (~3 px).
-CameraModel SplinedCamera() {
-  CameraModel camera;
-  camera.lens_model = "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38";
-  camera.intrinsics.resize(4 + 2 * 10 * 8);
-  camera.intrinsics.head<4>() << 2667.0, 2665.0, 805.0, 596.0;
-  for (int k = 4; k < camera.intrinsics.size(); ++k)
-    camera.intrinsics[k] = 1e-3 * std::sin(0.7 * k);
   camera.width_px = 1600;
   camera.height_px = 1200;
   return camera;
@@ -162,7 +149,7 @@ TEST(PlaneCosts, PlateMarkReprojectionJacobiansMatchNumeric) {
 // where the projection does not depend on them); a point that needs a knot
 // outside its blocks fails the evaluation and counts.
 TEST(PlaneCosts, ReprojectionInIntrinsicsBlocksIsTheOneBlockCost) {
-  const CameraModel camera = SplinedCamera();
+  const CameraModel camera = testing::SplinedCamera();
   const MrcalLensProjection lens(camera);
   Eigen::Vector3d r = LookingDownR();
   Eigen::Vector3d t(1.5, -2.0, 391.0);

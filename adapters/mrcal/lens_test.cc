@@ -6,24 +6,10 @@
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/mrcal_lens_projection.h"
+#include "adapters/mrcal/synthetic_plates.h"
 
 namespace omm {
 namespace {
-
-// mrcal's cubic splined model with 10 x 8 knots (what lens-mismatch's
-// calibration picks, fov 38 deg: knots ~255 px apart) over the 12 mm camera's
-// core; the knots' offsets up to 1e-3 in u (~3 px).
-CameraModel SplinedCamera() {
-  CameraModel camera;
-  camera.lens_model = "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38";
-  camera.intrinsics.resize(4 + 2 * 10 * 8);
-  camera.intrinsics.head<4>() << 2670.0, 2668.0, 812.0, 590.0;
-  for (int k = 4; k < camera.intrinsics.size(); ++k)
-    camera.intrinsics[k] = 1e-3 * std::sin(0.7 * k);
-  camera.width_px = 1600;
-  camera.height_px = 1200;
-  return camera;
-}
 
 CameraModel TwelveMillimetreCamera() {
   CameraModel camera;
@@ -138,7 +124,7 @@ TEST(Lens, MrcalLensProjectionIsProjectPoints) {
 // outer knots). Radius 20 px, neighbours up to 19 px away: "to first order"
 // ignores the spline's slope, < 2 % here.
 TEST(Lens, SplinedBlocksNearHoldEveryKnotANeighbourUses) {
-  const CameraModel camera = SplinedCamera();
+  const CameraModel camera = testing::SplinedCamera();
   const MrcalLensProjection lens(camera);
   const int n = static_cast<int>(camera.intrinsics.size());
   const std::vector<int> starts = lens.IntrinsicsBlockStarts();

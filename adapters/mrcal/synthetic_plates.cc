@@ -21,6 +21,18 @@ CameraModel TruthCamera() {
   return camera;
 }
 
+CameraModel SplinedCamera() {
+  CameraModel camera;
+  camera.lens_model = "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38";
+  camera.intrinsics.resize(4 + 2 * 10 * 8);
+  camera.intrinsics.head<4>() << 2670.0, 2668.0, 812.0, 590.0;
+  for (int k = 4; k < camera.intrinsics.size(); ++k)
+    camera.intrinsics[k] = 1e-3 * std::sin(0.7 * k);
+  camera.width_px = 1600;
+  camera.height_px = 1200;
+  return camera;
+}
+
 std::vector<PlateObservation> SyntheticPlates::Observe(double noise_px, uint32_t seed) const {
   std::mt19937 rng(seed);
   std::normal_distribution<double> noise(0.0, noise_px);

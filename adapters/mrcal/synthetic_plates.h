@@ -18,6 +18,11 @@ namespace omm::testing {
 
 CameraModel TruthCamera();
 
+// mrcal's cubic splined model with 10 x 8 knots (what lens-mismatch's
+// calibration picks, fov 38 deg: knots ~255 px apart) over the 12 mm camera's
+// core; the knots' offsets up to 1e-3 in u (~3 px).
+CameraModel SplinedCamera();
+
 struct SyntheticPlates {
   std::vector<Vector6d> rt_cam_from_plate;      // truth poses
   std::vector<Eigen::Matrix2Xd> q_truth_px;     // noise-free marks

@@ -86,6 +86,13 @@ PlaneAdjustment Adjust(const SyntheticPlane& s, const PlaneBundleConfig& config 
   return AdjustPlaneScene(s.camera, s.input, config, PlaneBundleOptions{});
 }
 
+// How many observations each track has.
+std::vector<int> ObservationsPerTrack(const PlaneBundleInput& input) {
+  std::vector<int> num_obs(input.num_tracks, 0);
+  for (const TrackObservation& obs : input.observations) ++num_obs[obs.track];
+  return num_obs;
+}
+
 // (e) The seed needs no knowledge of the camera's rotation about its axis,
 // its tilt or distance; the adjustment converges from it.
 TEST(PlaneAdjustment, SeedAndSolveConvergeForAnyRotationAboutTheAxis) {
@@ -363,8 +370,7 @@ TEST(PlaneAdjustment, GrossOutliersAreDownWeighted) {
   options.num_tracks = 1500;
   const SyntheticPlane clean = MakeSyntheticPlane(options);
   SyntheticPlane s = clean;
-  std::vector<int> num_obs(s.input.num_tracks, 0);
-  for (const TrackObservation& obs : s.input.observations) ++num_obs[obs.track];
+  const std::vector<int> num_obs = ObservationsPerTrack(s.input);
   int num_outliers = 0;
   std::vector<bool> spoiled(s.input.num_tracks, false);
   for (size_t n = 0; n < s.input.observations.size(); ++n) {
@@ -415,8 +421,7 @@ TEST(PlaneAdjustment, TwoTileMismatchesDoNotStallTheSolve) {
   options.num_tracks = 1500;
   const SyntheticPlane clean = MakeSyntheticPlane(options);
   SyntheticPlane s = clean;
-  std::vector<int> num_obs(s.input.num_tracks, 0);
-  for (const TrackObservation& obs : s.input.observations) ++num_obs[obs.track];
+  const std::vector<int> num_obs = ObservationsPerTrack(s.input);
   std::vector<bool> spoiled(s.input.num_tracks, false);
   int num_spoiled = 0;
   for (TrackObservation& obs : s.input.observations) {
