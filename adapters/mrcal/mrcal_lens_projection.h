@@ -17,8 +17,9 @@ class MrcalLensProjection : public LensProjection {
   int NumIntrinsics() const override;
   bool Project(const Eigen::Vector3d& p_cam, const double* intrinsics, Eigen::Vector2d* q_px,
                Matrix23d* dq_dp, RowMajorMatrix2Xd* dq_dintrinsics) const override;
-  // Splined models: the core (fx, fy, cx, cy) is block 0, each knot's two
-  // values a block of their own; other models: one block.
+  // Splined models: the core (fx, fy, cx, cy) is block 0, then each row of
+  // knots in blocks of about order + 2 knots (both values of each); other
+  // models: one block.
   std::vector<int> IntrinsicsBlockStarts() const override;
   std::vector<int> IntrinsicsBlocksNear(const Eigen::Vector3d& p_cam, const double* intrinsics,
                                         double radius_px) const override;
