@@ -19,6 +19,7 @@
 #include <fstream>
 #include <map>
 #include <regex>
+#include <sstream>
 
 #include <gtest/gtest.h>
 
@@ -121,6 +122,52 @@ TEST(RegisterTilesReal, LscmSpeckleOffsetsAgreeWithPublishedRegistration) {
     EXPECT_LT((median - dic).norm(), 1.5) << pair.tile_a << "-" << pair.tile_b;
   }
   EXPECT_EQ(neighbour_pairs, 17);  // 3 rows x 3 + 2 x 4 columns
+}
+
+// NIST MIST's 5 x 5 phase-contrast tiles (../shared/data/mist_phase_contrast_5x5):
+// crops of one image, 245 x 183 px, stepped ~230 x ~172 px, so neighbours
+// overlap by only ~15 and ~11 px, narrower than a template (31 px): no pair
+// can be matched. The registration must say so and place no tile by its
+// images, never misplace one silently.
+TEST(RegisterTilesReal, MistOverlapsNarrowerThanATemplateAreReported) {
+  const std::filesystem::path dir = SharedDataDir() / "mist_phase_contrast_5x5";
+  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no " << dir;
+  std::ifstream in(dir / "ground_truth_global_positions.csv");
+  std::vector<ImageF> tiles;
+  std::vector<Eigen::Vector2d> commanded;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line.rfind("file", 0) == 0) continue;
+    std::stringstream fields(line);
+    std::string file, row, col;
+    std::getline(fields, file, ',');
+    std::getline(fields, row, ',');
+    std::getline(fields, col, ',');
+    tiles.push_back(ReadGrayImage(dir / file).pixels);
+    // The nominal grid, y up (as above), in px as "mm".
+    commanded.emplace_back(230.0 * std::stoi(col), -172.0 * std::stoi(row));
+  }
+  ASSERT_EQ(tiles.size(), 25u);
+  CameraModel camera;  // 1 px per "mm", as above
+  camera.lens_model = "LENSMODEL_PINHOLE";
+  camera.intrinsics = Eigen::Vector4d(1000, 1000, 122, 91);
+  camera.width_px = 245;
+  camera.height_px = 183;
+  RegisterTilesOptions options;
+  options.motion.min_overlap_fraction = 0.01;  // let the 6 % overlaps be tried
+  options.use_apriltags = false;
+  options.compute_covariance = false;
+  // The crops drift up to ~21 px from the grid.
+  const TileRegistration reg = RegisterTiles(tiles, commanded, 10.0, camera, options);
+  std::printf("%s\n", reg.brief.c_str());
+  EXPECT_FALSE(reg.usable);
+  EXPECT_EQ(reg.pairs.size(), 40u);  // the grid's neighbours: 5 x 4 + 4 x 5
+  for (const PairRegistration& pair : reg.pairs) {
+    EXPECT_FALSE(pair.usable) << pair.tile_a << "-" << pair.tile_b;
+    EXPECT_EQ(pair.num_used, 0) << pair.tile_a << "-" << pair.tile_b;
+  }
+  EXPECT_EQ(reg.tiles_held_by_prior.size(), 25u);
+  EXPECT_NE(reg.brief.find("held by the table prior alone"), std::string::npos) << reg.brief;
 }
 
 }  // namespace
