@@ -303,6 +303,7 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
     // can overshoot.
     std::vector<TileExposure> next = exposure;
     const double current_cost = Cost(samples, factor, weight);
+    bool descended = false;
     for (double scale = 1.0; step.allFinite() && scale > 1e-3; scale *= 0.5) {
       std::vector<TileExposure> trial = exposure;
       bool valid = true;
@@ -320,9 +321,14 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
       Factors(samples, trial, &trial_factor);
       if (Cost(samples, trial_factor, weight) < current_cost) {
         next = trial;
+        descended = true;
         break;
       }
     }
+    // No descent with a step this small is the optimum (rounding); with a
+    // larger one the fit is stuck away from it (a and b are g and g v, so
+    // the step compares with the tolerance on g and v).
+    const bool stalled = !descended && !(step.cwiseAbs().maxCoeff() < options.tolerance);
     // Gauge: the brightest tile that has samples keeps gain 1.
     int reference = -1;
     for (int i = 0; i < num_tiles; ++i) {
@@ -346,20 +352,25 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
     sigma = RobustSigma(e, sigma);
     const double c = options.cauchy_sigmas * std::max(sigma, 1e-6);
     for (size_t k = 0; k < obs.size(); ++k) weight[k] = 1.0 / (1.0 + (e[k] / c) * (e[k] / c));
-    if (change < options.tolerance) break;
+    if (stalled) break;
+    if (change < options.tolerance) {
+      summary.converged = true;
+      break;
+    }
   }
   summary.iterations = std::min(summary.iterations, options.max_iterations);
   // e: the residuals of the final exposures and radiances.
   summary.relative_sigma_after = RobustSigma(e);
   summary.max_pair_step_after = MaxPairStep(samples, factor, num_tiles);
   summary.usable = summary.tiles_without_samples.empty();
-  char line[256];
+  char line[320];
   std::snprintf(line, sizeof(line),
-                "exposure: %d samples, %d iterations; relative sigma %.4f -> %.4f, "
+                "exposure: %d samples, %d iterations%s; relative sigma %.4f -> %.4f, "
                 "largest pair step %.4f -> %.4f%s",
-                summary.num_samples, summary.iterations, summary.relative_sigma_before,
-                summary.relative_sigma_after, summary.max_pair_step_before,
-                summary.max_pair_step_after,
+                summary.num_samples, summary.iterations,
+                summary.converged ? "" : " (stopped before converging)",
+                summary.relative_sigma_before, summary.relative_sigma_after,
+                summary.max_pair_step_before, summary.max_pair_step_after,
                 summary.usable ? "" : "; some tiles share no samples (left as recorded)");
   summary.brief = line;
   return summary;

@@ -89,6 +89,10 @@ struct ExposureSummary {
   int num_samples = 0;  // points seen by >= 2 tiles
   int num_observations = 0;
   int iterations = 0;
+  // Within the tolerance at the end. False when max_iterations ran out or a
+  // step larger than the tolerance lowered no cost (the fit is stuck, not at
+  // its optimum: the exposures are then the last good ones).
+  bool converged = false;
   // Robust sigma (1.4826 MAD) of the relative difference of a tile's
   // compensated intensity from the sample's consensus, before (g = 1, v = 0)
   // and after compensation.

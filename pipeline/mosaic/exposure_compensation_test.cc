@@ -78,6 +78,7 @@ TEST(EstimateExposure, RecoversTheTruthFromNoisyObservations) {
   const ExposureSummary summary =
       EstimateExposure(Observations(20000, 0.01, 2), kNumTiles, ExposureOptions());
   ASSERT_TRUE(summary.usable) << summary.brief;
+  EXPECT_TRUE(summary.converged) << summary.brief;
   EXPECT_EQ(summary.reference_tile, 4);
   for (int i = 0; i < kNumTiles; ++i) {
     EXPECT_NEAR(summary.tiles[i].gain, truth[i].gain, 1.8e-3) << i;
@@ -107,6 +108,7 @@ TEST(EstimateExposure, GrossOutliersLeaveTheFitWhereItIsWithoutThem) {
       const ExposureSummary summary = EstimateExposure(
           Observations(20000, 0.01, seed, 0.02, outlier_factor), kNumTiles, ExposureOptions());
       ASSERT_TRUE(summary.usable) << summary.brief;
+      EXPECT_TRUE(summary.converged) << summary.brief;
       for (int i = 0; i < kNumTiles; ++i) {
         const std::string where = "factor " + std::to_string(outlier_factor) + " seed " +
                                   std::to_string(seed) + " tile " + std::to_string(i);
@@ -117,6 +119,19 @@ TEST(EstimateExposure, GrossOutliersLeaveTheFitWhereItIsWithoutThem) {
       }
     }
   }
+}
+
+// Exposures 0.7-1 from a start at 1 take more than two steps: a fit cut off
+// there has not converged and says so (its exposures are still usable).
+TEST(EstimateExposure, AnIterationLimitIsReportedAsNotConverged) {
+  ExposureOptions options;
+  options.max_iterations = 2;
+  const ExposureSummary summary =
+      EstimateExposure(Observations(20000, 0.01, 2), kNumTiles, options);
+  EXPECT_TRUE(summary.usable) << summary.brief;
+  EXPECT_FALSE(summary.converged);
+  EXPECT_EQ(summary.iterations, 2);
+  EXPECT_NE(summary.brief.find("stopped before converging"), std::string::npos) << summary.brief;
 }
 
 // The passes are split in fixed blocks of samples and the blocks' sums added

@@ -371,6 +371,7 @@ void RunMosaicStage(StageContext& context) {
       {"tiles_held_by_prior", held},
       {"exposure",
        ReportObject{{"brief", ortho.summary.exposure.brief},
+                    {"converged", ortho.summary.exposure.converged},
                     {"relative_sigma_before", ortho.summary.exposure.relative_sigma_before},
                     {"relative_sigma_after", ortho.summary.exposure.relative_sigma_after},
                     {"max_pair_step_before", ortho.summary.exposure.max_pair_step_before},
