@@ -63,21 +63,31 @@
 // ~16 mm diameter with the camera's axis within ~2 radii of its centre:
 // measured on synthetic holes, radius up to 0.17 px small (8 mm hole, axis
 // through it) and centre up to 0.07 px off, which the covariance does not
-// cover. Larger holes with the nadir near the rim show such a narrow arc
-// on one side: without a nadir (none given, or tiles blending over the
-// hole), or when it is more than half the rim, it stays in the fit: for a
-// 60 mm hole with the nadir 0.97 r from its centre, over 30 textures, the
-// centre 0.020 px away from the nadir and the diameter 0.023 px small
-// (0.008 and 0.010 px with the nadir). A resolved wall 2-5 px wide moves
-// the rim by 0.005-0.01 px, inwards or outwards with the blur's SHAPE: the
-// step model assumes a Gaussian, a real blur (pixel box, the mosaic's
-// B-spline) leaves a residual odd about the rim, and the wall model's
-// one-sided terms (outer ramp, wall step) absorb part of it where the
-// ramp-only model's two-sided ramps do not (1-D fits on exact profiles:
-// Gaussian 0, synthetic_hole's kernel -0.008 to -0.010 px, a simulated
-// tile resampled by the B-spline +0.005 to +0.007 px). Not covered by the
-// covariance either; a fix would model the blur's shape (e.g. the mean
-// residual profile of the image's ramp-only fits) at both rims.
+// cover (8 mm, k 0.97, s 0.8 px, the simulator's sensor noise: radius -0.17
+// px with the axis through the centre, -0.10 px with it 1.1 radii away,
+// unbiased from ~2 radii; k is then not resolved, and given the true k the
+// held bottom rim still leaves -0.13 and -0.06 px: the wall's contrast
+// trades against x0). Far from the axis a crescent wider than the bottom
+// rim's reach leaves no bias (WideCrescentFarFromTheNadirDoesNotBiasTheFit);
+// an 8-12 mm hole's radius scatters by ~0.011 px per tile view, as its
+// covariance says (399 views in 128 simulated projects: rms error / sigma
+// 1.05); with noise alone a 2 px wedge's x0 scatters by ~0.09 px, the
+// Cramer-Rao bound of its six-parameter step fit (x0 alone: 0.02 px; the two
+// ramps cost most of it). Larger holes with the nadir near the rim show such
+// a narrow arc on one side: without a nadir (none given, or tiles blending
+// over the hole), or when it is more than half the rim, it stays in the fit:
+// for a 60 mm hole with the nadir 0.97 r from its centre, over 30 textures,
+// the centre 0.020 px away from the nadir and the diameter 0.023 px small
+// (0.008 and 0.010 px with the nadir). A resolved wall 2-5 px wide moves the
+// rim by 0.005-0.01 px, inwards or outwards with the blur's SHAPE: the step
+// model assumes a Gaussian, a real blur (pixel box, the mosaic's B-spline)
+// leaves a residual odd about the rim, and the wall model's one-sided terms
+// (outer ramp, wall step) absorb part of it where the ramp-only model's
+// two-sided ramps do not (1-D fits on exact profiles: Gaussian 0,
+// synthetic_hole's kernel -0.008 to -0.010 px, a simulated tile resampled by
+// the B-spline +0.005 to +0.007 px). Not covered by the covariance either; a
+// fix would model the blur's shape (e.g. the mean residual profile of the
+// image's ramp-only fits) at both rims.
 //
 // Covariance of (cx, cy, r). The fit is linear in the edge points' radial
 // moves e: delta = S e, S = -(J'WJ)^-1 J'W (3 x n, W the final IRLS
