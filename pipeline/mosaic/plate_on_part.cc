@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include <Eigen/Dense>
@@ -34,6 +35,7 @@ std::string PlateOnPartOptions::Check() const {
 std::string FinalAdjustmentOptions::Check() const {
   if (std::string e = bundle.Check(); !e.empty()) return e;
   if (!(plate_outlier_sigmas > 0)) return "plate_outlier_sigmas must be > 0";
+  if (!(extrapolation_px_per_px >= 0)) return "extrapolation_px_per_px must be >= 0";
   return {};
 }
 
@@ -306,6 +308,58 @@ IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance)
   return prior;
 }
 
+Eigen::Matrix2Xd ConvexHull(const Eigen::Matrix2Xd& points_px) {
+  if (points_px.cols() < 3) return {};
+  // Andrew's monotone chain.
+  std::vector<Eigen::Vector2d> p(points_px.cols());
+  for (Eigen::Index k = 0; k < points_px.cols(); ++k) p[k] = points_px.col(k);
+  std::sort(p.begin(), p.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  const auto cross = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a,
+                        const Eigen::Vector2d& b) {
+    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+  };
+  std::vector<Eigen::Vector2d> hull;
+  for (int pass = 0; pass < 2; ++pass) {
+    const size_t start = hull.size();
+    for (const Eigen::Vector2d& q : p) {
+      while (hull.size() >= start + 2 && cross(hull[hull.size() - 2], hull.back(), q) <= 0)
+        hull.pop_back();
+      hull.push_back(q);
+    }
+    hull.pop_back();  // the next chain's first point
+    std::reverse(p.begin(), p.end());
+  }
+  if (hull.size() < 3) return {};
+  Eigen::Matrix2Xd out(2, static_cast<Eigen::Index>(hull.size()));
+  for (size_t k = 0; k < hull.size(); ++k) out.col(static_cast<Eigen::Index>(k)) = hull[k];
+  return out;
+}
+
+double DistanceOutsideConvexPolygon(const Eigen::Matrix2Xd& polygon_px,
+                                    const Eigen::Vector2d& q_px) {
+  if (InsideConvexPolygon(polygon_px, q_px)) return 0.0;
+  double distance = std::numeric_limits<double>::infinity();
+  const Eigen::Index n = polygon_px.cols();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const Eigen::Vector2d a = polygon_px.col(k), ab = polygon_px.col((k + 1) % n) - a;
+    const double t = std::clamp((q_px - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+    distance = std::min(distance, (q_px - a - t * ab).norm());
+  }
+  return distance;
+}
+
+bool InsideConvexPolygon(const Eigen::Matrix2Xd& polygon_px, const Eigen::Vector2d& q_px) {
+  const Eigen::Index n = polygon_px.cols();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const Eigen::Vector2d a = polygon_px.col(k), b = polygon_px.col((k + 1) % n);
+    if ((b.x() - a.x()) * (q_px.y() - a.y()) - (b.y() - a.y()) * (q_px.x() - a.x()) < 0)
+      return false;
+  }
+  return n >= 3;
+}
+
 double TableScaleSigmaPpm(const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
                           const Eigen::MatrixXd& scene_covariance) {
   const int n = static_cast<int>(commanded_table_pos_mm.size());
@@ -342,6 +396,15 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   FinalAdjustment result;
   result.intrinsics_refined = prior.information.size() > 0;
   result.input = plate.found ? WithPlate(registered_input, plate) : registered_input;
+  if (plate.found && prior.measured_region_px.cols() > 0) {
+    const double sigma = result.input.observation_sigma_px;
+    for (PlateMarkObservation& obs : result.input.plate_observations) {
+      const double d = DistanceOutsideConvexPolygon(prior.measured_region_px, obs.q_px);
+      if (!(d > 0)) continue;
+      ++result.plate_outside_region;
+      obs.weight = sigma / std::hypot(sigma / obs.weight, options.extrapolation_px_per_px * d);
+    }
+  }
   if (result.intrinsics_refined) {
     result.input.intrinsics_information = prior.information;
     result.input.intrinsics_held = prior.held;

@@ -109,12 +109,38 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
 // conditioning of the correlation matrix (a rational model's near
 // redundancy) get that much information only: a weaker prior, never a
 // stronger one (the .cc says why).
+//
+// The region where the calibration saw marks (measured_region_px, set by the
+// caller from the solve record, for a splined lens). Outside it a spline is
+// extrapolated by mrcal's regularisation, and the covariance holds only the
+// noise, not that extrapolation's error. Measured on lens-mismatch with the
+// plate on the part, seed 203: 52-79 px left of the marks the spline is
+// 0.19-0.73 px off at a stated 0.01-0.14 px (1.2 px at 144 px); the final
+// adjustment's refinement leaves 0.05-0.15 px there, and the 10 plate marks
+// in that margin alone moved the plate's height by 20 um (10 sigma), so the
+// mosaic's scale by -55 ppm at a stated 7. The final adjustment widens the
+// sigma of plate marks outside the region by that error
+// (FinalAdjustmentOptions::extrapolation_px_per_px).
 struct IntrinsicsPrior {
   Eigen::MatrixXd information;  // N x N, positive definite over the free ones, or empty
   std::vector<int> held;        // ascending
   std::string why_held;         // set when information is empty
+  // Convex polygon, counter-clockwise, px (2 x K); empty: unknown, the lens
+  // is trusted everywhere.
+  Eigen::Matrix2Xd measured_region_px;
 };
 IntrinsicsPrior IntrinsicsPriorFromCovariance(const Eigen::MatrixXd& covariance);
+
+// Convex hull of `points_px` (2 x N), counter-clockwise, without collinear
+// vertices; empty if the points span no area.
+Eigen::Matrix2Xd ConvexHull(const Eigen::Matrix2Xd& points_px);
+
+// Whether q lies inside (or on) a counter-clockwise convex polygon.
+bool InsideConvexPolygon(const Eigen::Matrix2Xd& polygon_px, const Eigen::Vector2d& q_px);
+
+// Distance from q to a counter-clockwise convex polygon (0 inside), px.
+double DistanceOutsideConvexPolygon(const Eigen::Matrix2Xd& polygon_px,
+                                    const Eigen::Vector2d& q_px);
 
 struct FinalAdjustmentOptions {
   PlaneBundleOptions bundle;
@@ -127,6 +153,12 @@ struct FinalAdjustmentOptions {
   // sigma is scaled by it and the scene solved again; the priors (table,
   // intrinsics) keep their declared sigmas. Never narrowed.
   bool rescale_observation_sigma = true;
+  // The lens's error outside IntrinsicsPrior::measured_region_px, per px of
+  // distance from it: a plate mark d px outside has sigma
+  // hypot(its own, extrapolation_px_per_px * d). The upper end of what
+  // lens-mismatch-203 showed (0.004-0.009 px/px, header above). Marks just
+  // outside keep most of their weight, marks 100 px out are worth ~1 %.
+  double extrapolation_px_per_px = 0.01;
 
   std::string Check() const;
 };
@@ -153,6 +185,9 @@ struct FinalAdjustment {
   int plate_outliers = 0;
   double plate_height_mm = 0.0;
   double plate_height_sigma_mm = 0.0;
+  // Plate observations outside the calibration's measured region
+  // (IntrinsicsPrior::measured_region_px), their sigma widened.
+  int plate_outside_region = 0;
   PlateScaleCheck scale_check;
   // Set when a found plate was left out (its solve unusable, or most of its
   // marks outliers: not the plate it seemed): the scene is the one without it.
