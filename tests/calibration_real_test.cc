@@ -20,6 +20,20 @@ std::filesystem::path DataDir() {
   return testing::SharedDataDir() / "opencv_samples_chessboard_9x6";
 }
 
+// Images of `dir`, as the calibration stage and OpenCV take them.
+struct RealImages {
+  std::vector<NamedImage> named;
+  std::vector<GrayImage> pixels;
+};
+RealImages ReadImages(const std::filesystem::path& dir, const std::vector<std::string>& names) {
+  RealImages images;
+  for (const std::string& name : names) {
+    images.named.push_back({name, ReadGrayImage(dir / name)});
+    images.pixels.push_back(images.named.back().image);
+  }
+  return images;
+}
+
 // Each OPENCV5 parameter of ours within `bound` of our 1-sigma of OpenCV's.
 void ExpectAgreementWithinOurSigma(const CalibrationStageSummary& ours,
                                    const OpenCvCalibration& opencv, double bound) {
@@ -45,22 +59,19 @@ TEST(CalibrationOnRealImages, OpenCvChessboard9x6AgreesWithOpenCvWithinOurUncert
   board.rows = 6;
   board.cols = 9;
   board.pitch_mm = 25.0;
-  std::vector<NamedImage> images;
-  std::vector<GrayImage> pixels;
   std::vector<std::string> names;
   for (int k : {1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14}) {
     char name[32];
     std::snprintf(name, sizeof(name), "left%02d.jpg", k);
-    images.push_back({name, ReadGrayImage(DataDir() / name)});
-    pixels.push_back(images.back().image);
     names.push_back(name);
   }
+  const RealImages images = ReadImages(DataDir(), names);
   // A rough nominal seed (~7 % from the answer): a 3 mm lens on 6 um pixels.
   CameraSpec camera;
   camera.focal_length_mm = 3.0;
   camera.pixel_pitch_um = 6.0;
   camera.lens_model = "LENSMODEL_OPENCV5";  // OpenCV's model, to compare like with like
-  const CalibrationStageSummary ours = RunCalibration(images, board, camera, {});
+  const CalibrationStageSummary ours = RunCalibration(images.named, board, camera, {});
   ASSERT_TRUE(ours.usable) << ours.brief;
   EXPECT_EQ(ours.result.record.images.size(), 13u);
   // The same detections, as nearly as two programs allow: OpenCV's own
@@ -70,7 +81,7 @@ TEST(CalibrationOnRealImages, OpenCvChessboard9x6AgreesWithOpenCvWithinOurUncert
   // doubles (0.41 vs 0.18 px) and fx drops 3 px, 8 of our sigmas.
   OpenCvCalibrationOptions opencv_options;
   opencv_options.chessboard_subpix_half_window_px = 7;
-  const OpenCvCalibration opencv = OpenCvCalibrate(pixels, names, board, opencv_options);
+  const OpenCvCalibration opencv = OpenCvCalibrate(images.pixels, names, board, opencv_options);
   ASSERT_TRUE(opencv.usable) << opencv.brief;
   // Same model, (nearly) the same corners: within our reported 1-sigma up
   // to the residual corner differences and mrcal's regularisation
@@ -94,27 +105,21 @@ TEST(CalibrationOnRealImages, BoofCvCircleGridAgreesWithOpenCvWithinOurUncertain
   board.cols = 10;
   board.pitch_mm = 25.0;
   board.dot_diameter_mm = 15.0;
-  std::vector<NamedImage> images;
-  std::vector<GrayImage> pixels;
   std::vector<std::string> names;
-  for (int k = 0; k <= 5; ++k) {
-    const std::string name = "image0000" + std::to_string(k) + ".jpg";
-    images.push_back({name, ReadGrayImage(dir / name)});
-    pixels.push_back(images.back().image);
-    names.push_back(name);
-  }
+  for (int k = 0; k <= 5; ++k) names.push_back("image0000" + std::to_string(k) + ".jpg");
+  const RealImages images = ReadImages(dir, names);
   // A nominal seed of 703 px, 55 % above the answer (the zoom is unknown).
   CameraSpec camera;
   camera.focal_length_mm = 4.5;
   camera.pixel_pitch_um = 6.4;
   camera.lens_model = "LENSMODEL_OPENCV5";
-  const CalibrationStageSummary ours = RunCalibration(images, board, camera, {});
+  const CalibrationStageSummary ours = RunCalibration(images.named, board, camera, {});
   ASSERT_TRUE(ours.usable) << ours.brief;
   // 00000 (the grid runs off the image) and 00004 are rejected, as by OpenCV.
   EXPECT_EQ(ours.result.record.images.size(), 4u);
   OpenCvCalibrationOptions opencv_options;
   opencv_options.max_blob_area_fraction = 0.05;  // dots of up to ~50 px across
-  const OpenCvCalibration opencv = OpenCvCalibrate(pixels, names, board, opencv_options);
+  const OpenCvCalibration opencv = OpenCvCalibrate(images.pixels, names, board, opencv_options);
   ASSERT_TRUE(opencv.usable) << opencv.brief;
   // Measured: at most 0.86 sigma (fx).
   ExpectAgreementWithinOurSigma(ours, opencv, 1.5);
