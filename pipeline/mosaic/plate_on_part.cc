@@ -469,10 +469,20 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.scene.covariance =
       (0.5 * (result.scene.covariance + result.scene.covariance.transpose())).eval();
   if (plate.found) {
+    // Over the marks whose weight the region left as it was: the widened
+    // ones carry the lens's extrapolation error.
     double sum_sq = 0;
+    int count = 0;
     const Eigen::Matrix2Xd& res = result.scene.plate_residual_px;
-    for (Eigen::Index n = 0; n < res.cols(); ++n) sum_sq += res.col(n).squaredNorm();
-    result.plate_rms_px = res.cols() > 0 ? std::sqrt(sum_sq / res.cols()) : 0.0;
+    for (Eigen::Index n = 0; n < res.cols(); ++n) {
+      const Eigen::Vector2d& q = result.input.plate_observations[static_cast<size_t>(n)].q_px;
+      if (prior.measured_region_px.cols() > 0 &&
+          DistanceOutsideConvexPolygon(prior.measured_region_px, q) > 0)
+        continue;
+      sum_sq += res.col(n).squaredNorm();
+      ++count;
+    }
+    result.plate_rms_px = count > 0 ? std::sqrt(sum_sq / count) : 0.0;
     result.plate_height_mm = result.scene.plates[0].height_mm;
     const int h = plate_index + 3;
     if (result.scene.covariance.rows() > h)

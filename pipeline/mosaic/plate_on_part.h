@@ -179,8 +179,9 @@ struct FinalAdjustment {
   // least-squares similarity fit of the adjusted to the commanded table
   // positions, ppm (0 if no covariance).
   double scale_sigma_ppm = 0.0;
-  // Plate (if found): residual RMS of its used marks, px; observations
-  // dropped as outliers; height and its sigma (0 if held), mm.
+  // Plate (if found): residual RMS of its used marks inside the measured
+  // region (all if there is none), px; observations dropped as outliers;
+  // height and its sigma (0 if held), mm.
   double plate_rms_px = 0.0;
   int plate_outliers = 0;
   double plate_height_mm = 0.0;
