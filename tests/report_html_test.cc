@@ -118,7 +118,11 @@ Report FullReport() {
               ReportValue::Array{ReportObject{{"image", "t<3>.png"}, {"why", "no good matches"}}}},
              {"exposure", ReportObject{{"brief", "gains 0.91..1.00"},
                                        {"relative_sigma_before", 0.031},
-                                       {"relative_sigma_after", 0.002}}}};
+                                       {"relative_sigma_after", 0.002}}},
+             {"scale_sigma_ppm", 5.84},
+             {"plate_scale_check", ReportObject{{"brief", "plate on the part: whole in 1 tile(s)"},
+                                                {"scale_minus_1_ppm", -3.21},
+                                                {"sigma_ppm", 4.47}}}};
   report.mosaic = m;
 
   FeatureReport lost;
@@ -222,7 +226,24 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   // adjusted - commanded in micrometres.
   EXPECT_THAT(html, HasSubstr("<td class=\"r\">-14.83</td><td class=\"r\">1.23</td>"));
   EXPECT_THAT(html, HasSubstr("<tr class=\"failed\"><td>t1.png</td><td>t&lt;3&gt;.png</td>"));
+  // The mosaic's scale: its reference, the table's scale against it, sigma.
+  EXPECT_THAT(html, HasSubstr("plate on the part: whole in 1 tile(s); the table's scale against "
+                              "the plate -3.2 &plusmn; 4.5 ppm"));
+  EXPECT_THAT(html, HasSubstr("<td>5.8 ppm</td>"));
+  EXPECT_THAT(html, HasSubstr("gains 0.91..1.00"));
   EXPECT_THAT(html, Not(HasSubstr("has not run")));
+}
+
+// Without a plate on the part the report says where the scale came from.
+TEST(ReportHtml, ScaleFromTheTableAloneIsSaid) {
+  Report report = FullReport();
+  for (auto& [key, value] : report.mosaic->extra) {
+    if (key == "plate_scale_check")
+      value = "no plate on the part: scale from the table positions alone (sigma <46> ppm)";
+  }
+  EXPECT_THAT(ReportHtml(report, FullInputs()),
+              HasSubstr("no plate on the part: scale from the table positions alone (sigma "
+                        "&lt;46&gt; ppm)"));
 }
 
 TEST(ReportHtml, OnlyCalibrationRan) {

@@ -410,6 +410,22 @@ std::string MosaicSection(const Report& report) {
   if (Member(extra, "num_tracks")) facts.Add("tracks", Text(Member(extra, "num_tracks")));
   if (const std::string* brief = AsString(Member(extra, "brief")))
     facts.Add("summary", Escape(*brief));
+  // The metric scale: the plate on the part, or the table alone.
+  const ReportValue* plate = Member(extra, "plate_scale_check");
+  if (const std::string* text = AsString(plate)) facts.Add("scale reference", Escape(*text));
+  if (const ReportObject* check = AsObject(plate)) {
+    std::string line = Text(Member(*check, "brief"));
+    if (Member(*check, "scale_minus_1_ppm") != nullptr) {
+      line +=
+          fmt::format("; the table's scale against the plate {} &plusmn; {} ppm",
+                      NumberOf(*check, "scale_minus_1_ppm", 1), NumberOf(*check, "sigma_ppm", 1));
+    }
+    facts.Add("scale reference", line);
+  }
+  if (Member(extra, "scale_sigma_ppm") != nullptr)
+    facts.Add("scale 1-sigma", NumberOf(extra, "scale_sigma_ppm", 1) + " ppm");
+  if (const ReportObject* exposure = AsObject(Member(extra, "exposure")))
+    facts.Add("exposure", Text(Member(*exposure, "brief")));
   out += facts.Html();
 
   if (const ReportValue::Array* pairs = AsArray(Member(extra, "pairs"))) {

@@ -223,7 +223,14 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
     for (int i : tiles) out.emplace_back(project.tiles[i].image);
     return out;
   };
-  ReportObject report{{"brief", plate.brief},
+  std::string brief = plate.brief;
+  if (adjusted.plate_outside_region > 0) {
+    brief += fmt::format(
+        "; {} marks outside the image region the calibration measured, weighted down (the "
+        "lens is extrapolated there)",
+        adjusted.plate_outside_region);
+  }
+  ReportObject report{{"brief", brief},
                       {"scale_reference", plate.scale_reference},
                       {"whole_in_tiles", names(plate.whole_in_tiles)},
                       {"seen_in_tiles", names(plate.seen_in_tiles)},
