@@ -36,11 +36,12 @@ class FileLock {
 }  // namespace
 
 CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
-                               std::optional<int> num_calib_images) {
+                               std::optional<int> num_calib_images, bool plate_on_part) {
   const fs::path cache = OMM_SIM_CACHE_DIR;
   fs::create_directories(cache);
   const std::string name = preset + "-" + std::to_string(seed) +
-                           (num_calib_images ? "-calib" + std::to_string(*num_calib_images) : "");
+                           (num_calib_images ? "-calib" + std::to_string(*num_calib_images) : "") +
+                           (plate_on_part ? "-plate" : "");
   const fs::path final_dir = cache / name;
   {
     FileLock lock(cache / (name + ".lock"));
@@ -52,6 +53,7 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
       options.preset = preset;
       options.seed = seed;
       if (num_calib_images) options.num_calib_images = *num_calib_images;
+      options.plate_on_part = plate_on_part;
       try {
         SimulateProjectDirectory(options, temp / "project", temp / "truth.json", {});
       } catch (const std::exception& e) {

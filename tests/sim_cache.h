@@ -26,10 +26,12 @@ struct CachedProject {
 
 // Renders (or finds) the project of `preset` and `seed` with the simulator's
 // defaults, or with num_calib_images calib/ images if given (cached apart, as
-// <preset>-<seed>-calib<N>). Fails the calling test (ADD_FAILURE) and throws
-// if rendering fails.
+// <preset>-<seed>-calib<N>), and with the plate on the part if asked (a
+// -plate suffix; the demo preset always has it). Fails the calling test
+// (ADD_FAILURE) and throws if rendering fails.
 CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
-                               std::optional<int> num_calib_images = std::nullopt);
+                               std::optional<int> num_calib_images = std::nullopt,
+                               bool plate_on_part = false);
 
 // Copies a project's inputs (everything but out/) into `to` (created).
 void CopyProject(const std::filesystem::path& from, const std::filesystem::path& to);
