@@ -333,6 +333,8 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     return true;
   };
   std::vector<std::vector<Match>> pair_matches(result.pairs.size());
+  // Per pair, the Harris corners of its tile a that were matched (indices).
+  std::vector<std::vector<int>> pair_candidates(result.pairs.size());
   ParallelFor(static_cast<int>(result.pairs.size()), options.num_threads, [&](int p) {
     PairRegistration& pair = result.pairs[p];
     const int ta = pair.tile_a, tb = pair.tile_b;
@@ -366,6 +368,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         candidates.clear();
         for (const auto& [rank, k] : ranked) candidates.push_back(k);
       }
+      pair_candidates[p] = candidates;
       // Probes: the strongest corners (already spread by the bucketing).
       const int num_probes = std::min<int>(options.num_probe_corners, candidates.size());
       Eigen::Matrix2Xd probe_a(2, num_probes), probe_b(2, num_probes);
@@ -677,60 +680,67 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     result.num_dropped_observations += dropped;
     return dropped;
   };
+  // The adjusted scene's prediction of part point xy (mm) seen by tile a in
+  // tile b: its pixel there and the tile-to-tile warp about it, dq_b/dq_a =
+  // (dq_b/dP) (dq_a/dP)^-1 with dq/dP = dq/dp_cam R[:, 0:2], to second order
+  // from the neighbours h px from the anchor along +-x and +-y of tile a (to
+  // first order; PatchWarp). False if the lens refuses.
+  const auto predict_by_scene = [&](int tile_a, int tile_b, const Eigen::Vector2d& xy,
+                                    Eigen::Vector2d* q_b, PatchWarp* warp) {
+    const PlaneScene& scene = adjustment.scene;
+    const Eigen::Matrix3d r = RotationFromAngleAxis(scene.cam_from_part_r);
+    // Column 2 k: the point xy + dxy_mm in tile a, 2 k + 1 in b.
+    const auto fill = [&](Eigen::Matrix3Xd* p_cam, int k, const Eigen::Vector2d& dxy_mm) {
+      for (int e = 0; e < 2; ++e) {
+        const Eigen::Vector2d& t = scene.table_pos_mm[e == 0 ? tile_a : tile_b];
+        p_cam->col(2 * k + e) =
+            r * Eigen::Vector3d(xy.x() + dxy_mm.x() + t.x(), xy.y() + dxy_mm.y() + t.y(), 0) +
+            scene.cam_from_part_t_mm;
+      }
+    };
+    Eigen::Matrix3Xd p_cam(3, 10);
+    fill(&p_cam, 0, Eigen::Vector2d::Zero());
+    Eigen::Matrix2Xd q;
+    Eigen::MatrixXd dq_dp;
+    if (!ProjectPoints(camera, p_cam.leftCols(2), &q, &dq_dp)) return false;
+    const Eigen::Matrix2d dxy_dqa = (dq_dp.block<2, 3>(0, 0) * r.leftCols<2>()).inverse();
+    const double s = options.patch.half_size_px;
+    const Eigen::Vector2d steps[4] = {{s, 0}, {-s, 0}, {0, s}, {0, -s}};
+    for (int k = 0; k < 4; ++k) fill(&p_cam, k + 1, dxy_dqa * steps[k]);
+    if (!ProjectPoints(camera, p_cam, &q, &dq_dp)) return false;
+    const auto db_da = [&](int k) {
+      const Eigen::Matrix2d dqa = dq_dp.block<2, 3>(4 * k, 0) * r.leftCols<2>();
+      const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(4 * k + 2, 0) * r.leftCols<2>();
+      return Eigen::Matrix2d(dqb * dqa.inverse());
+    };
+    *q_b = q.col(1);
+    *warp = PatchWarp::FromJacobians(db_da(0), db_da(1), db_da(2), db_da(3), db_da(4), s);
+    return true;
+  };
   // Returns the number of matches relocated.
   const auto relocate = [&] {
     std::atomic<int> num_relocated{0};
-    // The adjusted plane model's affine between the two tiles at each track
-    // point: dq_b/dq_a = (dq_b/dP) (dq_a/dP)^-1, dq/dP = dq/dp_cam R[:, 0:2].
-    const PlaneScene& scene = adjustment.scene;
-    const Eigen::Matrix3d r = RotationFromAngleAxis(scene.cam_from_part_r);
     std::vector<std::pair<int, int>> todo;
-    for (size_t o = 0; o < match_of_observation.size(); ++o)
-      if (match_of_observation[o].first >= 0) todo.push_back(match_of_observation[o]);
     std::vector<int> obs_index;
-    for (size_t o = 0; o < match_of_observation.size(); ++o)
-      if (match_of_observation[o].first >= 0) obs_index.push_back(static_cast<int>(o));
+    for (size_t o = 0; o < match_of_observation.size(); ++o) {
+      if (match_of_observation[o].first < 0) continue;
+      todo.push_back(match_of_observation[o]);
+      obs_index.push_back(static_cast<int>(o));
+    }
     ParallelFor(static_cast<int>(todo.size()), options.num_threads, [&](int n) {
       Match& m = pair_matches[todo[n].first][todo[n].second];
       const int track = result.input.observations[obs_index[n]].track;
-      const Eigen::Vector2d xy = scene.track_xy_mm.col(track);
-      // db/da at part point xy + dxy_mm: column 2 k its pixel in tile a, 2 k + 1 in b.
-      const auto fill = [&](Eigen::Matrix3Xd* p_cam, int k, const Eigen::Vector2d& dxy_mm) {
-        for (int e = 0; e < 2; ++e) {
-          const Eigen::Vector2d& t = scene.table_pos_mm[e == 0 ? m.tile_a : m.tile_b];
-          p_cam->col(2 * k + e) =
-              r * Eigen::Vector3d(xy.x() + dxy_mm.x() + t.x(), xy.y() + dxy_mm.y() + t.y(), 0) +
-              scene.cam_from_part_t_mm;
-        }
-      };
-      Eigen::Matrix3Xd p_cam(3, 10);
-      fill(&p_cam, 0, Eigen::Vector2d::Zero());
-      Eigen::Matrix2Xd q;
-      Eigen::MatrixXd dq_dp;
-      if (!ProjectPoints(camera, p_cam.leftCols(2), &q, &dq_dp)) {
+      Eigen::Vector2d q_b;
+      PatchWarp warp;
+      if (!predict_by_scene(m.tile_a, m.tile_b, adjustment.scene.track_xy_mm.col(track), &q_b,
+                            &warp)) {
         m.keep = false;
         return;
       }
-      // The neighbours h px from the anchor along +-x and +-y of tile a (to
-      // first order) give the warp's second-order term (PatchWarp).
-      const Eigen::Matrix2d dxy_dqa = (dq_dp.block<2, 3>(0, 0) * r.leftCols<2>()).inverse();
-      const double s = options.patch.half_size_px;
-      const Eigen::Vector2d steps[4] = {{s, 0}, {-s, 0}, {0, s}, {0, -s}};
-      for (int k = 0; k < 4; ++k) fill(&p_cam, k + 1, dxy_dqa * steps[k]);
-      if (!ProjectPoints(camera, p_cam, &q, &dq_dp)) {
-        m.keep = false;
-        return;
-      }
-      const auto db_da = [&](int k) {
-        const Eigen::Matrix2d dqa = dq_dp.block<2, 3>(4 * k, 0) * r.leftCols<2>();
-        const Eigen::Matrix2d dqb = dq_dp.block<2, 3>(4 * k + 2, 0) * r.leftCols<2>();
-        return Eigen::Matrix2d(dqb * dqa.inverse());
-      };
-      const PatchWarp warp =
-          PatchWarp::FromJacobians(db_da(0), db_da(1), db_da(2), db_da(3), db_da(4), s);
       // The template's corners move by at most |change J| h sqrt(2) + |change
       // H_k| h^2: below a small fraction of a match's sigma, the match would
       // not move.
+      const double s = options.patch.half_size_px;
       const double change_px = (warp.jacobian - m.warp.jacobian).norm() * s * std::sqrt(2.0) +
                                std::hypot((warp.hessian[0] - m.warp.hessian[0]).norm(),
                                           (warp.hessian[1] - m.warp.hessian[1]).norm()) *
@@ -749,8 +759,68 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     });
     return num_relocated.load();
   };
+  // Pairs left unusable by the probes (weak texture) matched again, their
+  // candidates predicted by the adjusted scene; returns how many became
+  // usable.
+  const auto rescue_pairs = [&] {
+    const PlaneScene& scene = adjustment.scene;
+    const Eigen::Matrix3d r = RotationFromAngleAxis(scene.cam_from_part_r);
+    std::vector<int> todo;
+    for (size_t p = 0; p < result.pairs.size(); ++p)
+      if (!result.pairs[p].usable && !pair_candidates[p].empty())
+        todo.push_back(static_cast<int>(p));
+    std::atomic<int> num_rescued{0};
+    ParallelFor(static_cast<int>(todo.size()), options.num_threads, [&](int n) {
+      const int p = todo[n];
+      PairRegistration& pair = result.pairs[p];
+      const int ta = pair.tile_a, tb = pair.tile_b;
+      // Part point of a ray of tile a: s R^T d - R^T t - T_a on z = 0.
+      const Eigen::Vector3d w = r.transpose() * scene.cam_from_part_t_mm;
+      std::vector<Match> matches;
+      for (int k : pair_candidates[p]) {
+        const Eigen::Vector3d u = r.transpose() * corner_rays[ta].col(k).homogeneous();
+        if (!(std::abs(u.z()) > 1e-12)) continue;
+        const Eigen::Vector2d xy = (w.z() / u.z() * u - w).head<2>() - scene.table_pos_mm[ta];
+        Match m;
+        m.tile_a = ta;
+        m.tile_b = tb;
+        m.anchor_px = corners[ta][k].pixel;
+        m.key = PixelKey(ta, m.anchor_px, width, height);
+        m.ray_a = corner_rays[ta].col(k);
+        Eigen::Vector2d q_b;
+        if (!predict_by_scene(ta, tb, xy, &q_b, &m.warp)) continue;
+        const PatchMatch pm = MatchPatch(normalized[ta], m.anchor_px, normalized[tb], spline[tb],
+                                         q_b, m.warp, options.search_radius_px, options.patch);
+        if (!pm.ok) continue;
+        m.q_b = pm.q_px;
+        m.covariance_px2 = pm.covariance_px2;
+        matches.push_back(m);
+      }
+      std::mt19937_64 rng(options.ransac_seed + p);
+      Eigen::Matrix2Xd ra(2, matches.size()), qb(2, matches.size());
+      for (size_t k = 0; k < matches.size(); ++k)
+        ra.col(k) = matches[k].ray_a, qb.col(k) = matches[k].q_b;
+      const Eigen::Matrix2Xd rb = unproject(qb);
+      if (rb.cols() != qb.cols()) return;
+      Eigen::Matrix3d h_rays;
+      const std::vector<bool> inliers = RansacHomography(ra, rb, options.ransac_threshold_px, fx,
+                                                         options.ransac_iterations, &rng, &h_rays);
+      std::vector<Match> kept;
+      for (size_t k = 0; k < inliers.size(); ++k)
+        if (inliers[k]) kept.push_back(matches[k]);
+      pair.num_matched = static_cast<int>(matches.size());
+      pair.num_inliers = static_cast<int>(kept.size());
+      pair.usable = pair.num_inliers + pair.num_tag_corners >= options.min_pair_matches;
+      if (!pair.usable) return;
+      pair.rescued = true;
+      pair_matches[p].insert(pair_matches[p].end(), kept.begin(), kept.end());
+      ++num_rescued;
+    });
+    return num_rescued.load();
+  };
 
   solve(false);
+  if (adjustment.seed.ok && options.rescue_unusable_pairs && rescue_pairs() > 0) solve(false);
   if (adjustment.seed.ok) {
     int dropped = drop_outliers();
     for (int pass = 0; pass < options.rematch_passes; ++pass) {
@@ -808,6 +878,12 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     brief << "; " << num_sift << " matches anchored at SIFT keypoints (" << sift_matches.size()
           << " SIFT pairs in)";
   }
+  const int num_rescued =
+      static_cast<int>(std::count_if(result.pairs.begin(), result.pairs.end(),
+                                     [](const PairRegistration& p) { return p.rescued; }));
+  if (num_rescued > 0)
+    brief << "; " << num_rescued << " pair" << (num_rescued > 1 ? "s" : "")
+          << " matched on the adjusted scene's prediction";
   if (!result.tiles_held_by_prior.empty()) {
     brief << "; held by the table prior alone: tile";
     for (int i : result.tiles_held_by_prior) brief << ' ' << i;

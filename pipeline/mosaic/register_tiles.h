@@ -41,7 +41,12 @@
 // 5. AdjustPlaneScene (seed + robust bundle adjustment; each match weighted
 //    by its template match's predicted covariance, so that weak texture
 //    counts less — this halved the low-texture preset's hole error — and a
-//    match on an edge counts across the edge only), then observations
+//    match on an edge counts across the edge only). Pairs the probes left
+//    unusable (weak texture: too few probes found at the coarse level) are
+//    then matched again, every candidate predicted through the adjusted
+//    scene (good to the table prior's ~0.2 px even for a tile held by it)
+//    and screened as above, and the scene re-solved with those that reach
+//    min_pair_matches (rescue_unusable_pairs). Then observations
 //    whose residual exceeds outlier_factor x the median residual are dropped
 //    and the scene re-solved; then (rematch_passes) every match is relocated
 //    with the affine the adjusted plane model predicts between the two tiles
@@ -148,6 +153,13 @@ struct RegisterTilesOptions {
   bool weight_by_match_sigma = true;
   double outlier_factor = 4.0;         // drop |residual| > this x the median |residual|
   double min_outlier_threshold_px = 0.1;  // ... but never below this, px
+  // Pairs the probes left unusable are matched again after the first
+  // adjustment, every candidate predicted by the adjusted scene (step 5).
+  // Over 34 low-texture projects (seeds 101-105, 201-212) the worst hole
+  // errors, 0.076 and 0.111 raw px (a tile held), came down to 0.020 and
+  // 0.025; no project's got worse by more than 0.001. Textured projects
+  // have no unusable pair.
+  bool rescue_unusable_pairs = true;
   int rematch_passes = 1;  // relocations with the adjusted plane model's affine
   // ... of the matches whose template corners that affine moves by at least
   // this, px (the others would not move: their affine came from the probes'
@@ -169,6 +181,7 @@ struct PairRegistration {
   int num_candidates = 0;           // corners of a predicted inside b
   int num_probes = 0;               // of them, searched with the wide probe window
   int num_contradicting_probes = 0; // ... whose best NCC is below probe_contradiction_ncc
+  // Of the last attempt: the rescue's for a pair the probes left unusable.
   int num_matched = 0;              // accepted by the template match
   int num_inliers = 0;              // after the plane-induced-homography RANSAC
   int num_sift = 0;                 // of them, anchored at SIFT keypoints
@@ -176,6 +189,7 @@ struct PairRegistration {
   int num_used = 0;                 // matches in the final adjustment
   double rms_px = 0.0;              // final residual RMS of the used matches' observations
   bool usable = false;              // false: too few matches; its matches were dropped
+  bool rescued = false;             // usable once matched on the adjusted scene's prediction
 };
 
 struct TileRegistration {

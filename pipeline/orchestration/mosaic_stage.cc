@@ -160,7 +160,8 @@ ReportValue PairsReport(const Project& project, const TileRegistration& registra
                                    {"tag_corners", pair.num_tag_corners},
                                    {"used", pair.num_used},
                                    {"rms_px", pair.rms_px},
-                                   {"usable", pair.usable}});
+                                   {"usable", pair.usable},
+                                   {"matched_on_adjusted_scene", pair.rescued}});
   }
   return rows;
 }
