@@ -101,7 +101,8 @@ Report FullReport() {
                                               {"matched", 411},
                                               {"used", 403},
                                               {"rms_px", 0.0151},
-                                              {"usable", true}},
+                                              {"usable", true},
+                                              {"matched_on_adjusted_scene", true}},
                                  ReportObject{{"images", ReportValue::Array{"t1.png", "t<3>.png"}},
                                               {"predicted_overlap", 0.15},
                                               {"matched", 3},
@@ -226,6 +227,7 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   // adjusted - commanded in micrometres.
   EXPECT_THAT(html, HasSubstr("<td class=\"r\">-14.83</td><td class=\"r\">1.23</td>"));
   EXPECT_THAT(html, HasSubstr("<tr class=\"failed\"><td>t1.png</td><td>t&lt;3&gt;.png</td>"));
+  EXPECT_THAT(html, HasSubstr("<td>yes (matched on the adjusted scene's prediction)</td>"));
   // The mosaic's scale: its reference, the table's scale against it, sigma.
   EXPECT_THAT(html, HasSubstr("plate on the part: whole in 1 tile(s); the table's scale against "
                               "the plate -3.2 &plusmn; 4.5 ppm"));

@@ -442,7 +442,10 @@ std::string MosaicSection(const Report& report) {
                  NumberOf(*p, "predicted_overlap", 2), Text(Member(*p, "candidates")),
                  Text(Member(*p, "matched")), Text(Member(*p, "inliers")),
                  Text(Member(*p, "tag_corners")), Text(Member(*p, "used")), NumberOf(*p, "rms_px"),
-                 Text(Member(*p, "usable"))},
+                 Text(Member(*p, "usable")) +
+                     (AsBool(Member(*p, "matched_on_adjusted_scene")).value_or(false)
+                          ? " (matched on the adjusted scene's prediction)"
+                          : "")},
                 AsBool(Member(*p, "usable")).value_or(true) ? "" : "failed");
     }
     out += table.Html("pairs-table");
