@@ -332,8 +332,29 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     }
     return true;
   };
+  // The matches that one plane-induced homography between the undistorted
+  // rays explains (RANSAC, inliers within ransac_threshold_px in tile b);
+  // none if a matched pixel cannot be unprojected.
+  const auto plane_inliers = [&](const std::vector<Match>& matches, std::mt19937_64* rng) {
+    std::vector<Match> kept;
+    Eigen::Matrix2Xd ra(2, matches.size()), qb(2, matches.size());
+    for (size_t k = 0; k < matches.size(); ++k) {
+      ra.col(k) = matches[k].ray_a;
+      qb.col(k) = matches[k].q_b;
+    }
+    const Eigen::Matrix2Xd rb = unproject(qb);
+    if (rb.cols() != qb.cols()) return kept;
+    Eigen::Matrix3d h_rays;
+    const std::vector<bool> inliers = RansacHomography(ra, rb, options.ransac_threshold_px, fx,
+                                                       options.ransac_iterations, rng, &h_rays);
+    for (size_t k = 0; k < inliers.size(); ++k) {
+      if (inliers[k]) kept.push_back(matches[k]);
+    }
+    return kept;
+  };
   std::vector<std::vector<Match>> pair_matches(result.pairs.size());
-  // Per pair, the Harris corners of its tile a that were matched (indices).
+  // Per pair, its candidates: the Harris corners of tile a predicted inside
+  // tile b (indices into corners[a]).
   std::vector<std::vector<int>> pair_candidates(result.pairs.size());
   ParallelFor(static_cast<int>(result.pairs.size()), options.num_threads, [&](int p) {
     PairRegistration& pair = result.pairs[p];
@@ -487,21 +508,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       matches.push_back(m);
     }
     pair.num_matched = static_cast<int>(matches.size());
-    // Plane-induced homography on the undistorted rays.
-    Eigen::Matrix2Xd ra(2, matches.size()), qb(2, matches.size());
-    for (size_t k = 0; k < matches.size(); ++k) {
-      ra.col(k) = matches[k].ray_a;
-      qb.col(k) = matches[k].q_b;
-    }
-    const Eigen::Matrix2Xd rb = unproject(qb);
-    if (rb.cols() != qb.cols()) return;
-    Eigen::Matrix3d h_rays;
-    const std::vector<bool> inliers = RansacHomography(
-        ra, rb, options.ransac_threshold_px, fx, options.ransac_iterations, &rng, &h_rays);
-    std::vector<Match> kept;
-    for (size_t k = 0; k < inliers.size(); ++k) {
-      if (inliers[k]) kept.push_back(matches[k]);
-    }
+    std::vector<Match> kept = plane_inliers(matches, &rng);
     pair.num_inliers = static_cast<int>(kept.size());
     pair.num_sift = static_cast<int>(
         std::count_if(kept.begin(), kept.end(), [](const Match& m) { return m.sift; }));
@@ -797,17 +804,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
         matches.push_back(m);
       }
       std::mt19937_64 rng(options.ransac_seed + p);
-      Eigen::Matrix2Xd ra(2, matches.size()), qb(2, matches.size());
-      for (size_t k = 0; k < matches.size(); ++k)
-        ra.col(k) = matches[k].ray_a, qb.col(k) = matches[k].q_b;
-      const Eigen::Matrix2Xd rb = unproject(qb);
-      if (rb.cols() != qb.cols()) return;
-      Eigen::Matrix3d h_rays;
-      const std::vector<bool> inliers = RansacHomography(ra, rb, options.ransac_threshold_px, fx,
-                                                         options.ransac_iterations, &rng, &h_rays);
-      std::vector<Match> kept;
-      for (size_t k = 0; k < inliers.size(); ++k)
-        if (inliers[k]) kept.push_back(matches[k]);
+      const std::vector<Match> kept = plane_inliers(matches, &rng);
       pair.num_matched = static_cast<int>(matches.size());
       pair.num_inliers = static_cast<int>(kept.size());
       pair.usable = pair.num_inliers + pair.num_tag_corners >= options.min_pair_matches;
