@@ -171,6 +171,7 @@ enum class Inner {
   kRamp,   // no wall term; a ramp gi inside the rim
   kFree,   // wall term with x1 free
   kFixed,  // wall term with x1 held (from the bottom-rim circle)
+  kTied,   // wall term with x1 = x0 - w and the wall's level c1 held (BorePrior)
 };
 
 // The rim profile of the header fitted to (d, value) samples by
@@ -179,22 +180,28 @@ enum class Inner {
 //   u_j = d - x_j, z_j = u_j / s, Rout(u) = u Phi(u/s) + s phi(u/s),
 //   Rin(u) = u Phi(-u/s) - s phi(u/s) (ramps blurred by the same Gaussian);
 // the last term is the bore wall, the band [x1, x0] between the bottom rim
-// and the top rim (absent where the wall is hidden, x1 >= x0).
+// and the top rim (absent where the wall is hidden, x1 >= x0). kTied: the
+// band's width w = `x1` and its level c1 = `wall_level` are given, so the
+// wall term moves with x0 and has no free parameter.
 template <Inner kInner>
 StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
-                  double sigma) {
+                  double sigma, double wall_level) {
   constexpr bool kWall = kInner != Inner::kRamp;
-  constexpr int kLinear = 4;                                  // a, c0, go, and gi or c1
+  constexpr bool kTiedWall = kInner == Inner::kTied;
+  constexpr int kLinear = kTiedWall ? 3 : 4;                  // a, c0, go, and gi or c1 (not tied)
   constexpr int kNonlinear = kInner == Inner::kFree ? 3 : 2;  // x0, [x1,] s
   constexpr int kParams = kNonlinear + kLinear;
   using Normal = Eigen::Matrix<double, kParams, kParams>;
   using Vector = Eigen::Matrix<double, kParams, 1>;
+  using Linear = Eigen::Matrix<double, kLinear, 1>;
   const int n = static_cast<int>(d.size());
   StepFit fit;
   if (n < kParams + 3) return fit;
+  const double tied_width = x1;
+  if constexpr (kTiedWall) x1 = x0 - tied_width;
   struct Params {
     double x0, x1, s;
-    Eigen::Vector4d lin;
+    Linear lin;
   };
   // The Jacobian's rows (nonlinear parameters first, then the linear ones)
   // and the residuals at the last point evaluated.
@@ -202,25 +209,35 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
   Eigen::VectorXd residual(n);
   // Sum of squared residuals; rows and residuals kept for normal_equations.
   auto evaluate = [&](const Params& p) {
-    const bool band = kWall && p.x1 < p.x0;
-    const double c0 = p.lin(1), go = p.lin(2), l3 = p.lin(3);
+    const double x1_here = kTiedWall ? p.x0 - tied_width : p.x1;
+    const bool band = kWall && x1_here < p.x0;
+    const double c0 = p.lin(1), go = p.lin(2), l3 = kTiedWall ? wall_level : p.lin(kLinear - 1);
     double cost = 0.0;
     for (int i = 0; i < n; ++i) {
       const double di = d[static_cast<size_t>(i)];
       const double u0 = di - p.x0, z0 = u0 / p.s;
       const Normal01 n0 = NormalAt(z0);
       const double cdf0 = n0.cdf, pdf0 = n0.pdf;
-      const double z1 = (di - p.x1) / p.s;
+      const double z1 = (di - x1_here) / p.s;
       const Normal01 n1 = band ? NormalAt(z1) : Normal01{0.0, 0.0};
       const double cdf1 = n1.cdf, pdf1 = n1.pdf;
-      const Eigen::Vector4d basis(
-          1.0, cdf0, u0 * cdf0 + p.s * pdf0,
-          kWall ? (band ? cdf1 - cdf0 : 0.0) : u0 * (1.0 - cdf0) - p.s * pdf0);
-      const double r = basis.dot(p.lin) - v[static_cast<size_t>(i)];
+      Linear basis;
+      double r;
+      if constexpr (kTiedWall) {
+        basis << 1.0, cdf0, u0 * cdf0 + p.s * pdf0;
+        r = basis.dot(p.lin) + wall_level * (cdf1 - cdf0) - v[static_cast<size_t>(i)];
+      } else {
+        basis << 1.0, cdf0, u0 * cdf0 + p.s * pdf0,
+            kWall ? (band ? cdf1 - cdf0 : 0.0) : u0 * (1.0 - cdf0) - p.s * pdf0;
+        r = basis.dot(p.lin) - v[static_cast<size_t>(i)];
+      }
       cost += r * r;
       residual(i) = r;
       auto row = rows.col(i);
-      if constexpr (kWall) {
+      if constexpr (kTiedWall) {
+        row(0) = -(c0 * pdf0 / p.s + go * cdf0) + l3 * (pdf0 - pdf1) / p.s;
+        row(1) = -c0 * z0 * pdf0 / p.s + go * pdf0 + l3 * (z0 * pdf0 - z1 * pdf1) / p.s;
+      } else if constexpr (kWall) {
         row(0) = -(c0 * pdf0 / p.s + go * cdf0) + (band ? l3 * pdf0 / p.s : 0.0);
         if constexpr (kInner == Inner::kFree) row(1) = band ? -l3 * pdf1 / p.s : 0.0;
         row(kNonlinear - 1) =
@@ -247,18 +264,20 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
       *jtr += rows.col(i) * residual(i);
     }
   };
-  Params p{x0, x1, sigma, Eigen::Vector4d::Zero()};
+  Params p{x0, x1, sigma, Linear::Zero()};
   // The linear parameters at the start: least squares (tiny ridge: the wall
-  // column is zero where the wall is hidden).
+  // column is zero where the wall is hidden). The residuals at zero are
+  // -v, less the tied wall term.
   evaluate(p);
-  Eigen::Matrix4d btb = Eigen::Matrix4d::Zero();
-  Eigen::Vector4d btv = Eigen::Vector4d::Zero();
+  using LinearNormal = Eigen::Matrix<double, kLinear, kLinear>;
+  LinearNormal btb = LinearNormal::Zero();
+  Linear btv = Linear::Zero();
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector4d basis = rows.col(i).template segment<kLinear>(kNonlinear);
+    const Linear basis = rows.col(i).template segment<kLinear>(kNonlinear);
     btb.noalias() += basis * basis.transpose();
-    btv += basis * -v[static_cast<size_t>(i)];
+    btv += basis * (kTiedWall ? residual(i) : -v[static_cast<size_t>(i)]);
   }
-  p.lin = (btb + 1e-12 * Eigen::Matrix4d::Identity()).ldlt().solve(-btv);
+  p.lin = (btb + 1e-12 * LinearNormal::Identity()).ldlt().solve(-btv);
   double current = evaluate(p);
   Normal jtj;
   Vector jtr;
@@ -303,21 +322,23 @@ StepFit FitStepOf(const std::vector<double>& d, const std::vector<double>& v, do
   }
   fit.ok = std::isfinite(p.x0) && std::isfinite(current);
   fit.x0 = p.x0;
-  fit.x1 = p.x1;
+  fit.x1 = kTiedWall ? p.x0 - tied_width : p.x1;
   fit.sigma = p.s;
-  const bool band = kWall && p.x1 < p.x0;
-  fit.wall_contrast = band ? p.lin(3) : 0.0;
+  const bool band = kWall && fit.x1 < p.x0;
+  fit.wall_contrast = band ? (kTiedWall ? wall_level : p.lin(kLinear - 1)) : 0.0;
   fit.contrast = p.lin(1) - fit.wall_contrast;
   fit.rms = std::sqrt(current / n);
   return fit;
 }
 
+// kTied: x1 is the wall's width and `wall_level` its level (FitStepOf).
 StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, double x0, double x1,
-                double sigma, Inner inner) {
+                double sigma, Inner inner, double wall_level = 0.0) {
   switch (inner) {
-    case Inner::kRamp: return FitStepOf<Inner::kRamp>(d, v, x0, x1, sigma);
-    case Inner::kFree: return FitStepOf<Inner::kFree>(d, v, x0, x1, sigma);
-    case Inner::kFixed: return FitStepOf<Inner::kFixed>(d, v, x0, x1, sigma);
+    case Inner::kRamp: return FitStepOf<Inner::kRamp>(d, v, x0, x1, sigma, wall_level);
+    case Inner::kFree: return FitStepOf<Inner::kFree>(d, v, x0, x1, sigma, wall_level);
+    case Inner::kFixed: return FitStepOf<Inner::kFixed>(d, v, x0, x1, sigma, wall_level);
+    case Inner::kTied: return FitStepOf<Inner::kTied>(d, v, x0, x1, sigma, wall_level);
   }
   return {};
 }
@@ -329,6 +350,7 @@ struct WedgeEdge {
   bool ok = false;         // a clean rim step
   bool inner_ok = false;   // ... and a resolved bottom-rim step inside it
   bool narrow = false;     // the predicted wall is visible but too narrow to resolve
+  bool wall_fitted = false;  // pass (b): the wall's level fitted with the rim (two-step fit)
   StepFit step;
 };
 
@@ -351,10 +373,11 @@ double BottomRimOffset(const Circle& circle, const Circle& bottom, const Eigen::
 // well, kFixed to take it from `bottom`. The blur is fitted per wedge,
 // `sigma` (the previous pass's median) only places the shoulder starts.
 // With kFixed, wedges whose wall is visible but narrower than `narrow_px`
-// are marked narrow (none if 0).
+// are marked narrow (none if 0); given `narrow_wall_level` (BorePrior), they
+// are fitted with the wall tied to the rim at that level (kTied).
 EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, double sigma,
                    Inner inner, const std::optional<Circle>& bottom, double narrow_px,
-                   const CircleMeasureOptions& options) {
+                   std::optional<double> narrow_wall_level, const CircleMeasureOptions& options) {
   const double hw = options.profile_half_width_px;
   const int num =
       std::max(options.min_wedges,
@@ -498,7 +521,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
         if (!alone) alone = FitStep(d, v, x_rim, x_rim, sigma, Inner::kRamp);
         if (step.rms < 0.7 * alone->rms && (!wedge.inner_ok || step.rms < wedge.step.rms)) {
           wedge.step = step;
-          wedge.ok = wedge.inner_ok = true;
+          wedge.ok = wedge.inner_ok = wedge.wall_fitted = true;
         }
       }
       continue;
@@ -510,9 +533,13 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
       wedge.narrow = x1 < 0.0 && x1 > -narrow_px;
       // Beyond the window's reach (a wide wall) or no bottom rim: the ramp.
       if (!(x1 > x_rim - hw - 3.0 * sigma)) mode = Inner::kRamp;
+      if (wedge.narrow && narrow_wall_level) {
+        mode = Inner::kTied;
+        x1 = -x1;  // the band's width
+      }
     }
     samples_in(x_rim - hw, x_rim + hw);
-    wedge.step = FitStep(d, v, x_rim, x1, sigma, mode);
+    wedge.step = FitStep(d, v, x_rim, x1, sigma, mode, narrow_wall_level.value_or(0.0));
     wedge.ok = accept(wedge.step);
   }
   std::vector<double> rms, sigmas;
@@ -745,7 +772,8 @@ std::string CircleMeasurement::Brief() const {
 
 CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
                                 double nominal_radius_px, const CircleMeasureOptions& options,
-                                const std::optional<Eigen::Vector2d>& nadir_px) {
+                                const std::optional<Eigen::Vector2d>& nadir_px,
+                                const std::optional<BorePrior>& prior) {
   assert(options.Check().empty() && nominal_radius_px > 0.0);
   CircleMeasurement result;
   const double search =
@@ -772,7 +800,9 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
                         : bottom || bottom_scale ? Inner::kFixed
                                                  : Inner::kRamp;
     pass = FindEdges(image, circle, band, sigma, inner, bottom_of(circle),
-                     bottom_scale ? options.min_wall_blurs * sigma : 0.0, options);
+                     bottom_scale ? options.min_wall_blurs * sigma : 0.0,
+                     result.bore_prior_used ? std::optional(prior->wall_contrast) : std::nullopt,
+                     options);
     if (std::isfinite(pass.sigma)) sigma = pass.sigma;
     const int num = static_cast<int>(pass.wedges.size());
     result.num_wedges = num;
@@ -781,7 +811,8 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
     for (const WedgeEdge& w : pass.wedges) result.num_narrow_wall += w.narrow ? 1 : 0;
     // Left out while the rest spans half the rim or more; else the fit
     // keeps them (the header's limit).
-    result.narrow_wall_skipped = result.num_narrow_wall > 0 && 2 * result.num_narrow_wall <= num;
+    result.narrow_wall_skipped =
+        result.num_narrow_wall > 0 && 2 * result.num_narrow_wall <= num && !result.bore_prior_used;
     const int usable = num - (result.narrow_wall_skipped ? result.num_narrow_wall : 0);
     std::vector<int> index, inner_index;
     for (int k = 0; k < num; ++k) {
@@ -837,8 +868,35 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
       }
     }
     if (inner == Inner::kFree) {
+      // The wall's level where a wall 2 blurs to 2 profile half widths wide
+      // was fitted with the rim (a BorePrior for other views): the model
+      // the tied wall uses. (Wider walls, fitted apart or with the rim's
+      // window short of the hole's level, read it 10 % off on synthetic
+      // holes.)
+      std::vector<double> walls;
+      for (int k : inner_index) {
+        const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
+        if (w.wall_fitted) walls.push_back(w.step.wall_contrast);
+      }
+      if (walls.size() >= 12) result.wall_contrast = Median(walls);
       result.num_bottom_rim_points = static_cast<int>(inner_index.size());
       result.bottom_rim_modelled = bottom.has_value() || bottom_scale.has_value();
+      if (nadir_px && prior && !result.bottom_rim_modelled) {
+        // The prior's wall, narrower than min_wall_blurs blurs on more than
+        // half the rim: those wedges cannot be left out (the Limits).
+        const Circle prior_bottom{*nadir_px + prior->bottom_rim_scale * (circle.centre - *nadir_px),
+                                  prior->bottom_rim_scale * circle.radius};
+        int narrow = 0;
+        for (const WedgeEdge& w : pass.wedges) {
+          const double x1 = BottomRimOffset(circle, prior_bottom,
+                                            Eigen::Vector2d(std::cos(w.angle), std::sin(w.angle)));
+          narrow += x1 < 0.0 && x1 > -options.min_wall_blurs * sigma ? 1 : 0;
+        }
+        if (2 * narrow > num) {
+          bottom_scale = prior->bottom_rim_scale;
+          result.bore_prior_used = true;
+        }
+      }
     }
     fit = FitCircleRobust(points_at(index, false), circle, options.tukey_sigmas);
     fit.index = index;
@@ -847,7 +905,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
     circle = fit.circle;
     // k relates the bottom rim to the top rim as now placed (an early pass's
     // rim can be off by a tenth of a px where a narrow wall merges with it).
-    if (bottom_scale) {
+    if (bottom_scale && !result.bore_prior_used) {
       bottom_scale =
           FitBottomScale(bottom_points, circle, *nadir_px, *bottom_scale, options.tukey_sigmas)
               .value_or(*bottom_scale);

@@ -67,7 +67,13 @@
 // px with the axis through the centre, -0.10 px with it 1.1 radii away,
 // unbiased from ~2 radii; k is then not resolved, and given the true k the
 // held bottom rim still leaves -0.13 and -0.06 px: the wall's contrast
-// trades against x0). Far from the axis a crescent wider than the bottom
+// trades against x0). Given a BorePrior (k and the wall's level that other
+// views resolved; MeasureCircle's comment) those wedges are fitted with the
+// wall tied to the rim: radius within 0.003 px over 60 textures, the centre
+// ~0.01 px away from the nadir (NarrowRingNearTheAxisIsUnbiasedGiven-
+// TheBorePrior); a wall level off by e moves the radius by ~+2 e px and the
+// centre by ~-2.4 e px along the nadir's direction, which the covariance
+// does not include. Far from the axis a crescent wider than the bottom
 // rim's reach leaves no bias (WideCrescentFarFromTheNadirDoesNotBiasTheFit);
 // an 8-12 mm hole's radius scatters by ~0.011 px per tile view, as its
 // covariance says (399 views in 128 simulated projects: rms error / sigma
@@ -162,20 +168,36 @@ struct CircleMeasurement {
   double bottom_rim_scale = 0.0;  // k, the bottom rim about the nadir (0: none given or not found)
   int num_narrow_wall = 0;  // wedges whose wall shows narrower than min_wall_blurs (nadir model)
   bool narrow_wall_skipped = false;  // ... left out of the fit (they leave half the rim or more)
+  bool bore_prior_used = false;      // k and the narrow wall's level from the BorePrior given
+  double wall_contrast = 0.0;  // wall minus hole level where this view resolved it (0: nowhere)
   int passes = 0;                    // edge + fit passes run
   Eigen::Vector2d coarse_centre_px = Eigen::Vector2d::Zero();  // step 1's centre
 
   std::string Brief() const;  // one line for a log or a report
 };
 
+// What the other holes of a project say of the bore (the measure stage pools
+// their views where the wall was resolved): the bottom rim's scale k about
+// the nadir (one plane, one thickness) and the wall's level.
+struct BorePrior {
+  double bottom_rim_scale = 0.0;  // k, in (0, 1)
+  double wall_contrast = 0.0;     // wall minus hole level, image units
+};
+
 // Measures the dark round hole of nominal radius `nominal_radius_px` whose
 // centre is expected near `expected_centre_px` (within the options' search
 // square). `nadir_px`, if given, is the nadir of the camera whose picture
 // shows the hole, image px (bore_view.h): the bore's bottom rim is modelled
-// about it. A data failure is a result with ok = false and `error` set.
+// about it. `prior`, used only with a nadir, where this view resolves no
+// bottom rim and the prior's k puts a wall narrower than min_wall_blurs on
+// more than half the rim (the Limits above): the later passes take the
+// bottom rim from its k and fit those narrow wedges with the wall tied to
+// the rim, x1 = x0 - w(a), at its level (no free wall contrast to trade
+// against x0). A data failure is a result with ok = false and `error` set.
 // Preconditions: options.Check() is empty, nominal_radius_px > 0.
 CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
                                 double nominal_radius_px, const CircleMeasureOptions& options = {},
-                                const std::optional<Eigen::Vector2d>& nadir_px = std::nullopt);
+                                const std::optional<Eigen::Vector2d>& nadir_px = std::nullopt,
+                                const std::optional<BorePrior>& prior = std::nullopt);
 
 }  // namespace omm
