@@ -29,6 +29,7 @@
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/measure/bore_view.h"
 #include "pipeline/measure/circle_measure.h"
@@ -61,6 +62,10 @@ struct LocatedFeature {
   FeatureReport report;
   std::optional<CircleFeatureValue> value;  // none if not found
   int value_index = -1;                     // into the propagation's features; -1 if not found
+  // Of its fits: the bore where they resolved it (k, wall level; for a
+  // BorePrior), and whether one with a nadir resolved none.
+  std::vector<double> bottom_rim_scales, wall_contrasts;
+  bool bore_unresolved = false;
 };
 
 // Each tile's exposure as the mosaic divided it out (report.json's mosaic
@@ -96,6 +101,8 @@ constexpr double kMaxOtherTileWeight = 0.01;
 constexpr double kSharedEdgeFraction = 0.2;
 // Views of a hole whose chi-square exceeds this quantile disagree (CombineCircleViews).
 constexpr double kConsistencyProbability = 0.999;
+// A BorePrior is pooled from at least this many views that resolve the wall.
+constexpr size_t kMinBorePriorViews = 3;
 // Beyond the rim, a fit reads pixels out to its rim band plus the step
 // profile's half width (circle_measure.h); one more for rounding.
 double FitReachPx(const CircleMeasureOptions& options) {
@@ -114,6 +121,7 @@ struct MeasureInputs {
   const OrthoGeometry& geometry;
   const std::vector<ImageF>& tiles;
   std::vector<TileExposure> exposure;  // per tile
+  std::optional<BorePrior> bore_prior;  // the project's bore, from a first pass (RunMeasureStage)
 };
 
 // One fit, in the mosaic or in one tile's patch; mosaic px.
@@ -151,7 +159,8 @@ HoleFit FitInTile(const MeasureInputs& in, int tile, const Eigen::Vector2d& expe
     fit.circle.error = "not seen by the tile";
     return fit;
   }
-  fit.circle = MeasureCircle(patch.pixels, expected_px - origin, radius_px, options, nadir_px);
+  fit.circle = MeasureCircle(patch.pixels, expected_px - origin, radius_px, options, nadir_px,
+                             in.bore_prior);
   fit.circle.centre_px += origin;
   fit.circle.coarse_centre_px += origin;
   return fit;
@@ -169,13 +178,20 @@ HoleFit FitInMosaic(const MeasureInputs& in, const Eigen::Vector2d& centre_mm, d
   std::optional<Eigen::Vector2d> nadir_px;
   if (fit.nadir_tile)
     nadir_px = in.grid.MosaicFromPart(TileNadirMm(in.saved.scene, *fit.nadir_tile));
-  fit.circle =
-      MeasureCircle(in.mosaic, expected_px, radius_mm / in.grid.gsd_mm, FitOptions(in), nadir_px);
+  fit.circle = MeasureCircle(in.mosaic, expected_px, radius_mm / in.grid.gsd_mm, FitOptions(in),
+                             nadir_px, in.bore_prior);
   return fit;
 }
 
 std::string BoreNote(const HoleFit& fit, const SavedScene& saved) {
   const CircleMeasurement& circle = fit.circle;
+  if (circle.bore_prior_used) {
+    return fmt::format(
+        "no bore wall resolved; bottom rim scaled by the project's {:.4f} about {}'s nadir; wall "
+        "too narrow on {} of {} wedges, tied to the rim at the project's level",
+        circle.bottom_rim_scale, saved.tile_images[*fit.nadir_tile], circle.num_narrow_wall,
+        circle.num_wedges);
+  }
   if (circle.bottom_rim_scale > 0.0) {
     return fmt::format(
         "bottom rim scaled by {:.4f} about {}'s nadir; wall too narrow on {} of {} wedges{}",
@@ -249,12 +265,14 @@ void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& co
   for (size_t i = 0; i < fits.size(); ++i) {
     const HoleFit& fit = fits[i];
     const std::string& name = saved.tile_images[*fit.tile];
-    views_note +=
-        fmt::format("{} {} ({})", i > 0 ? "," : "", name,
-                    fit.circle.bottom_rim_scale > 0.0
-                        ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
-                        : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
-                                                                     : "no bore wall resolved"));
+    views_note += fmt::format(
+        "{} {} ({})", i > 0 ? "," : "", name,
+        fit.circle.bore_prior_used
+            ? fmt::format("no bore wall resolved, project's k {:.4f}", fit.circle.bottom_rim_scale)
+        : fit.circle.bottom_rim_scale > 0.0
+            ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
+            : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
+                                                         : "no bore wall resolved"));
     bore_note += (i > 0 ? "; " : "") + name + ": " + BoreNote(fit, saved);
     tile_fits.emplace_back(name, fit.circle.Brief());
   }
@@ -337,6 +355,13 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
       return located;
     }
     fits.push_back(std::move(fit));
+  }
+  for (const HoleFit& fit : fits) {
+    const CircleMeasurement& circle = fit.circle;
+    if (circle.bottom_rim_scale > 0.0 && !circle.bore_prior_used)
+      located.bottom_rim_scales.push_back(circle.bottom_rim_scale);
+    if (circle.wall_contrast > 0.0) located.wall_contrasts.push_back(circle.wall_contrast);
+    located.bore_unresolved |= fit.nadir_tile.has_value() && !circle.bottom_rim_modelled;
   }
 
   // Per fit: (cx, cy, D) mm, its edge covariance and scene sensitivity.
@@ -458,10 +483,9 @@ void RunMeasureStage(StageContext& context) {
   const std::shared_ptr<const std::vector<ImageF>> tiles =
       context.tiles ? context.tiles
                     : std::make_shared<const std::vector<ImageF>>(TileImages(project, camera));
-  const MeasureInputs inputs{
-      saved,         lens,   grid,
-      mosaic.pixels, camera, source_px,
-      geometry,      *tiles, TileExposures(mosaic_report, saved.tile_images)};
+  MeasureInputs inputs{saved,         lens,   grid,
+                       mosaic.pixels, camera, source_px,
+                       geometry,      *tiles, TileExposures(mosaic_report, saved.tile_images)};
 
   const int num_features = static_cast<int>(project.features.size());
   std::vector<LocatedFeature> located(num_features);
@@ -473,6 +497,29 @@ void RunMeasureStage(StageContext& context) {
     const std::lock_guard lock(progress_mutex);
     if (context.progress) context.progress(++num_located, num_features + 1, "located " + spec.name);
   });
+  // Views that resolve no bore wall, near a nadir, are measured again with
+  // the bore the others resolved (BorePrior; MeasureCircle uses it only
+  // where a narrow wall covers most of the rim).
+  std::vector<double> scales, walls;
+  std::vector<int> unresolved;
+  for (int i = 0; i < num_features; ++i) {
+    const LocatedFeature& feature = located[i];
+    scales.insert(scales.end(), feature.bottom_rim_scales.begin(), feature.bottom_rim_scales.end());
+    walls.insert(walls.end(), feature.wall_contrasts.begin(), feature.wall_contrasts.end());
+    if (feature.bore_unresolved) unresolved.push_back(i);
+  }
+  ReportObject bore_prior_report{{"views_with_k", static_cast<int>(scales.size())},
+                                 {"views_with_wall_level", static_cast<int>(walls.size())}};
+  if (scales.size() >= kMinBorePriorViews && walls.size() >= kMinBorePriorViews &&
+      !unresolved.empty()) {
+    inputs.bore_prior = BorePrior{Median(scales), Median(walls)};
+    bore_prior_report.emplace_back("bottom_rim_scale", inputs.bore_prior->bottom_rim_scale);
+    bore_prior_report.emplace_back("wall_contrast", inputs.bore_prior->wall_contrast);
+    ParallelFor(static_cast<int>(unresolved.size()), kNumThreads, [&](int j) {
+      const int i = unresolved[static_cast<size_t>(j)];
+      located[i] = LocateFeature(project.features[i], inputs);
+    });
+  }
   std::vector<CircleFeatureValue> values;
   std::map<std::string, int> by_name;
   for (int i = 0; i < num_features; ++i) {
@@ -575,6 +622,7 @@ void RunMeasureStage(StageContext& context) {
   context.report.extra.emplace_back("measure",
                                     ReportObject{{"brief", brief},
                                                  {"intrinsics_refined", saved.intrinsics_refined},
+                                                 {"bore_prior", std::move(bore_prior_report)},
                                                  {"seconds", SecondsSince(stage_start)}});
   if (context.progress) context.progress(num_features + 1, num_features + 1, "measure done");
 }
