@@ -972,6 +972,25 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
   result.correlation_px =
       spectrum.samples_per_independent * 2 * kPi * circle.radius / result.num_wedges;
   result.ok = true;
+  if (result.bore_prior_used && prior->wall_contrast_sigma > 0.0) {
+    // The borrowed wall level's own error moves the tied rim (~2 px per
+    // unit of level): its term by central differences, refitting at the
+    // level +- its sigma.
+    const auto refit = [&](double sign) {
+      BorePrior shifted = *prior;
+      shifted.wall_contrast += sign * prior->wall_contrast_sigma;
+      shifted.wall_contrast_sigma = 0.0;
+      return MeasureCircle(image, expected_centre_px, nominal_radius_px, options, nadir_px,
+                           shifted);
+    };
+    const CircleMeasurement plus = refit(1.0), minus = refit(-1.0);
+    if (plus.ok && minus.ok && plus.bore_prior_used && minus.bore_prior_used) {
+      const Eigen::Vector3d g(0.5 * (plus.centre_px.x() - minus.centre_px.x()),
+                              0.5 * (plus.centre_px.y() - minus.centre_px.y()),
+                              0.5 * (plus.radius_px - minus.radius_px));
+      result.covariance_px2 += g * g.transpose();
+    }
+  }
   return result;
 }
 

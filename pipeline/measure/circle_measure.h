@@ -73,7 +73,7 @@
 // ~0.01 px away from the nadir (NarrowRingNearTheAxisIsUnbiasedGiven-
 // TheBorePrior); a wall level off by e moves the radius by ~+2 e px and the
 // centre by ~-2.4 e px along the nadir's direction, which the covariance
-// does not include. Far from the axis a crescent wider than the bottom
+// includes for the prior's wall_contrast_sigma. Far from the axis a crescent wider than the bottom
 // rim's reach leaves no bias (WideCrescentFarFromTheNadirDoesNotBiasTheFit);
 // an 8-12 mm hole's radius scatters by ~0.011 px per tile view, as its
 // covariance says (399 views in 128 simulated projects: rms error / sigma
@@ -182,6 +182,9 @@ struct CircleMeasurement {
 struct BorePrior {
   double bottom_rim_scale = 0.0;  // k, in (0, 1)
   double wall_contrast = 0.0;     // wall minus hole level, image units
+  // Its 1-sigma for this hole (the spread of the pooled views' levels): the
+  // covariance of a view that uses the prior includes what it moves.
+  double wall_contrast_sigma = 0.0;
 };
 
 // Measures the dark round hole of nominal radius `nominal_radius_px` whose

@@ -371,6 +371,52 @@ TEST(CircleMeasure, NarrowRingNearTheAxisIsUnbiasedGivenTheBorePrior) {
   }
 }
 
+// A borrowed wall level that is off (here by 0.02, a sixth of the level)
+// moves the tied rim by ~2 px per unit of level: radius +0.04 px, several
+// of its edge sigmas. Given the level's sigma, the covariance carries that
+// term and covers the error; without it the errors are far outside.
+TEST(CircleMeasure, TheBorrowedWallLevelsSigmaCoversItsError) {
+  constexpr double kRadius = 26.75, kScale = 0.97, kWallError = 0.02;
+  constexpr int kDraws = 30;
+  std::mt19937_64 rng(2032);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  double z2_plain = 0.0, z2_radius = 0.0, z2_centre = 0.0;
+  for (int k = 0; k < kDraws; ++k) {
+    Eigen::Vector2d nadir;
+    SyntheticHole hole = HoleWithBore(kRadius, kScale, 1.36 * kRadius, &rng, &nadir);
+    hole.texture_seed = 1200 + k;
+    hole.texture_offset_mm = Eigen::Vector2d(200.0 * uniform(rng), 200.0 * uniform(rng));
+    hole.psf_sigma_px = 0.8;
+    hole.noise_sigma = 0.0065;
+    hole.noise_seed = 1200 + k;
+    const ImageF image = RenderSyntheticHole(hole);
+    const double level = hole.wall - hole.table + kWallError;
+    const Eigen::Vector2d start = hole.centre_px + Eigen::Vector2d(1.0, -1.0);
+    const CircleMeasurement plain =
+        MeasureCircle(image, start, std::round(kRadius), {}, nadir, BorePrior{kScale, level, 0.0});
+    const CircleMeasurement m = MeasureCircle(image, start, std::round(kRadius), {}, nadir,
+                                              BorePrior{kScale, level, kWallError});
+    ASSERT_TRUE(plain.ok && m.ok) << k;
+    ASSERT_TRUE(m.bore_prior_used) << k;
+    // Same fit, wider covariance.
+    EXPECT_EQ(m.centre_px, plain.centre_px);
+    EXPECT_EQ(m.radius_px, plain.radius_px);
+    const Eigen::Vector2d to_nadir = (nadir - hole.centre_px).normalized();
+    const double along = (m.centre_px - hole.centre_px).dot(to_nadir);
+    z2_plain += std::pow((plain.radius_px - kRadius) / Sigma(plain, 2), 2);
+    z2_radius += std::pow((m.radius_px - kRadius) / Sigma(m, 2), 2);
+    z2_centre += std::pow(
+        along / std::sqrt(to_nadir.dot(m.covariance_px2.topLeftCorner<2, 2>() * to_nadir)), 2);
+  }
+  const double plain_z = std::sqrt(z2_plain / kDraws), radius_z = std::sqrt(z2_radius / kDraws),
+               centre_z = std::sqrt(z2_centre / kDraws);
+  std::printf("rms z of the radius: %.2f without the level's sigma, %.2f with; centre %.2f\n",
+              plain_z, radius_z, centre_z);
+  EXPECT_GT(plain_z, 2.0);
+  EXPECT_LT(radius_z, 1.4);
+  EXPECT_LT(centre_z, 1.4);
+}
+
 // The prior changes nothing where a view resolves its own bottom rim or its
 // narrow wall covers less than half the rim (far from the axis): the
 // results are the same to the bit.

@@ -512,9 +512,15 @@ void RunMeasureStage(StageContext& context) {
                                  {"views_with_wall_level", static_cast<int>(walls.size())}};
   if (scales.size() >= kMinBorePriorViews && walls.size() >= kMinBorePriorViews &&
       !unresolved.empty()) {
-    inputs.bore_prior = BorePrior{Median(scales), Median(walls)};
+    // The level's sigma for one hole is the views' spread (1.4826 MAD), not
+    // its standard error: walls differ from hole to hole beyond their noise.
+    const double wall = Median(walls);
+    std::vector<double> deviations;
+    for (const double w : walls) deviations.push_back(std::abs(w - wall));
+    inputs.bore_prior = BorePrior{Median(scales), wall, 1.4826 * Median(std::move(deviations))};
     bore_prior_report.emplace_back("bottom_rim_scale", inputs.bore_prior->bottom_rim_scale);
     bore_prior_report.emplace_back("wall_contrast", inputs.bore_prior->wall_contrast);
+    bore_prior_report.emplace_back("wall_contrast_sigma", inputs.bore_prior->wall_contrast_sigma);
     ParallelFor(static_cast<int>(unresolved.size()), kNumThreads, [&](int j) {
       const int i = unresolved[static_cast<size_t>(j)];
       located[i] = LocateFeature(project.features[i], inputs);
