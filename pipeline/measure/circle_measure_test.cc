@@ -198,6 +198,19 @@ SyntheticHole HoleWithBore(double radius_px, double k, double nadir_distance_px,
   return hole;
 }
 
+// `hole` rendered with the simulator's blur (0.8 px) and sensor noise at the
+// surface's level (shot noise of 0.5 x 12000 electrons: 0.0065), its texture
+// and noise drawn from `seed`, the texture at a random place.
+ImageF RenderWithSensorNoise(SyntheticHole hole, std::uint64_t seed, std::mt19937_64* rng) {
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  hole.texture_seed = seed;
+  hole.texture_offset_mm = Eigen::Vector2d(200.0 * uniform(*rng), 200.0 * uniform(*rng));
+  hole.psf_sigma_px = 0.8;
+  hole.noise_sigma = 0.0065;
+  hole.noise_seed = seed;
+  return RenderSyntheticHole(hole);
+}
+
 // demo-101's hole_13 (60 mm at 0.15 mm per px: r = 200 px) with the nadir
 // of the tile that renders it 0.97 r from its centre, the 10 mm part seen
 // from 385 mm (k = 0.9746): the wall shows (1 - k)(r - D cos a) wide, under
@@ -268,22 +281,15 @@ TEST(CircleMeasure, NarrowWallNearTheNadirDoesNotBiasTheFit) {
 // same ~0.04 px on the crescent's and on the hidden side.
 TEST(CircleMeasure, WideCrescentFarFromTheNadirDoesNotBiasTheFit) {
   constexpr double kRadius = 26.75, kScale = 0.9603, kNadirDistance = 570.0;
-  constexpr double kSensorNoise = 0.0065;
   constexpr int kDraws = 30;
   std::mt19937_64 rng(2027);
-  std::uniform_real_distribution<double> uniform(0.0, 1.0);
   double sum = 0.0, sum2 = 0.0, sum_z2 = 0.0;
   for (int k = 0; k < kDraws; ++k) {
     Eigen::Vector2d nadir;
-    SyntheticHole hole = HoleWithBore(kRadius, kScale, kNadirDistance, &rng, &nadir);
-    hole.texture_seed = 700 + k;
-    hole.texture_offset_mm = Eigen::Vector2d(200.0 * uniform(rng), 200.0 * uniform(rng));
-    hole.psf_sigma_px = 0.8;
-    hole.noise_sigma = kSensorNoise;
-    hole.noise_seed = 700 + k;
+    const SyntheticHole hole = HoleWithBore(kRadius, kScale, kNadirDistance, &rng, &nadir);
     const CircleMeasurement m =
-        MeasureCircle(RenderSyntheticHole(hole), hole.centre_px + Eigen::Vector2d(1.0, -1.0),
-                      std::round(kRadius), {}, nadir);
+        MeasureCircle(RenderWithSensorNoise(hole, 700 + k, &rng),
+                      hole.centre_px + Eigen::Vector2d(1.0, -1.0), std::round(kRadius), {}, nadir);
     ASSERT_TRUE(m.ok) << k << ": " << m.error;
     const double error = m.radius_px - kRadius;
     sum += error;
@@ -315,17 +321,11 @@ TEST(CircleMeasure, WideCrescentFarFromTheNadirDoesNotBiasTheFit) {
 // ~10 (radius) and ~2 (centre) times the bounds. rms error / sigma under
 // 1.4 as in the crescent test.
 TEST(CircleMeasure, NarrowRingNearTheAxisIsUnbiasedGivenTheBorePrior) {
-  constexpr double kRadius = 26.75, kScale = 0.97, kSensorNoise = 0.0065, kBlurPx = 0.8;
+  constexpr double kRadius = 26.75, kScale = 0.97;
   constexpr int kDraws = 60;
   std::mt19937_64 rng(2030);
-  std::uniform_real_distribution<double> uniform(0.0, 1.0);
-  auto render = [&](SyntheticHole hole, std::uint64_t seed) {
-    hole.texture_seed = seed;
-    hole.texture_offset_mm = Eigen::Vector2d(200.0 * uniform(rng), 200.0 * uniform(rng));
-    hole.psf_sigma_px = kBlurPx;
-    hole.noise_sigma = kSensorNoise;
-    hole.noise_seed = seed;
-    return RenderSyntheticHole(hole);
+  const auto render = [&](const SyntheticHole& hole, std::uint64_t seed) {
+    return RenderWithSensorNoise(hole, seed, &rng);
   };
   // The resolved view: the wall 0 to 15 px wide, 2 blurs to 6 px on two arcs.
   Eigen::Vector2d nadir;
@@ -379,17 +379,11 @@ TEST(CircleMeasure, TheBorrowedWallLevelsSigmaCoversItsError) {
   constexpr double kRadius = 26.75, kScale = 0.97, kWallError = 0.02;
   constexpr int kDraws = 30;
   std::mt19937_64 rng(2032);
-  std::uniform_real_distribution<double> uniform(0.0, 1.0);
   double z2_plain = 0.0, z2_radius = 0.0, z2_centre = 0.0;
   for (int k = 0; k < kDraws; ++k) {
     Eigen::Vector2d nadir;
-    SyntheticHole hole = HoleWithBore(kRadius, kScale, 1.36 * kRadius, &rng, &nadir);
-    hole.texture_seed = 1200 + k;
-    hole.texture_offset_mm = Eigen::Vector2d(200.0 * uniform(rng), 200.0 * uniform(rng));
-    hole.psf_sigma_px = 0.8;
-    hole.noise_sigma = 0.0065;
-    hole.noise_seed = 1200 + k;
-    const ImageF image = RenderSyntheticHole(hole);
+    const SyntheticHole hole = HoleWithBore(kRadius, kScale, 1.36 * kRadius, &rng, &nadir);
+    const ImageF image = RenderWithSensorNoise(hole, 1200 + k, &rng);
     const double level = hole.wall - hole.table + kWallError;
     const Eigen::Vector2d start = hole.centre_px + Eigen::Vector2d(1.0, -1.0);
     const CircleMeasurement plain =
