@@ -6,7 +6,9 @@
 //   positions, plate, intrinsics) that round-trips exactly;
 // - calibration.from a .cameramodel and the tile with the whole plate
 //   removed: the intrinsics held and the report saying so, and "no plate on
-//   the part" with the table-only scale sigma.
+//   the part" with the table-only scale sigma;
+// - a splined lens's plate marks outside the calibrated region weighted
+//   down, with the region from the solve or from a reused .cameramodel.
 // The numbers against the truth are plate_on_part_sim_test.cc's.
 #include <gtest/gtest.h>
 
@@ -157,6 +159,56 @@ TEST(MosaicPlateStageSplined, MarksOutsideTheCalibratedRegionDoNotBiasThePlate) 
   EXPECT_LT(std::abs(Number(check, "height_mm")), 3 * Number(check, "height_sigma_mm"));
   EXPECT_LT(std::abs(Number(check, "scale_minus_1_ppm")), 3 * Number(check, "sigma_ppm"));
   EXPECT_LT(Number(check, "rms_px"), 0.02);
+}
+
+// The same project with calibration.from the .cameramodel its calibration
+// wrote (no covariance: the intrinsics held, not refined). The file carries
+// the calibration's region (valid_intrinsics_region), so the plate marks
+// outside it are weighted down as in the test above: the plate's height
+// within 3 sigma of the truth. The same file without the region is the
+// control: no mark is outside anything, and the height comes out 22.7 um at
+// a stated 2.1 (-67 ppm of scale), as before the region was read.
+TEST(MosaicPlateStageSplined, AReusedCameraModelsRegionWeighsTheMarksOutsideIt) {
+  const testing::CachedProject sim = testing::SimulatedProject("lens-mismatch", 203, 20, true);
+  testing::TempDir dir;
+  testing::CopyProject(sim.project_dir, dir.path() / "calibrated");
+  RunOptions calibrate;
+  calibrate.stages = {Stage::kCalibrate};
+  RunProject(LoadProject(dir.path() / "calibrated"), calibrate);
+  const fs::path with_region = dir.path() / "with_region.cameramodel";
+  fs::copy_file(dir.path() / "calibrated" / "out" / "camera.cameramodel", with_region);
+  ASSERT_GE(ReadCameraModel(with_region).valid_region_px.cols(), 3);
+  const std::string text = testing::ReadTextFile(with_region);
+  const fs::path without_region = dir.path() / "without_region.cameramodel";
+  testing::WriteTextFile(without_region,
+                         text.substr(0, text.find(",\n  'valid_intrinsics_region'")) + "\n}\n");
+  ASSERT_EQ(ReadCameraModel(without_region).valid_region_px.cols(), 0);
+
+  // The plate check of a run reusing `model`.
+  const auto plate_check = [&](const fs::path& model) {
+    const fs::path project = dir.path() / model.stem();
+    testing::CopyProject(sim.project_dir, project);
+    testing::ReplaceInFile(project / "project.yaml",
+                           "\nboard:", "\ncalibration:\n  from: " + model.string() + "\nboard:");
+    RunOptions options;
+    options.stages = {Stage::kCalibrate, Stage::kMosaic};
+    const RunSummary summary = RunProject(LoadProject(project), options);
+    EXPECT_TRUE(summary.report.mosaic.has_value());
+    const ReportObject& mosaic = summary.report.mosaic->extra;
+    EXPECT_EQ(Text(mosaic, "intrinsics"),
+              "held: calibration from a .cameramodel without covariance");
+    const ReportValue& check = RequiredMember(mosaic, "plate_scale_check");
+    EXPECT_TRUE(std::holds_alternative<ReportObject>(check.data())) << Text(mosaic, "brief");
+    return std::holds_alternative<ReportObject>(check.data()) ? std::get<ReportObject>(check.data())
+                                                              : ReportObject{};
+  };
+  const ReportObject with = plate_check(with_region);
+  EXPECT_GT(std::get<std::int64_t>(RequiredMember(with, "outside_calibrated_region").data()), 0);
+  EXPECT_LT(std::abs(Number(with, "height_mm")), 3 * Number(with, "height_sigma_mm"));
+  EXPECT_LT(std::abs(Number(with, "scale_minus_1_ppm")), 3 * Number(with, "sigma_ppm"));
+  const ReportObject without = plate_check(without_region);
+  EXPECT_EQ(std::get<std::int64_t>(RequiredMember(without, "outside_calibrated_region").data()), 0);
+  EXPECT_GT(std::abs(Number(without, "height_mm")), 5 * Number(without, "height_sigma_mm"));
 }
 
 // calibration.from a .cameramodel (no covariance) and the tile with the

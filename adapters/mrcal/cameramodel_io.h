@@ -2,6 +2,9 @@
 // mrcal_read_cameramodel_file): lens model, intrinsics, imager size. The
 // camera is written at the reference (rt_cam_ref = 0); optimization_inputs are
 // not written (the C API does not carry them; our solve record does).
+// `valid_intrinsics_region`, a key of the format that the C API skips, is
+// written and read here beside it (CameraModel::valid_region_px): a list of
+// [x, y] vertices, closed (the last repeats the first) as mrcal writes it.
 #pragma once
 
 #include <filesystem>

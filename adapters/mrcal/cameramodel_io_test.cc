@@ -4,6 +4,8 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
+#include <string>
 
 #include <nlohmann/json.hpp>
 
@@ -23,6 +25,8 @@ CameraModel Camera() {
       -0.001, 0.003;
   camera.width_px = 1600;
   camera.height_px = 1200;
+  camera.valid_region_px.resize(2, 4);
+  camera.valid_region_px << 140.25, 1460.5, 1400.0, 160.0, 120.0, 110.75, 1080.0, 1090.125;
   return camera;
 }
 
@@ -42,6 +46,12 @@ TEST(CameraModelIo, WriteReadRoundTrip) {
   EXPECT_EQ(back.height_px, camera.height_px);
   // mrcal writes the intrinsics in text; allow the last digits.
   EXPECT_LT((back.intrinsics - camera.intrinsics).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_EQ(back.valid_region_px, camera.valid_region_px);
+  // Without a region the file has none, and reads back without one.
+  CameraModel bare = Camera();
+  bare.valid_region_px.resize(2, 0);
+  WriteCameraModel(dir / "bare.cameramodel", bare);
+  EXPECT_EQ(ReadCameraModel(dir / "bare.cameramodel").valid_region_px.cols(), 0);
   fs::remove_all(dir);
 }
 
@@ -58,10 +68,20 @@ TEST(CameraModelIo, BadFileThrowsNamingIt) {
   CameraModel wrong = Camera();
   wrong.intrinsics.conservativeResize(8);
   EXPECT_THROW(WriteCameraModel(dir / "wrong.cameramodel", wrong), InputError);
+  // A region that is not a polygon.
+  WriteCameraModel(dir / "region.cameramodel", Camera());
+  std::ifstream in(dir / "region.cameramodel");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t key = text.find("'valid_intrinsics_region'");
+  ASSERT_NE(key, std::string::npos);
+  text = text.substr(0, key) + "'valid_intrinsics_region': [ [ 1, 2 ], [ 3 ] ]\n}\n";
+  std::ofstream(dir / "region.cameramodel") << text;
+  EXPECT_THROW(ReadCameraModel(dir / "region.cameramodel"), InputError);
   fs::remove_all(dir);
 }
 
-// python3-mrcal loads what we wrote and projects exactly as we do.
+// python3-mrcal loads what we wrote, projects exactly as we do and reads our
+// valid_intrinsics_region (closed, as mrcal writes it).
 TEST(CameraModelIo, PythonMrcalProjectsLikeUs) {
   const fs::path dir = TempDir("cameramodel_py");
   const CameraModel camera = Camera();
@@ -81,6 +101,13 @@ TEST(CameraModelIo, PythonMrcalProjectsLikeUs) {
   const nlohmann::json out = nlohmann::json::parse(std::ifstream(dir / "q.json"));
   EXPECT_EQ(out["lens_model"], camera.lens_model);
   EXPECT_EQ(out["imagersize"][0], 1600);
+  const nlohmann::json& region = out["valid_intrinsics_region"];
+  ASSERT_EQ(region.size(), camera.valid_region_px.cols() + 1u);
+  for (size_t i = 0; i < region.size(); ++i) {
+    const auto v = static_cast<Eigen::Index>(i % camera.valid_region_px.cols());
+    EXPECT_EQ(region[i][0].get<double>(), camera.valid_region_px(0, v));
+    EXPECT_EQ(region[i][1].get<double>(), camera.valid_region_px(1, v));
+  }
   Eigen::Matrix2Xd q;
   ASSERT_TRUE(ProjectPoints(camera, p, &q));
   for (int i = 0; i < p.cols(); ++i) {

@@ -26,6 +26,11 @@ struct CameraModel {
   Eigen::VectorXd intrinsics;
   int width_px = 0;
   int height_px = 0;
+  // Where the calibration measured the lens (2 x N polygon, px; empty if not
+  // known): the convex hull of the calibration's inlier marks, written as
+  // mrcal's `valid_intrinsics_region`. A model read from a file has mrcal's
+  // polygon, which mrcal's tools draw where the projection uncertainty is low.
+  Eigen::Matrix2Xd valid_region_px;
 };
 
 }  // namespace omm

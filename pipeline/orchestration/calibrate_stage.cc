@@ -233,7 +233,9 @@ void CalibrateFromImages(StageContext& context) {
                summary.lens_choice_seconds);
 
   fs::create_directories(context.staging_dir / "calibration");
-  WriteCameraModel(context.staging_dir / kCameraModelName, summary.result.camera);
+  CameraModel camera = summary.result.camera;
+  camera.valid_region_px = CalibratedRegionPx(summary.result.record);
+  WriteCameraModel(context.staging_dir / kCameraModelName, camera);
   WriteSolveRecord(context.staging_dir / kSolveRecordName, summary.result.record);
   CalibrationReport report =
       ReportFromSolve(context.staging_dir, summary.result, summary.uncertainty);

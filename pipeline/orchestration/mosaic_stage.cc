@@ -70,19 +70,16 @@ fs::path CameraModelPath(const StageContext& context) {
 // 201-205 widening the 14-30 plate marks outside the hull would cost
 // precision for nothing: scale sigma 4.6-5.9 -> 5.6-45 ppm, distances RMS
 // 0.0145 -> 0.0346 raw px.
+// A .cameramodel's valid_intrinsics_region stands in for the marks (mrcal's
+// own polygon may be concave: its hull).
+bool Splined(const CameraModel& camera) {
+  return camera.lens_model.rfind("LENSMODEL_SPLINED", 0) == 0;
+}
 Eigen::Matrix2Xd MeasuredRegion(const SolveRecord& record) {
-  if (record.camera.lens_model.rfind("LENSMODEL_SPLINED", 0) != 0) return {};
-  std::vector<Eigen::Vector2d> marks;
-  for (const SolveImage& image : record.images) {
-    for (Eigen::Index m = 0; m < image.q_px.cols(); ++m) {
-      const auto k = static_cast<size_t>(m);
-      if (image.weight(m) > 0 && !(k < image.outlier.size() && image.outlier[k]))
-        marks.push_back(image.q_px.col(m));
-    }
-  }
-  Eigen::Matrix2Xd points(2, static_cast<Eigen::Index>(marks.size()));
-  for (size_t k = 0; k < marks.size(); ++k) points.col(static_cast<Eigen::Index>(k)) = marks[k];
-  return ConvexHull(points);
+  return Splined(record.camera) ? CalibratedRegionPx(record) : Eigen::Matrix2Xd();
+}
+Eigen::Matrix2Xd MeasuredRegion(const CameraModel& camera) {
+  return Splined(camera) ? ConvexHull(camera.valid_region_px) : Eigen::Matrix2Xd();
 }
 
 // The calibration's intrinsics prior: from the calibrate stage's solve record
@@ -100,6 +97,7 @@ IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camer
   if (project.calibration_from &&
       project.calibration_from->kind == CalibrationSource::Kind::kCameraModel) {
     prior.why_held = "calibration from a .cameramodel without covariance";
+    prior.measured_region_px = MeasuredRegion(*camera);
     return prior;
   }
   if (record_path.empty() || !fs::exists(record_path)) {

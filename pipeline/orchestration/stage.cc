@@ -5,6 +5,7 @@
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/mosaic/plate_on_part.h"
 
 namespace omm {
 
@@ -48,6 +49,20 @@ std::filesystem::path StageContext::Input(const std::string& name) const {
   if (std::filesystem::exists(staging_dir / name, ec)) return staging_dir / name;
   if (std::filesystem::exists(out_dir / name, ec)) return out_dir / name;
   return {};
+}
+
+Eigen::Matrix2Xd CalibratedRegionPx(const SolveRecord& record) {
+  std::vector<Eigen::Vector2d> marks;
+  for (const SolveImage& image : record.images) {
+    for (Eigen::Index m = 0; m < image.q_px.cols(); ++m) {
+      const auto k = static_cast<size_t>(m);
+      if (image.weight(m) > 0 && !(k < image.outlier.size() && image.outlier[k]))
+        marks.push_back(image.q_px.col(m));
+    }
+  }
+  Eigen::Matrix2Xd points(2, static_cast<Eigen::Index>(marks.size()));
+  for (size_t k = 0; k < marks.size(); ++k) points.col(static_cast<Eigen::Index>(k)) = marks[k];
+  return ConvexHull(points);
 }
 
 }  // namespace omm

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "pipeline/core/calibration_result.h"
 #include "pipeline/core/camera.h"
 #include "pipeline/core/image.h"
 #include "pipeline/core/progress.h"
@@ -84,6 +85,10 @@ struct StageContext {
 // converted from those LoadProject decoded, else read from the files. Throws
 // InputError for a tile whose size is not the camera's.
 std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera);
+
+// Where a calibration measured the lens: the convex hull of its solve's inlier
+// mark centres, px (CameraModel::valid_region_px; empty if they span no area).
+Eigen::Matrix2Xd CalibratedRegionPx(const SolveRecord& record);
 
 // The runners, one per stage. Each throws InputError for bad input,
 // StageFailedError for a data failure.
