@@ -8,8 +8,10 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "adapters/project_io/measurements_csv.h"
 #include "adapters/project_io/project_reader.h"
 #include "adapters/project_io/report_json.h"
+#include "adapters/project_io/text_file.h"
 #include "adapters/report_html/report_html.h"
 #include "app/exit_codes.h"
 #include "app/terminal_progress.h"
@@ -108,7 +110,29 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
   }));
 }
 
-int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
+// How the batch's measurements agree with their CMM values.
+std::string CmmAgreement(const std::vector<ProjectMeasurements>& projects) {
+  int n = 0, within_2 = 0, beyond_3 = 0;
+  double sum_z2 = 0.0;
+  for (const ProjectMeasurements& project : projects) {
+    for (const MeasurementReport& m : project.measurements) {
+      if (!m.deviation_sigma) continue;
+      const double z = std::abs(*m.deviation_sigma);
+      ++n;
+      within_2 += z <= 2.0;
+      beyond_3 += z > 3.0;
+      sum_z2 += z * z;
+    }
+  }
+  if (n == 0) return "no measurement has a CMM value";
+  return fmt::format(
+      "against the CMM: {} measurements, |deviation| <= 2 sigma for {} ({:.1f} %), beyond 3 "
+      "sigma {}, rms deviation/sigma {:.2f}",
+      n, within_2, 100.0 * within_2 / n, beyond_3, std::sqrt(sum_z2 / n));
+}
+
+int BatchCommand(const std::vector<fs::path>& dirs, bool force,
+                 const std::optional<fs::path>& csv) {
   std::vector<fs::path> projects;
   if (const Outcome found = Guarded([&] { projects = FindProjects(dirs); });
       found.exit_code != kExitOk) {
@@ -119,11 +143,13 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
     double seconds = 0.0;
   };
   std::vector<Row> rows;
+  std::vector<ProjectMeasurements> measurements;
   bool any_failed = false;
   for (size_t i = 0; i < projects.size(); ++i) {
     const fs::path& dir = projects[i];
     spdlog::info("[{}/{}] {}", i + 1, projects.size(), dir.string());
     Row row{dir.string(), "ok", "-"};
+    ProjectMeasurements made{dir.string(), {}, ""};
     const auto start = std::chrono::steady_clock::now();
     const Outcome outcome = Guarded([&] {
       const Project project = LoadProject(dir);
@@ -135,15 +161,19 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
         options.progress = progress.Callback();
         RunProject(project, options);
       }
-      row.measurements = MeasurementBrief(ReadReportJson(project.OutDir() / "report.json"));
+      const Report report = ReadReportJson(project.OutDir() / "report.json");
+      row.measurements = MeasurementBrief(report);
+      if (report.measurements) made.measurements = *report.measurements;
     });
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (outcome.exit_code != kExitOk) {
       any_failed = true;
       row.result = fmt::format("FAILED ({}): {}", outcome.exit_code, outcome.message);
       spdlog::error("{}: {}", dir.string(), outcome.message);
+      made = {dir.string(), {}, outcome.message};  // out/ is an earlier run's, if any
     }
     rows.push_back(row);
+    measurements.push_back(std::move(made));
   }
 
   size_t width = 7;
@@ -156,6 +186,13 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force) {
   const auto failed = std::count_if(rows.begin(), rows.end(),
                                     [](const Row& r) { return r.result.rfind("FAILED", 0) == 0; });
   fmt::print("{} projects, {} failed\n", rows.size(), failed);
+  fmt::print("{}\n", CmmAgreement(measurements));
+  if (csv) {
+    const Outcome written =
+        Guarded([&] { WriteTextFileAtomically(*csv, MeasurementsCsv(measurements)); });
+    if (written.exit_code != kExitOk) return Finish(written);
+    fmt::print("{}\n", csv->string());
+  }
   return any_failed ? kExitFailed : kExitOk;
 }
 

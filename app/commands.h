@@ -20,8 +20,12 @@ int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage
 
 // `omm batch`: each argument is a project directory or a directory whose
 // subdirectories are projects. Projects whose report is current are skipped
-// unless `force`. Prints a summary table; exits kExitFailed if any failed.
-int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force);
+// unless `force`. Prints a summary table and how the measurements agree with
+// the CMM values over all projects; with `csv`, also writes every
+// measurement to that file (measurements_csv.h). Exits kExitFailed if any
+// project failed.
+int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force,
+                 const std::optional<std::filesystem::path>& csv = std::nullopt);
 
 // `omm simulate`.
 int SimulateCommand(const std::filesystem::path& project_dir, const SimulationOptions& options,

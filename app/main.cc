@@ -137,9 +137,14 @@ int main(int argc, char** argv) {
       "Run many projects, one after another, and print a summary table.\n"
       "Each DIR is a project directory or a directory of project directories.\n"
       "Projects whose out/report.json is current (same inputs, same omm) are skipped.\n"
-      "Writes each project's out/ as `omm run` does; a failing project does not stop the batch.");
+      "Writes each project's out/ as `omm run` does; a failing project does not stop the batch;\n"
+      "with --csv, one table of every measurement of every project.");
   batch->add_option("DIR", batch_dirs, "project directories or folders of projects")->required();
   batch->add_flag("--force", force, "rerun projects whose report is current");
+  std::optional<fs::path> batch_csv;
+  batch->add_option("--csv", batch_csv,
+                    "also write every project's measurements (value, sigma, CMM deviation) to "
+                    "this CSV file");
 
   fs::path simulate_out;
   omm::SimulationOptions simulation;
@@ -186,7 +191,7 @@ int main(int argc, char** argv) {
   const omm::FeatureSource mosaic_features = feature_sources.at(features);
   if (run->parsed()) return omm::RunCommand(project, omm::AllStages(), false, mosaic_features);
   if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features);
-  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force);
+  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force, batch_csv);
   if (simulate->parsed()) return omm::SimulateCommand(simulate_out, simulation, truth);
   if (report->parsed()) return omm::ReportCommand(project, json);
   return omm::kExitBadInput;

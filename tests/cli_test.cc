@@ -1,5 +1,7 @@
 // The `omm` program as a user meets it: help, exit codes, error messages and
 // what is (not) left in out/.
+#include <algorithm>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -110,12 +112,24 @@ TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
   Project bad = testing::TinyProject(dir_.path() / "bad");
   testing::WriteTinyProject(bad);
   testing::ReplaceInFile(bad.dir / "table.csv", "image,x_mm,y_mm", "image,x,y");
-  const auto result = testing::RunOmm("batch " + Quoted(dir_.path()));  // a folder of projects
+  const fs::path csv = dir_.path() / "summary.csv";
+  const auto result = testing::RunOmm("batch " + Quoted(dir_.path()) +  // a folder of projects
+                                      " --csv " + Quoted(csv));
   EXPECT_EQ(result.exit_code, 1) << result.output;
   EXPECT_THAT(result.output, HasSubstr("2 projects, 2 failed"));
   EXPECT_THAT(result.output, HasSubstr("FAILED (2)"));  // bad: table.csv header
   EXPECT_THAT(result.output, HasSubstr("table.csv:1"));
   EXPECT_THAT(result.output, HasSubstr("FAILED (1)"));  // job: no plate in its gray images
+  EXPECT_THAT(result.output, HasSubstr("no measurement has a CMM value"));
+  // The CSV: its header, then each failed project as one row saying why.
+  const std::string table = testing::ReadTextFile(csv);
+  EXPECT_EQ(table.rfind("project,measurement,type,value_mm,sigma_mm,cmm_mm,deviation_mm,"
+                        "deviation_sigma,error\n",
+                        0),
+            0u);
+  EXPECT_EQ(std::count(table.begin(), table.end(), '\n'), 3) << table;
+  EXPECT_THAT(table, HasSubstr((bad.dir.string() + ",,,,,,,,")));
+  EXPECT_THAT(table, HasSubstr("table.csv:1"));
 }
 
 TEST_F(CliTest, ReportPrintsTheMeasurements) {
