@@ -65,6 +65,27 @@ std::string MeasurementBrief(const Report& report) {
                      worst);
 }
 
+// How the batch's measurements agree with their CMM values.
+std::string CmmAgreement(const std::vector<ProjectMeasurements>& projects) {
+  int n = 0, within_2 = 0, beyond_3 = 0;
+  double sum_z2 = 0.0;
+  for (const ProjectMeasurements& project : projects) {
+    for (const MeasurementReport& m : project.measurements) {
+      if (!m.deviation_sigma) continue;
+      const double z = std::abs(*m.deviation_sigma);
+      ++n;
+      within_2 += z <= 2.0;
+      beyond_3 += z > 3.0;
+      sum_z2 += z * z;
+    }
+  }
+  if (n == 0) return "no measurement has a CMM value";
+  return fmt::format(
+      "against the CMM: {} measurements, |deviation| <= 2 sigma for {} ({:.1f} %), beyond 3 "
+      "sigma {}, rms deviation/sigma {:.2f}",
+      n, within_2, 100.0 * within_2 / n, beyond_3, std::sqrt(sum_z2 / n));
+}
+
 // Project directories named by `dirs` (a project, or a folder of projects).
 std::vector<fs::path> FindProjects(const std::vector<fs::path>& dirs) {
   std::vector<fs::path> projects;
@@ -108,27 +129,6 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     spdlog::info("{}", summary.Brief());
     fmt::print("{}\n", summary.report_path.string());
   }));
-}
-
-// How the batch's measurements agree with their CMM values.
-std::string CmmAgreement(const std::vector<ProjectMeasurements>& projects) {
-  int n = 0, within_2 = 0, beyond_3 = 0;
-  double sum_z2 = 0.0;
-  for (const ProjectMeasurements& project : projects) {
-    for (const MeasurementReport& m : project.measurements) {
-      if (!m.deviation_sigma) continue;
-      const double z = std::abs(*m.deviation_sigma);
-      ++n;
-      within_2 += z <= 2.0;
-      beyond_3 += z > 3.0;
-      sum_z2 += z * z;
-    }
-  }
-  if (n == 0) return "no measurement has a CMM value";
-  return fmt::format(
-      "against the CMM: {} measurements, |deviation| <= 2 sigma for {} ({:.1f} %), beyond 3 "
-      "sigma {}, rms deviation/sigma {:.2f}",
-      n, within_2, 100.0 * within_2 / n, beyond_3, std::sqrt(sum_z2 / n));
 }
 
 int BatchCommand(const std::vector<fs::path>& dirs, bool force,
