@@ -91,9 +91,15 @@
 // (outer ramp, wall step) absorb part of it where the ramp-only model's
 // two-sided ramps do not (1-D fits on exact profiles: Gaussian 0,
 // synthetic_hole's kernel -0.008 to -0.010 px, a simulated tile resampled by
-// the B-spline +0.005 to +0.007 px). Not covered by the covariance either; a
-// fix would model the blur's shape (e.g. the mean residual profile of the
-// image's ramp-only fits) at both rims.
+// the B-spline +0.005 to +0.007 px). The term is the outer ramp go: without
+// it those 1-D fits are within 0.002 px, but texture slopes then move x0 by
+// ~4 px per unit of slope. Not covered by the covariance either. Modelling
+// the blur as Gaussian * source-pixel box * B-spline kernel along the pixel
+// axes is exact in 1-D and over-corrects in 2-D (walls all around a 100 px
+// hole: -0.006 to -0.014 px against the Gaussian's +0.001 to +0.003): an
+// edge at angle t to the source pixels sees both kernels projected
+// (k(u / cos t) * k(u / sin t)), much nearer a Gaussian at 45 deg, so a fix
+// needs each wedge's normal in source-pixel axes.
 //
 // Covariance of (cx, cy, r). The fit is linear in the edge points' radial
 // moves e: delta = S e, S = -(J'WJ)^-1 J'W (3 x n, W the final IRLS
