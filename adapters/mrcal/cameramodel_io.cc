@@ -31,7 +31,8 @@ Eigen::Matrix2Xd ReadRegion(const std::filesystem::path& path) {
   const std::string text = ReadText(path);
   const size_t key = text.find(kRegionKey);
   if (key == std::string::npos) return {};
-  // The list: from the first '[' after the key to its matching ']'.
+  // The list: from the first '[' after the key to its matching ']' (mrcal's
+  // reader, which ran first, refuses a value that is not a balanced list).
   const size_t open = text.find('[', key);
   size_t close = open;
   for (int depth = 0; close < text.size(); ++close) {

@@ -93,13 +93,18 @@
 // synthetic_hole's kernel -0.008 to -0.010 px, a simulated tile resampled by
 // the B-spline +0.005 to +0.007 px). The term is the outer ramp go: without
 // it those 1-D fits are within 0.002 px, but texture slopes then move x0 by
-// ~4 px per unit of slope. Not covered by the covariance either. Modelling
-// the blur as Gaussian * source-pixel box * B-spline kernel along the pixel
-// axes is exact in 1-D and over-corrects in 2-D (walls all around a 100 px
-// hole: -0.006 to -0.014 px against the Gaussian's +0.001 to +0.003): an
-// edge at angle t to the source pixels sees both kernels projected
-// (k(u / cos t) * k(u / sin t)), much nearer a Gaussian at 45 deg, so a fix
-// needs each wedge's normal in source-pixel axes.
+// ~4 px per unit of slope. Not covered by the covariance either. Tried in
+// 2-D (a synthetic 100 px hole resampled on a rotated grid, walls all
+// around, 48-96 holes per cell), none landed:
+// - blur = Gaussian * source-pixel box * B-spline kernel along the pixel
+//   axes (exact in 1-D): -0.005 to -0.014 px against the Gaussian's +0.001
+//   to +0.005;
+// - the same per wedge direction (both kernels projected on the normal in
+//   source-pixel axes): -0.001 to -0.007;
+// - with the PSF as the simulator applies it, a sampled Gaussian on the
+//   pixels, instead of a continuous one: within 0.0016 px on flat walls.
+//   That models our renderer, not a lens, so it is not used; on textured
+//   walls every model above still read +0.002 to +0.005 px.
 //
 // Covariance of (cx, cy, r). The fit is linear in the edge points' radial
 // moves e: delta = S e, S = -(J'WJ)^-1 J'W (3 x n, W the final IRLS
