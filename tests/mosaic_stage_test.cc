@@ -25,6 +25,7 @@
 #include "pipeline/core/board.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/orchestration/run_project.h"
+#include "pipeline/simulate/simulation.h"
 #include "tests/rim_locator.h"
 #include "tests/sim_cache.h"
 #include "tests/test_util.h"
@@ -224,11 +225,7 @@ TEST_F(MosaicStageTest, HolesSitWhereTheTruthSceneMosaicHasThem) {
   for (const TileTruth& tile : Truth().tiles) {
     tiles.push_back(ReadGrayImage(ProjectDir() / "tiles" / tile.image).pixels);
   }
-  PlaneScene truth_scene;
-  const Eigen::AngleAxisd r(Truth().cam_from_part.linear());
-  truth_scene.cam_from_part_r = r.angle() * r.axis();
-  truth_scene.cam_from_part_t_mm = Truth().cam_from_part.translation();
-  for (const TileTruth& tile : Truth().tiles) truth_scene.table_pos_mm.push_back(tile.actual_mm);
+  const PlaneScene truth_scene = TruthPlaneScene(Truth());
   const Report report = ReadReportJson(Out() / "report.json");
   OrthoOptions options;
   options.gsd_mm = report.mosaic->gsd_mm;

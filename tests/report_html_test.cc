@@ -102,7 +102,8 @@ Report FullReport() {
                                               {"used", 403},
                                               {"rms_px", 0.0151},
                                               {"usable", true},
-                                              {"matched_on_adjusted_scene", true}},
+                                              {"matched_on_adjusted_scene", true},
+                                              {"weight_scale", 0.4567}},
                                  ReportObject{{"images", ReportValue::Array{"t1.png", "t<3>.png"}},
                                               {"predicted_overlap", 0.15},
                                               {"matched", 3},
@@ -117,6 +118,13 @@ Report FullReport() {
                            {"exposure_gain", 0.9553}}}},
              {"tiles_held_by_prior",
               ReportValue::Array{ReportObject{{"image", "t<3>.png"}, {"why", "no good matches"}}}},
+             {"hole_ties",
+              ReportObject{{"brief", "1 hole seen whole by two tiles or more tie them; 1 dropped"},
+                           {"ties", ReportValue::Array{ReportObject{
+                                        {"feature", "hole_A"},
+                                        {"images", ReportValue::Array{"t1.png", "t2.png"}},
+                                        {"rms_px", 0.0043}}}},
+                           {"dropped", ReportValue::Array{"<hole_B>"}}}},
              {"exposure", ReportObject{{"brief", "gains 0.91..1.00"},
                                        {"relative_sigma_before", 0.031},
                                        {"relative_sigma_after", 0.002}}},
@@ -215,8 +223,9 @@ TEST(ReportHtml, MeasurementsTableFlagsAndBreaksDown) {
 
 TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   const std::string html = ReportHtml(FullReport(), FullInputs());
-  for (const char* id : {"measurements-table", "features-table", "rejected-table",
-                         "per-image-table", "pairs-table", "tiles-table", "held-table"}) {
+  for (const char* id :
+       {"measurements-table", "features-table", "rejected-table", "per-image-table", "pairs-table",
+        "hole-ties-table", "tiles-table", "held-table"}) {
     EXPECT_THAT(html, HasSubstr(std::string("<table id=\"") + id + "\">")) << id;
   }
   EXPECT_THAT(html, HasSubstr("<th>run_date</th><td>2026-11-22T01:00:00Z</td>"));
@@ -228,6 +237,9 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   EXPECT_THAT(html, HasSubstr("<td class=\"r\">-14.83</td><td class=\"r\">1.23</td>"));
   EXPECT_THAT(html, HasSubstr("<tr class=\"failed\"><td>t1.png</td><td>t&lt;3&gt;.png</td>"));
   EXPECT_THAT(html, HasSubstr("<td>yes (matched on the adjusted scene's prediction)</td>"));
+  EXPECT_THAT(html, HasSubstr("<td class=\"r\">0.46</td>"));  // the pair's weight by its scatter
+  EXPECT_THAT(html, HasSubstr("<tr><td>hole_A</td><td>t1.png, t2.png</td>"));
+  EXPECT_THAT(html, HasSubstr("beyond their sigma): &lt;hole_B&gt;</p>"));
   // The mosaic's scale: its reference, the table's scale against it, sigma.
   EXPECT_THAT(html, HasSubstr("plate on the part: whole in 1 tile(s); the table's scale against "
                               "the plate -3.2 &plusmn; 4.5 ppm"));

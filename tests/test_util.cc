@@ -2,6 +2,7 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
@@ -9,6 +10,8 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
 
 #include "adapters/opencv/image_io.h"
 #include "adapters/project_io/project_writer.h"
@@ -111,6 +114,32 @@ CommandResult RunOmm(const std::string& arguments) {
 fs::path SharedDataDir() {
   const char* source = std::getenv("OMM_SOURCE_DIR");
   return fs::path(source ? source : ".") / ".." / "shared" / "data";
+}
+
+std::vector<std::pair<std::string, double>> HoleCentreErrorsAfterSimilarity(
+    const Report& report, const SimulationTruth& truth) {
+  std::vector<std::pair<std::string, double>> errors;
+  if (!report.features) return errors;
+  // Dynamic sizes: GCC 12 warns (-Wstringop-overread) inside Eigen's
+  // umeyama for 2 x N fixed-row matrices.
+  Eigen::MatrixXd measured(2, 0), expected(2, 0);
+  for (const FeatureReport& feature : *report.features) {
+    const auto hole = std::find_if(truth.holes.begin(), truth.holes.end(),
+                                   [&](const HoleTruth& h) { return h.name == feature.name; });
+    if (!feature.centre_mm || hole == truth.holes.end()) continue;
+    measured.conservativeResize(2, measured.cols() + 1);
+    expected.conservativeResize(2, expected.cols() + 1);
+    measured.col(measured.cols() - 1) = *feature.centre_mm;
+    expected.col(expected.cols() - 1) = hole->center_part_mm;
+    errors.emplace_back(feature.name, 0.0);
+  }
+  if (errors.size() < 3) return {};
+  const Eigen::MatrixXd fit = Eigen::umeyama(measured, expected, true);
+  const Eigen::MatrixXd residual =
+      expected - ((fit.topLeftCorner(2, 2) * measured).colwise() + fit.topRightCorner(2, 1).col(0));
+  for (size_t i = 0; i < errors.size(); ++i)
+    errors[i].second = residual.col(static_cast<Eigen::Index>(i)).norm();
+  return errors;
 }
 
 }  // namespace omm::testing

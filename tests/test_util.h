@@ -4,8 +4,12 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "pipeline/core/project.h"
+#include "pipeline/core/report.h"
+#include "pipeline/core/truth.h"
 
 namespace omm::testing {
 
@@ -61,5 +65,12 @@ CommandResult RunOmm(const std::string& arguments);
 // The real images from public sources in ../shared/data beside the
 // repository (OMM_SOURCE_DIR, set by omm_test; read in place, never copied).
 std::filesystem::path SharedDataDir();
+
+// The report's feature centres against the truth's holes after the
+// least-squares similarity fit of all of them (Umeyama: the table's scale
+// and the origin gauge removed): each found hole's name and distance from
+// its true centre, mm.
+std::vector<std::pair<std::string, double>> HoleCentreErrorsAfterSimilarity(
+    const Report& report, const SimulationTruth& truth);
 
 }  // namespace omm::testing

@@ -431,8 +431,8 @@ std::string MosaicSection(const Report& report) {
   if (const ReportValue::Array* pairs = AsArray(Member(extra, "pairs"))) {
     out += "<h3>Tile pairs</h3>\n";
     Table table({"tile a", "tile b", "predicted overlap", "candidates", "matched", "inliers",
-                 "tag corners", "used", "rms px", "usable"},
-                "llrrrrrrrl");
+                 "tag corners", "used", "rms px", "weight (by scatter)", "usable"},
+                "llrrrrrrrrl");
     for (const ReportValue& row : *pairs) {
       const ReportObject* p = AsObject(&row);
       if (p == nullptr) continue;
@@ -442,6 +442,7 @@ std::string MosaicSection(const Report& report) {
                  NumberOf(*p, "predicted_overlap", 2), Text(Member(*p, "candidates")),
                  Text(Member(*p, "matched")), Text(Member(*p, "inliers")),
                  Text(Member(*p, "tag_corners")), Text(Member(*p, "used")), NumberOf(*p, "rms_px"),
+                 NumberOf(*p, "weight_scale", 2),
                  Text(Member(*p, "usable")) +
                      (AsBool(Member(*p, "matched_on_adjusted_scene")).value_or(false)
                           ? " (matched on the adjusted scene's prediction)"
@@ -449,6 +450,30 @@ std::string MosaicSection(const Report& report) {
                 AsBool(Member(*p, "usable")).value_or(true) ? "" : "failed");
     }
     out += table.Html("pairs-table");
+  }
+  if (const ReportObject* hole_ties = AsObject(Member(extra, "hole_ties"))) {
+    out += "<h3>Holes tying the tiles</h3>\n<p>" + Text(Member(*hole_ties, "brief")) + "</p>\n";
+    const ReportValue::Array* ties = AsArray(Member(*hole_ties, "ties"));
+    if (ties != nullptr && !ties->empty()) {
+      Table table({"feature", "tiles", "rms residual px"}, "llr");
+      for (const ReportValue& row : *ties) {
+        const ReportObject* tie = AsObject(&row);
+        if (tie == nullptr) continue;
+        std::string tiles;
+        if (const ReportValue::Array* images = AsArray(Member(*tie, "images"))) {
+          for (const ReportValue& image : *images)
+            tiles += (tiles.empty() ? "" : ", ") + Text(&image);
+        }
+        table.Row({Text(Member(*tie, "feature")), tiles, NumberOf(*tie, "rms_px")});
+      }
+      out += table.Html("hole-ties-table");
+    }
+    const ReportValue::Array* dropped = AsArray(Member(*hole_ties, "dropped"));
+    if (dropped != nullptr && !dropped->empty()) {
+      std::string names;
+      for (const ReportValue& name : *dropped) names += (names.empty() ? "" : ", ") + Text(&name);
+      out += "<p>Dropped (their views disagree beyond their sigma): " + names + "</p>\n";
+    }
   }
   if (const ReportValue::Array* tiles = AsArray(Member(extra, "tiles"))) {
     out += "<h3>Tiles: adjusted minus commanded table position</h3>\n";

@@ -299,6 +299,22 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
   return mosaic;
 }
 
+double TilePxPerMosaicPx(const OrthoGeometry& geometry) {
+  double px_per_px = 0.0;
+  int n = 0;
+  for (size_t i = 0; i < geometry.tiles.size(); ++i) {
+    const Eigen::Vector2d centre =
+        geometry.grid.MosaicFromPart(geometry.tiles[i].footprint_mm.rowwise().mean());
+    Eigen::Vector2d q0, q1;
+    if (geometry.TilePixel(static_cast<int>(i), centre.x(), centre.y(), &q0) &&
+        geometry.TilePixel(static_cast<int>(i), centre.x() + 1.0, centre.y(), &q1)) {
+      px_per_px += (q1 - q0).norm();
+      ++n;
+    }
+  }
+  return n > 0 ? px_per_px / n : 0.0;
+}
+
 OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
                          const std::vector<ImageF>& tiles, const OrthoOptions& options) {
   const Clock::time_point start = Clock::now();
@@ -317,19 +333,7 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
   const OrthoGeometry geometry = ComputeOrthoGeometry(camera, scene, options);
   summary.lens_table_max_error_px = geometry.lens.max_error_px();
   summary.lens_table_nodes = geometry.lens.num_nodes();
-  double px_per_px = 0.0;
-  int n = 0;
-  for (size_t i = 0; i < tiles.size(); ++i) {
-    const Eigen::Vector2d centre =
-        geometry.grid.MosaicFromPart(geometry.tiles[i].footprint_mm.rowwise().mean());
-    Eigen::Vector2d q0, q1;
-    if (geometry.TilePixel(static_cast<int>(i), centre.x(), centre.y(), &q0) &&
-        geometry.TilePixel(static_cast<int>(i), centre.x() + 1.0, centre.y(), &q1)) {
-      px_per_px += (q1 - q0).norm();
-      ++n;
-    }
-  }
-  summary.tile_px_per_mosaic_px = n > 0 ? px_per_px / n : 0.0;
+  summary.tile_px_per_mosaic_px = TilePxPerMosaicPx(geometry);
   summary.geometry_seconds = SecondsSince(start);
 
   const Clock::time_point exposure_start = Clock::now();

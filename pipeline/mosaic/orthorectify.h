@@ -151,6 +151,10 @@ struct OrthoGeometry {
 OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& scene,
                                    const OrthoOptions& options);
 
+// Mean tile pixels per mosaic pixel along a row, at the tiles' footprint
+// centres (0 if none projects).
+double TilePxPerMosaicPx(const OrthoGeometry& geometry);
+
 struct OrthoMosaic {
   OrthoGrid grid;
   ImageF pixels;  // grid.size_px.y() rows x grid.size_px.x() cols, [0, 1]; 0 where no tile sees

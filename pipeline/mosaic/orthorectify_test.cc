@@ -23,15 +23,6 @@
 namespace omm {
 namespace {
 
-PlaneScene SceneFromTruth(const SimulationTruth& truth) {
-  PlaneScene scene;
-  const Eigen::AngleAxisd r(truth.cam_from_part.linear());
-  scene.cam_from_part_r = r.angle() * r.axis();
-  scene.cam_from_part_t_mm = truth.cam_from_part.translation();
-  for (const TileTruth& tile : truth.tiles) scene.table_pos_mm.push_back(tile.actual_mm);
-  return scene;
-}
-
 // Exact pixel of part point (x, y, 0) in tile `tile`.
 Eigen::Vector2d ExactPixel(const CameraModel& camera, const PlaneScene& scene, int tile,
                            const Eigen::Vector2d& part_mm) {
@@ -98,7 +89,7 @@ TEST(OrthoGeometry, MapMatchesExactProjectionWithinTheBound) {
     sim.preset = preset;
     const SimulationPlan plan = PlanSimulation(sim);
     const CameraModel& camera = plan.truth.camera.model;
-    const PlaneScene scene = SceneFromTruth(plan.truth);
+    const PlaneScene scene = TruthPlaneScene(plan.truth);
     OrthoOptions options;
     options.gsd_mm = 0.15;
     const OrthoGeometry geometry = ComputeOrthoGeometry(camera, scene, options);
@@ -157,7 +148,7 @@ TEST(OrthoGeometry, GridCoversTheFootprints) {
   OrthoOptions options;
   options.gsd_mm = 0.15;
   const OrthoGeometry geometry =
-      ComputeOrthoGeometry(plan.truth.camera.model, SceneFromTruth(plan.truth), options);
+      ComputeOrthoGeometry(plan.truth.camera.model, TruthPlaneScene(plan.truth), options);
   const OrthoGrid& grid = geometry.grid;
   EXPECT_DOUBLE_EQ(grid.gsd_mm, 0.15);
   for (const TileOrthoMap& map : geometry.tiles) {
@@ -177,7 +168,7 @@ TEST(OrthoGeometry, GridCoversTheFootprints) {
 TEST(Orthorectify, PixelConventionOfProjectFormat) {
   const SimulationPlan plan = PlanSimulation(SimulationOptions{});
   const CameraModel& camera = plan.truth.camera.model;
-  PlaneScene scene = SceneFromTruth(plan.truth);
+  PlaneScene scene = TruthPlaneScene(plan.truth);
   scene.table_pos_mm.resize(1);  // one tile
   const Eigen::Vector2d centre =
       (plan.truth.part_min_mm + plan.truth.part_max_mm) / 2 - scene.table_pos_mm[0];
@@ -274,7 +265,7 @@ TEST(Orthorectify, HoleCentresMatchTheTruth) {
   OrthoOptions options;
   options.gsd_mm = 0.15;
   const std::clock_t cpu_start = std::clock();
-  const OrthoResult result = Orthorectify(camera, SceneFromTruth(r.plan.truth), r.tiles, options);
+  const OrthoResult result = Orthorectify(camera, TruthPlaneScene(r.plan.truth), r.tiles, options);
   // CPU time as well as wall time: the latter depends on the machine's load.
   std::printf("%s\ngeometry %.3f s, exposure %.3f s, resample %.3f s (wall); %.3f CPU s\n",
               result.summary.brief.c_str(), result.summary.geometry_seconds,
@@ -339,7 +330,7 @@ TEST(Orthorectify, ExposureCompensationRemovesSeams) {
   const CameraModel& camera = truth.camera.model;
   OrthoOptions options;
   options.gsd_mm = 0.15;
-  const OrthoResult result = Orthorectify(camera, SceneFromTruth(truth), r.tiles, options);
+  const OrthoResult result = Orthorectify(camera, TruthPlaneScene(truth), r.tiles, options);
   const ExposureSummary& exposure = result.summary.exposure;
   std::printf("%s\n", result.summary.brief.c_str());
   ASSERT_TRUE(exposure.usable);

@@ -31,10 +31,9 @@
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
-#include "pipeline/measure/bore_view.h"
 #include "pipeline/measure/circle_measure.h"
+#include "pipeline/measure/hole_views.h"
 #include "pipeline/measure/measurement_uncertainty.h"
-#include "pipeline/measure/ortho_patch.h"
 #include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/orchestration/stage.h"
@@ -62,10 +61,7 @@ struct LocatedFeature {
   FeatureReport report;
   std::optional<CircleFeatureValue> value;  // none if not found
   int value_index = -1;                     // into the propagation's features; -1 if not found
-  // Of its fits: the bore where they resolved it (k, wall level; for a
-  // BorePrior), and whether one with a nadir resolved none.
-  std::vector<double> bottom_rim_scales, wall_contrasts;
-  bool bore_unresolved = false;
+  BoreEvidence bore;                        // of its fits (for a BorePrior)
 };
 
 // Each tile's exposure as the mosaic divided it out (report.json's mosaic
@@ -90,9 +86,6 @@ std::vector<TileExposure> TileExposures(const MosaicReport& mosaic,
 
 // Hole fits run on this many threads (the 2-core machine the stages target).
 constexpr int kNumThreads = 2;
-// A hole is one tile's picture where the other tiles' blend weights sum to
-// less than this: their ghost bottom rim is under the mosaic's noise.
-constexpr double kMaxOtherTileWeight = 0.01;
 // The part of a hole's edge error the tiles share (CombineCircleViews): they
 // show the same surface texture at the rim. Over 246 holes seen whole by 2-4
 // tiles in 30 simulated projects, the views' diameters disagreed by a pooled
@@ -103,85 +96,6 @@ constexpr double kSharedEdgeFraction = 0.2;
 constexpr double kConsistencyProbability = 0.999;
 // A BorePrior is pooled from at least this many views that resolve the wall.
 constexpr size_t kMinBorePriorViews = 3;
-// Beyond the rim, a fit reads pixels out to its rim band plus the step
-// profile's half width (circle_measure.h); one more for rounding.
-double FitReachPx(const CircleMeasureOptions& options) {
-  return options.rim_band_px + options.profile_half_width_px + 1.0;
-}
-
-// What every feature's fits read; shared, read only, by the threads.
-struct MeasureInputs {
-  const SavedScene& saved;
-  const LensProjection& lens;
-  const OrthoGrid& grid;
-  const ImageF& mosaic;
-  const CameraModel& camera;
-  double source_px = 1.0;
-  // The tiles alone on the mosaic's grid (ortho_patch.h), in the scene's tile order.
-  const OrthoGeometry& geometry;
-  const std::vector<ImageF>& tiles;
-  std::vector<TileExposure> exposure;  // per tile
-  std::optional<BorePrior> bore_prior;  // the project's bore, from a first pass (RunMeasureStage)
-};
-
-// One fit, in the mosaic or in one tile's patch; mosaic px.
-struct HoleFit {
-  std::optional<int> tile;  // none: in the mosaic
-  CircleMeasurement circle;
-  std::optional<int> nadir_tile;  // the tile whose nadir the bottom rim is about
-};
-
-CircleMeasureOptions FitOptions(const MeasureInputs& in) {
-  CircleMeasureOptions options;
-  options.source_px = in.source_px;
-  return options;
-}
-
-// The hole in tile `tile` alone, looked for within `search_px` of expected_px:
-// a patch reaching that far plus the fit's reach, then the fit with that
-// tile's nadir, shifted back to mosaic px.
-HoleFit FitInTile(const MeasureInputs& in, int tile, const Eigen::Vector2d& expected_px,
-                  double radius_px, CircleMeasureOptions options, double search_px) {
-  options.search_fraction = 0.0;
-  options.search_margin_px = search_px;
-  const double reach =
-      radius_px * (1.0 + options.max_radius_deviation) + search_px + FitReachPx(options) + 2.0;
-  const Eigen::Vector2i min_px = (expected_px.array() - reach).floor().cast<int>();
-  const int size = static_cast<int>(std::ceil(2.0 * reach)) + 1;
-  const OrthoPatch patch =
-      RenderTilePatch(in.geometry, tile, in.tiles[tile], in.exposure[tile],
-                      OrthoOptions{}.interpolator, min_px, Eigen::Vector2i::Constant(size));
-  const Eigen::Vector2d origin = patch.origin_px.cast<double>();
-  const Eigen::Vector2d nadir_px =
-      in.grid.MosaicFromPart(TileNadirMm(in.saved.scene, tile)) - origin;
-  HoleFit fit{tile, {}, tile};
-  if (patch.pixels.size() == 0) {
-    fit.circle.error = "not seen by the tile";
-    return fit;
-  }
-  fit.circle = MeasureCircle(patch.pixels, expected_px - origin, radius_px, options, nadir_px,
-                             in.bore_prior);
-  fit.circle.centre_px += origin;
-  fit.circle.coarse_centre_px += origin;
-  return fit;
-}
-
-// The hole in the blended mosaic. The bore's bottom rim shows scaled about
-// the nadir of the tile the mosaic takes the hole from (bore_view.h); where
-// tiles blend there are two such rims and the kernel fits one free circle.
-HoleFit FitInMosaic(const MeasureInputs& in, const Eigen::Vector2d& centre_mm, double radius_mm,
-                    const Eigen::Vector2d& expected_px) {
-  HoleFit fit;
-  fit.nadir_tile =
-      RenderingTile(in.lens, in.saved.scene, centre_mm, radius_mm, in.camera.width_px,
-                    in.camera.height_px, OrthoOptions{}.blend_band_px, kMaxOtherTileWeight);
-  std::optional<Eigen::Vector2d> nadir_px;
-  if (fit.nadir_tile)
-    nadir_px = in.grid.MosaicFromPart(TileNadirMm(in.saved.scene, *fit.nadir_tile));
-  fit.circle = MeasureCircle(in.mosaic, expected_px, radius_mm / in.grid.gsd_mm, FitOptions(in),
-                             nadir_px, in.bore_prior);
-  return fit;
-}
 
 std::string BoreNote(const HoleFit& fit, const SavedScene& saved) {
   const CircleMeasurement& circle = fit.circle;
@@ -205,58 +119,11 @@ std::string BoreNote(const HoleFit& fit, const SavedScene& saved) {
   return "no bore wall resolved";
 }
 
-// The fits of a hole in the tiles that see it whole (LocateFeature).
-struct TileFits {
-  std::vector<HoleFit> fits;          // the tiles' fits that succeeded
-  int num_seeing = 0;                 // tiles that see the hole whole
-  std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole first
-};
-
-// The first fit is in the tile that sees the expected disc best, searched as
-// widely as in the mosaic; its circle then says which tiles see the hole
-// whole, and those are fitted about it.
-TileFits FitInTiles(const MeasureInputs& in, const Eigen::Vector2d& near_part,
-                    const Eigen::Vector2d& expected_px, double radius_mm) {
-  TileFits result;
-  const SavedScene& saved = in.saved;
-  const OrthoGrid& grid = in.grid;
-  const CircleMeasureOptions options = FitOptions(in);
-  const double radius_px = radius_mm / grid.gsd_mm;
-  const double reach_mm = FitReachPx(options) * grid.gsd_mm;
-  const int width_px = in.camera.width_px, height_px = in.camera.height_px;
-  const double search_px = options.search_fraction * 2.0 * radius_px + options.search_margin_px;
-  const std::vector<int> first = TilesSeeingDisc(in.lens, saved.scene, near_part,
-                                                 radius_mm + reach_mm, width_px, height_px, 0.0);
-  std::optional<HoleFit> found;
-  if (!first.empty()) {
-    found = FitInTile(in, first[0], expected_px, radius_px, options, search_px);
-    if (!found->circle.ok) found.reset();
-  }
-  if (!found) {
-    result.mosaic_fit = FitInMosaic(in, near_part, radius_mm, expected_px);
-    if (result.mosaic_fit->circle.ok) found = *result.mosaic_fit;
-  }
-  if (!found) return result;
-  // Centres agree to well within a pixel: a small search about it.
-  const Eigen::Vector2d centre_px = found->circle.centre_px;
-  const double fitted_mm = found->circle.radius_px * grid.gsd_mm;
-  for (const int t : TilesSeeingDisc(in.lens, saved.scene, grid.PartFromMosaic(centre_px),
-                                     fitted_mm + reach_mm, width_px, height_px, 0.0)) {
-    ++result.num_seeing;
-    HoleFit fit = found->tile == t
-                      ? std::move(*found)
-                      : FitInTile(in, t, centre_px, radius_px, options, options.search_margin_px);
-    if (fit.circle.ok) result.fits.push_back(std::move(fit));
-  }
-  return result;
-}
-
 // The report's notes on a hole measured in tiles: which tiles, their bores
 // and fits, and whether the views agree.
 void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& combined,
-                      const Eigen::Matrix3d& to_mm, const MeasureInputs& in,
+                      const Eigen::Matrix3d& to_mm, const OrthoGrid& grid, const SavedScene& saved,
                       const std::string& name_of_feature, FeatureReport* report) {
-  const SavedScene& saved = in.saved;
   const CircleFeatureValue& value = combined.value;
   std::string views_note =
       fmt::format("measured in {} tile{}:", fits.size(), fits.size() > 1 ? "s" : "");
@@ -279,7 +146,7 @@ void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& co
   if (fits.size() > 1) {
     const Eigen::Matrix3d cov_px =
         to_mm.inverse() * value.edge_covariance * to_mm.inverse().transpose();
-    const Eigen::Vector2d centre_px = in.grid.MosaicFromPart(value.centre_mm);
+    const Eigen::Vector2d centre_px = grid.MosaicFromPart(value.centre_mm);
     const auto agreement = [](const char* what, const ViewAgreement& a) {
       std::string note = fmt::format("{} {}: chi2 {:.1f} for {} dof ({:.1f} % bound {:.1f})", what,
                                      a.consistent ? "agree" : "disagree", a.chi2, a.dof,
@@ -296,7 +163,7 @@ void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& co
         "fit",
         fmt::format("combined: centre ({:.3f}, {:.3f}) px, r {:.3f} px, sigma ({:.4f}, "
                     "{:.4f}, {:.4f}) px",
-                    centre_px.x(), centre_px.y(), 0.5 * value.diameter_mm / in.grid.gsd_mm,
+                    centre_px.x(), centre_px.y(), 0.5 * value.diameter_mm / grid.gsd_mm,
                     std::sqrt(cov_px(0, 0)), std::sqrt(cov_px(1, 1)), std::sqrt(cov_px(2, 2))));
   } else {
     report->extra.emplace_back("fit", fits[0].circle.Brief());
@@ -309,13 +176,13 @@ void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& co
 // Pure in its inputs: features are located concurrently.
 //
 // A hole that some tiles see whole (with the fit's reach) is measured in
-// each of them alone (ortho_patch.h, FitInTiles): pictures with their own
+// each of them alone (hole_views.h): pictures with their own
 // noise, each with one bottom rim about its own nadir, combined by their
 // edge covariances (CombineCircleViews). The blended mosaic is measured only
 // where no tile sees the hole whole.
-LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
-  const SavedScene& saved = in.saved;
-  const OrthoGrid& grid = in.grid;
+LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
+                             const SavedScene& saved) {
+  const OrthoGrid& grid = in.geometry.grid;
   LocatedFeature located;
   FeatureReport& report = located.report;
   report.name = spec.name;
@@ -336,12 +203,12 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
   report.extra = {{"expected_mosaic_px", Pair(expected_px)}};
   const double radius_mm = 0.5 * spec.diameter_mm;
 
-  TileFits tile_fits = FitInTiles(in, *near_part, expected_px, radius_mm);
-  std::vector<HoleFit>& fits = tile_fits.fits;
+  HoleViews views_found = FitHoleViews(in, *near_part, radius_mm);
+  std::vector<HoleFit>& fits = views_found.fits;
   if (fits.empty()) {
-    HoleFit fit = tile_fits.mosaic_fit ? std::move(*tile_fits.mosaic_fit)
-                                       : FitInMosaic(in, *near_part, radius_mm, expected_px);
-    const int num_seeing = tile_fits.num_seeing;
+    HoleFit fit = views_found.mosaic_fit ? std::move(*views_found.mosaic_fit)
+                                         : FitHoleInMosaic(in, *near_part, radius_mm);
+    const int num_seeing = views_found.num_seeing;
     report.extra.emplace_back("fit", fit.circle.Brief());
     report.extra.emplace_back("bore", BoreNote(fit, saved));
     report.extra.emplace_back(
@@ -356,13 +223,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
     }
     fits.push_back(std::move(fit));
   }
-  for (const HoleFit& fit : fits) {
-    const CircleMeasurement& circle = fit.circle;
-    if (circle.bottom_rim_scale > 0.0 && !circle.bore_prior_used)
-      located.bottom_rim_scales.push_back(circle.bottom_rim_scale);
-    if (circle.wall_contrast > 0.0) located.wall_contrasts.push_back(circle.wall_contrast);
-    located.bore_unresolved |= fit.nadir_tile.has_value() && !circle.bottom_rim_modelled;
-  }
+  located.bore = BoreEvidenceOf(fits);
 
   // Per fit: (cx, cy, D) mm, its edge covariance and scene sensitivity.
   // (col, row, r) px -> (x, y, D) mm: x along +col, y along -row.
@@ -400,7 +261,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const MeasureInputs& in) {
     num_inliers += fit.circle.num_inliers;
     sum_squares += fit.circle.num_inliers * fit.circle.rms_px * fit.circle.rms_px;
   }
-  if (fits[0].tile) AddTileViewNotes(fits, combined, to_mm, in, spec.name, &report);
+  if (fits[0].tile) AddTileViewNotes(fits, combined, to_mm, grid, saved, spec.name, &report);
   report.centre_mm = value.centre_mm;
   report.diameter_mm = value.diameter_mm;
   report.extra.emplace_back("num_views", static_cast<int>(fits.size()));
@@ -483,9 +344,9 @@ void RunMeasureStage(StageContext& context) {
   const std::shared_ptr<const std::vector<ImageF>> tiles =
       context.tiles ? context.tiles
                     : std::make_shared<const std::vector<ImageF>>(TileImages(project, camera));
-  MeasureInputs inputs{saved,         lens,   grid,
-                       mosaic.pixels, camera, source_px,
-                       geometry,      *tiles, TileExposures(mosaic_report, saved.tile_images)};
+  HoleViewInputs inputs{saved.scene, lens,          geometry,
+                        camera,      *tiles,        TileExposures(mosaic_report, saved.tile_images),
+                        source_px,   &mosaic.pixels};
 
   const int num_features = static_cast<int>(project.features.size());
   std::vector<LocatedFeature> located(num_features);
@@ -493,37 +354,34 @@ void RunMeasureStage(StageContext& context) {
   int num_located = 0;
   ParallelFor(num_features, kNumThreads, [&](int i) {
     const FeatureSpec& spec = project.features[i];
-    located[i] = LocateFeature(spec, inputs);
+    located[i] = LocateFeature(spec, inputs, saved);
     const std::lock_guard lock(progress_mutex);
     if (context.progress) context.progress(++num_located, num_features + 1, "located " + spec.name);
   });
   // Views that resolve no bore wall, near a nadir, are measured again with
   // the bore the others resolved (BorePrior; MeasureCircle uses it only
   // where a narrow wall covers most of the rim).
-  std::vector<double> scales, walls;
-  std::vector<int> unresolved;
-  for (int i = 0; i < num_features; ++i) {
-    const LocatedFeature& feature = located[i];
-    scales.insert(scales.end(), feature.bottom_rim_scales.begin(), feature.bottom_rim_scales.end());
-    walls.insert(walls.end(), feature.wall_contrasts.begin(), feature.wall_contrasts.end());
-    if (feature.bore_unresolved) unresolved.push_back(i);
+  std::vector<BoreEvidence> bores;
+  int views_with_k = 0, views_with_wall_level = 0;
+  for (const LocatedFeature& feature : located) {
+    bores.push_back(feature.bore);
+    views_with_k += static_cast<int>(feature.bore.bottom_rim_scales.size());
+    views_with_wall_level += static_cast<int>(feature.bore.wall_contrasts.size());
   }
-  ReportObject bore_prior_report{{"views_with_k", static_cast<int>(scales.size())},
-                                 {"views_with_wall_level", static_cast<int>(walls.size())}};
-  if (scales.size() >= kMinBorePriorViews && walls.size() >= kMinBorePriorViews &&
-      !unresolved.empty()) {
-    // The level's sigma for one hole is the views' spread (1.4826 MAD), not
-    // its standard error: walls differ from hole to hole beyond their noise.
-    const double wall = Median(walls);
-    std::vector<double> deviations;
-    for (const double w : walls) deviations.push_back(std::abs(w - wall));
-    inputs.bore_prior = BorePrior{Median(scales), wall, 1.4826 * Median(std::move(deviations))};
+  ReportObject bore_prior_report{{"views_with_k", views_with_k},
+                                 {"views_with_wall_level", views_with_wall_level}};
+  inputs.bore_prior = PoolBorePrior(bores, kMinBorePriorViews);
+  if (inputs.bore_prior) {
     bore_prior_report.emplace_back("bottom_rim_scale", inputs.bore_prior->bottom_rim_scale);
     bore_prior_report.emplace_back("wall_contrast", inputs.bore_prior->wall_contrast);
     bore_prior_report.emplace_back("wall_contrast_sigma", inputs.bore_prior->wall_contrast_sigma);
+    std::vector<int> unresolved;
+    for (int i = 0; i < num_features; ++i) {
+      if (located[i].bore.unresolved) unresolved.push_back(i);
+    }
     ParallelFor(static_cast<int>(unresolved.size()), kNumThreads, [&](int j) {
       const int i = unresolved[static_cast<size_t>(j)];
-      located[i] = LocateFeature(project.features[i], inputs);
+      located[i] = LocateFeature(project.features[i], inputs, saved);
     });
   }
   std::vector<CircleFeatureValue> values;

@@ -1,9 +1,12 @@
 // Runner of the mosaic stage (see stage.h): the calibrated camera and the
-// tiles in, RegisterTiles, the final adjustment with the plate lying on the
-// part and the calibration's intrinsics prior (plate_on_part.h), Orthorectify
-// (pipeline/mosaic), and out mosaic.png (16 bit), mosaic/scene.json (the
-// adjusted scene and its joint covariance for the measure stage), colmap/ (the
-// scene as a COLMAP sparse model) and report.mosaic.
+// tiles in, RegisterTiles, each pair's matches weighted by their own scatter
+// (pair_scatter.h), the final adjustment with the plate lying on the part,
+// the calibration's intrinsics prior (plate_on_part.h) and the project's
+// holes that several tiles see whole as tie points
+// (pipeline/measure/hole_ties.h), Orthorectify (pipeline/mosaic), and out
+// mosaic.png (16 bit), mosaic/scene.json (the adjusted scene and its joint
+// covariance for the measure stage), colmap/ (the scene as a COLMAP sparse
+// model) and report.mosaic.
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -18,6 +21,7 @@
 #include "adapters/colmap/colmap_model.h"
 #include "adapters/colmap/colmap_sift.h"
 #include "adapters/mrcal/cameramodel_io.h"
+#include "adapters/mrcal/mrcal_lens_projection.h"
 #include "adapters/mrcal/solve_record_json.h"
 #include "adapters/mrcal/uncertainty.h"
 #include "adapters/opencv/image_io.h"
@@ -25,8 +29,11 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/timing.h"
+#include "pipeline/measure/hole_ties.h"
+#include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/ortho_file.h"
 #include "pipeline/mosaic/orthorectify.h"
+#include "pipeline/mosaic/pair_scatter.h"
 #include "pipeline/mosaic/plate_on_part.h"
 #include "pipeline/mosaic/register_tiles.h"
 #include "pipeline/orchestration/stage.h"
@@ -146,9 +153,14 @@ std::string WhyHeld(const TileRegistration& registration, int tile) {
   return "its matches were all dropped as outliers: held by its table position alone";
 }
 
-ReportValue PairsReport(const Project& project, const TileRegistration& registration) {
+ReportValue PairsReport(const Project& project, const TileRegistration& registration,
+                        const std::vector<PairScatter>& scatter) {
   ReportValue::Array rows;
   for (const PairRegistration& pair : registration.pairs) {
+    const auto it = std::find_if(scatter.begin(), scatter.end(), [&](const PairScatter& s) {
+      return s.tile_a == pair.tile_a && s.tile_b == pair.tile_b;
+    });
+    const PairScatter pair_scatter = it == scatter.end() ? PairScatter{} : *it;
     rows.emplace_back(ReportObject{{"images", ReportValue::Array{project.tiles[pair.tile_a].image,
                                                                  project.tiles[pair.tile_b].image}},
                                    {"predicted_overlap", pair.predicted_overlap},
@@ -159,7 +171,9 @@ ReportValue PairsReport(const Project& project, const TileRegistration& registra
                                    {"used", pair.num_used},
                                    {"rms_px", pair.rms_px},
                                    {"usable", pair.usable},
-                                   {"matched_on_adjusted_scene", pair.rescued}});
+                                   {"matched_on_adjusted_scene", pair.rescued},
+                                   {"scatter", pair_scatter.scatter},
+                                   {"weight_scale", pair_scatter.weight_scale}});
   }
   return rows;
 }
@@ -251,6 +265,116 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
   return report;
 }
 
+// The final adjustment (the plate on the part, the intrinsics prior) with
+// the holes of project.yaml's features that several tiles see whole as tie
+// points (pipeline/measure/hole_ties.h), fitted on the registered scene: a
+// view's centre is an image position, which the final adjustment's small
+// changes of the scene leave as it is. A tie the solve finds inconsistent is
+// dropped and the solve run again; the kept ties' tracks join
+// registration->input.
+struct TiedAdjustment {
+  FinalAdjustment adjusted;
+  std::string ties_brief;
+  ReportValue ties_report;     // report.mosaic's hole_ties
+  double fit_seconds = 0.0;    // the ties' hole fits
+  double solve_seconds = 0.0;  // the final adjustment's solves
+};
+TiedAdjustment AdjustWithHoleTies(const Project& project, const std::vector<ImageF>& tiles,
+                                  const CameraModel& camera, const PlateOnPart& plate,
+                                  const IntrinsicsPrior& prior,
+                                  const FinalAdjustmentOptions& options,
+                                  TileRegistration* registration) {
+  const auto start = std::chrono::steady_clock::now();
+  const PlaneScene& registered = registration->scene;
+  const MrcalLensProjection lens(camera);
+  OrthoOptions ortho_options;
+  ortho_options.gsd_mm = project.mosaic_gsd_mm;
+  const OrthoGeometry geometry = ComputeOrthoGeometry(camera, registered, ortho_options);
+  std::vector<TieHole> holes;
+  std::vector<std::string> names;
+  for (const FeatureSpec& feature : project.features) {
+    const auto it = std::find_if(project.tiles.begin(), project.tiles.end(),
+                                 [&](const TilePosition& t) { return t.image == feature.image; });
+    if (it == project.tiles.end()) continue;
+    const auto near_mm = PartPointOfTilePixel(
+        lens, registered, static_cast<int>(it - project.tiles.begin()), feature.near_px);
+    if (!near_mm) continue;
+    holes.push_back({*near_mm, 0.5 * feature.diameter_mm});
+    names.push_back(feature.name);
+  }
+  const double tile_px_per_mosaic_px = TilePxPerMosaicPx(geometry);
+  const HoleViewInputs in{registered,
+                          lens,
+                          geometry,
+                          camera,
+                          tiles,
+                          std::vector<TileExposure>(tiles.size()),
+                          tile_px_per_mosaic_px > 0.0 ? 1.0 / tile_px_per_mosaic_px : 1.0};
+  const HoleTieOptions tie_options;
+  std::vector<HoleTie> ties = FindHoleTies(in, holes, tie_options);
+  TiedAdjustment result;
+  result.fit_seconds = SecondsSince(start);
+
+  ReportValue::Array dropped;
+  std::string failed;
+  PlaneBundleInput input;
+  int first_observation = 0;
+  for (;;) {
+    input = registration->input;
+    PlaneScene scene = registered;
+    first_observation = AddHoleTieTracks(ties, &input, &scene);
+    result.adjusted = AdjustWithPlateAndPrior(camera, input, scene, plate, prior, options);
+    if (ties.empty()) break;
+    if (!result.adjusted.summary.usable) {
+      failed = "the adjustment with them failed (" + result.adjusted.summary.brief + "): not used";
+      ties.clear();
+      continue;
+    }
+    const std::vector<int> inconsistent = InconsistentHoleTies(
+        ties, first_observation, result.adjusted.scene.residual_px, tie_options);
+    if (inconsistent.empty()) break;
+    for (auto it = inconsistent.rbegin(); it != inconsistent.rend(); ++it) {
+      dropped.emplace_back(names[ties[*it].hole]);
+      ties.erase(ties.begin() + *it);
+    }
+  }
+  result.solve_seconds = SecondsSince(start) - result.fit_seconds;
+
+  ReportValue::Array rows;
+  int index = first_observation;
+  for (const HoleTie& tie : ties) {
+    ReportValue::Array images;
+    double sum_squares = 0.0;
+    for (const int tile : tie.tiles) {
+      images.emplace_back(project.tiles[tile].image);
+      sum_squares += result.adjusted.scene.residual_px.col(index++).squaredNorm();
+    }
+    rows.emplace_back(
+        ReportObject{{"feature", names[tie.hole]},
+                     {"images", std::move(images)},
+                     {"rms_px", std::sqrt(sum_squares / static_cast<double>(tie.tiles.size()))}});
+  }
+  registration->input.observations = input.observations;
+  registration->input.num_tracks = input.num_tracks;
+  std::vector<int>& held = registration->tiles_held_by_prior;
+  for (const HoleTie& tie : ties) {
+    for (const int tile : tie.tiles)
+      held.erase(std::remove(held.begin(), held.end(), tile), held.end());
+  }
+  result.ties_brief = !failed.empty() ? failed
+                      : ties.empty()
+                          ? std::string("no hole seen whole by two tiles or more")
+                          : fmt::format("{} hole{} seen whole by two tiles or more tie them",
+                                        ties.size(), ties.size() == 1 ? "" : "s");
+  if (!dropped.empty()) {
+    result.ties_brief +=
+        fmt::format("; {} dropped: their views disagree beyond their sigma", dropped.size());
+  }
+  result.ties_report = ReportObject{
+      {"brief", result.ties_brief}, {"ties", std::move(rows)}, {"dropped", std::move(dropped)}};
+  return result;
+}
+
 }  // namespace
 
 void RunMosaicStage(StageContext& context) {
@@ -276,7 +400,7 @@ void RunMosaicStage(StageContext& context) {
     image_names.push_back(tile.image);
   }
   const int num_tiles = static_cast<int>(tiles.size());
-  if (context.progress) context.progress(num_tiles, num_tiles + 3, "register tiles");
+  if (context.progress) context.progress(num_tiles, num_tiles + 4, "register tiles");
   RegisterTilesOptions register_options;
   register_options.compute_covariance = false;  // the final adjustment's
   register_options.features = context.mosaic_features;
@@ -295,6 +419,10 @@ void RunMosaicStage(StageContext& context) {
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 
+  // Each pair's matches weighted by their own scatter.
+  const std::vector<PairScatter> pair_scatter = WeightPairsByScatter(
+      registration.track_anchor_observation, registration.scene.residual_px, &registration.input);
+
   // The final adjustment: the plate on the part, the intrinsics prior.
   PlateOnPart plate;
   if (project.board) {
@@ -308,8 +436,12 @@ void RunMosaicStage(StageContext& context) {
   spdlog::info("mosaic: {}", plate.brief);
   FinalAdjustmentOptions final_options;
   final_options.bundle = register_options.bundle;
-  FinalAdjustment adjusted = AdjustWithPlateAndPrior(camera, registration.input, registration.scene,
-                                                     plate, prior, final_options);
+  if (context.progress)
+    context.progress(num_tiles + 1, num_tiles + 4, "tie holes, final adjustment");
+  TiedAdjustment tied =
+      AdjustWithHoleTies(project, tiles, camera, plate, prior, final_options, &registration);
+  FinalAdjustment& adjusted = tied.adjusted;
+  spdlog::info("mosaic: holes: {}", tied.ties_brief);
   spdlog::info("mosaic: final {}", adjusted.summary.brief);
   if (adjusted.observation_sigma_scale > 1.0) {
     spdlog::info(
@@ -327,14 +459,14 @@ void RunMosaicStage(StageContext& context) {
   CameraModel scene_camera = camera;
   scene_camera.intrinsics = adjusted.scene.intrinsics;
 
-  if (context.progress) context.progress(num_tiles + 1, num_tiles + 3, "orthorectify");
+  if (context.progress) context.progress(num_tiles + 2, num_tiles + 4, "orthorectify");
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options);
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) throw StageFailedError(Stage::kMosaic, ortho.summary.brief);
 
-  if (context.progress) context.progress(num_tiles + 2, num_tiles + 3, "write mosaic");
+  if (context.progress) context.progress(num_tiles + 3, num_tiles + 4, "write mosaic");
   const auto write_start = std::chrono::steady_clock::now();
   // The samples the file will hold, for the measure stage and report.html,
   // while the file is written on another thread (0.05 s of CPU on the demo,
@@ -399,7 +531,8 @@ void RunMosaicStage(StageContext& context) {
       {"intrinsics_max_change_sigmas", IntrinsicsChangeSigmas(camera, adjusted, prior)},
       {"scale_sigma_ppm", adjusted.scale_sigma_ppm},
       {"plate_scale_check", PlateReport(project, plate, adjusted)},
-      {"pairs", PairsReport(project, registration)},
+      {"hole_ties", std::move(tied.ties_report)},
+      {"pairs", PairsReport(project, registration, pair_scatter)},
       {"tiles", TilesReport(project, registration, ortho.summary)},
       {"tiles_held_by_prior", held},
       {"exposure",
@@ -428,7 +561,8 @@ void RunMosaicStage(StageContext& context) {
                                  {"adjustment", registration.adjustment_seconds},
                                  {"plate_detection", plate.seconds},
                                  {"intrinsics_prior", prior_seconds},
-                                 {"final_adjustment", adjusted.seconds},
+                                 {"hole_ties", tied.fit_seconds},
+                                 {"final_adjustment", tied.solve_seconds},
                                  {"ortho_geometry", ortho.summary.geometry_seconds},
                                  {"ortho_exposure", ortho.summary.exposure_seconds},
                                  {"ortho_resample", ortho.summary.resample_seconds},
@@ -436,7 +570,7 @@ void RunMosaicStage(StageContext& context) {
                                  {"write", write_seconds},
                                  {"total", SecondsSince(stage_start)}}}};
   context.report.mosaic = std::move(report);
-  if (context.progress) context.progress(num_tiles + 3, num_tiles + 3, "mosaic done");
+  if (context.progress) context.progress(num_tiles + 4, num_tiles + 4, "mosaic done");
 }
 
 }  // namespace omm

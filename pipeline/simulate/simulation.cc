@@ -676,6 +676,16 @@ std::string SimulationOptions::Check() const {
   return "";
 }
 
+PlaneScene TruthPlaneScene(const SimulationTruth& truth) {
+  PlaneScene scene;
+  const Eigen::AngleAxisd r(truth.cam_from_part.linear());
+  scene.cam_from_part_r = r.angle() * r.axis();
+  scene.cam_from_part_t_mm = truth.cam_from_part.translation();
+  for (const TileTruth& tile : truth.tiles) scene.table_pos_mm.push_back(tile.actual_mm);
+  scene.intrinsics = truth.camera.model.intrinsics;
+  return scene;
+}
+
 RayTableOptions RayOptionsFor(const SimulationOptions& options) {
   RayTableOptions ray_options;
   ray_options.supersampling = options.supersampling;

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "pipeline/core/image.h"
+#include "pipeline/core/plane_scene.h"
 #include "pipeline/core/project.h"
 #include "pipeline/core/truth.h"
 #include "pipeline/simulate/ray_table.h"
@@ -118,6 +119,11 @@ class ProjectRenderer {
   std::unique_ptr<SurfaceTexture> texture_;
   std::unique_ptr<WorkpieceScene> workpiece_;
 };
+
+// The truth as the planar adjustment's scene (pipeline/core/plane_scene.h):
+// the plane's pose, the ACTUAL table positions and the true intrinsics (no
+// tracks): what the tests compare the adjusted scene and mosaic with.
+PlaneScene TruthPlaneScene(const SimulationTruth& truth);
 
 // Ray-table options for a plan (its supersampling and threads).
 RayTableOptions RayOptionsFor(const SimulationOptions& options);

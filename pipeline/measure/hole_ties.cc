@@ -1,0 +1,143 @@
+#include "pipeline/measure/hole_ties.h"
+
+#include <optional>
+
+#include <Eigen/Eigenvalues>
+
+#include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
+#include "pipeline/measure/measurement_uncertainty.h"
+#include "pipeline/measure/scene_sensitivity.h"
+
+namespace omm {
+namespace {
+
+// One view as a tie observation: the centre's pixel in its tile and the
+// fit's covariance carried there (d q / d mosaic px by central differences
+// over a mosaic pixel: the map is smooth at that scale).
+bool TileObservation(const HoleViewInputs& in, const HoleFit& fit, double min_sigma_px,
+                     Eigen::Vector2d* q_px, Eigen::Matrix2d* covariance_px2) {
+  const OrthoGrid& grid = in.geometry.grid;
+  const auto pixel = [&](const Eigen::Vector2d& mosaic_px) {
+    return TilePixelOfPartPoint(in.lens, in.scene, *fit.tile, grid.PartFromMosaic(mosaic_px));
+  };
+  const Eigen::Vector2d& c = fit.circle.centre_px;
+  const std::optional<Eigen::Vector2d> q = pixel(c);
+  if (!q) return false;
+  Eigen::Matrix2d jacobian;
+  for (int k = 0; k < 2; ++k) {
+    const Eigen::Vector2d step = 0.5 * Eigen::Vector2d::Unit(k);
+    const std::optional<Eigen::Vector2d> plus = pixel(c + step), minus = pixel(c - step);
+    if (!plus || !minus) return false;
+    jacobian.col(k) = *plus - *minus;
+  }
+  *q_px = *q;
+  *covariance_px2 =
+      jacobian * fit.circle.covariance_px2.topLeftCorner<2, 2>() * jacobian.transpose() +
+      min_sigma_px * min_sigma_px * Eigen::Matrix2d::Identity();
+  return true;
+}
+
+}  // namespace
+
+std::string HoleTieOptions::Check() const {
+  if (min_views < 2) return "min_views must be at least 2";
+  if (!(min_sigma_px > 0.0)) return "min_sigma_px must be > 0";
+  if (!(consistency_probability > 0.0 && consistency_probability < 1.0))
+    return "consistency_probability must be in (0, 1)";
+  if (num_threads < 1) return "num_threads must be at least 1";
+  return "";
+}
+
+std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<TieHole>& holes,
+                                  const HoleTieOptions& options) {
+  if (const std::string why = options.Check(); !why.empty())
+    throw InputError("HoleTieOptions", why);
+  HoleViewInputs tile_inputs = in;
+  tile_inputs.mosaic = nullptr;
+  const int num_holes = static_cast<int>(holes.size());
+  std::vector<HoleViews> views(num_holes);
+  const auto fit = [&](int i) {
+    views[i] = FitHoleViews(tile_inputs, holes[i].near_part_mm, holes[i].radius_mm);
+  };
+  ParallelFor(num_holes, options.num_threads, fit);
+  std::vector<BoreEvidence> bores;
+  for (const HoleViews& hole : views) bores.push_back(BoreEvidenceOf(hole.fits));
+  tile_inputs.bore_prior = PoolBorePrior(bores, options.min_bore_prior_views);
+  if (tile_inputs.bore_prior) {
+    std::vector<int> unresolved;
+    for (int i = 0; i < num_holes; ++i) {
+      if (bores[i].unresolved) unresolved.push_back(i);
+    }
+    ParallelFor(static_cast<int>(unresolved.size()), options.num_threads,
+                [&](int j) { fit(unresolved[static_cast<size_t>(j)]); });
+  }
+
+  std::vector<HoleTie> ties;
+  for (int i = 0; i < num_holes; ++i) {
+    HoleTie tie;
+    tie.hole = i;
+    Eigen::Vector2d sum_mm = Eigen::Vector2d::Zero();
+    for (const HoleFit& view : views[i].fits) {
+      Eigen::Vector2d q;
+      Eigen::Matrix2d covariance;
+      if (!TileObservation(tile_inputs, view, options.min_sigma_px, &q, &covariance)) continue;
+      tie.tiles.push_back(*view.tile);
+      tie.q_px.push_back(q);
+      tie.covariance_px2.push_back(covariance);
+      sum_mm += in.geometry.grid.PartFromMosaic(view.circle.centre_px);
+    }
+    if (static_cast<int>(tie.tiles.size()) < options.min_views) continue;
+    tie.centre_mm = sum_mm / static_cast<double>(tie.tiles.size());
+    ties.push_back(std::move(tie));
+  }
+  return ties;
+}
+
+int AddHoleTieTracks(const std::vector<HoleTie>& ties, PlaneBundleInput* input, PlaneScene* scene) {
+  const int first_observation = static_cast<int>(input->observations.size());
+  const int first_track = input->num_tracks;
+  scene->track_xy_mm.conservativeResize(2, first_track + static_cast<int>(ties.size()));
+  for (size_t t = 0; t < ties.size(); ++t) {
+    const HoleTie& tie = ties[t];
+    const int track = first_track + static_cast<int>(t);
+    scene->track_xy_mm.col(track) = tie.centre_mm;
+    for (size_t v = 0; v < tie.tiles.size(); ++v) {
+      // Weight and shape (TrackObservation): the inverse square root of the
+      // covariance, as a scale along its stiffest direction and a shape.
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(tie.covariance_px2[v]);
+      const Eigen::Vector2d sigma_px = eigen.eigenvalues().cwiseSqrt();  // ascending
+      TrackObservation observation;
+      observation.tile = tie.tiles[v];
+      observation.track = track;
+      observation.q_px = tie.q_px[v];
+      observation.weight = input->observation_sigma_px / sigma_px(0);
+      observation.shape = eigen.eigenvectors() *
+                          Eigen::Vector2d(1.0, sigma_px(0) / sigma_px(1)).asDiagonal() *
+                          eigen.eigenvectors().transpose();
+      input->observations.push_back(observation);
+    }
+  }
+  input->num_tracks = first_track + static_cast<int>(ties.size());
+  return first_observation;
+}
+
+std::vector<int> InconsistentHoleTies(const std::vector<HoleTie>& ties, int first_observation,
+                                      const Eigen::Matrix2Xd& residual_px,
+                                      const HoleTieOptions& options) {
+  std::vector<int> inconsistent;
+  int index = first_observation;
+  for (size_t t = 0; t < ties.size(); ++t) {
+    double chi2 = 0.0;
+    for (const Eigen::Matrix2d& covariance : ties[t].covariance_px2) {
+      const Eigen::Vector2d r = residual_px.col(index++);
+      chi2 += r.dot(covariance.ldlt().solve(r));
+    }
+    const int dof = 2 * (static_cast<int>(ties[t].tiles.size()) - 1);
+    if (!(chi2 <= ChiSquareQuantile(options.consistency_probability, dof)))
+      inconsistent.push_back(static_cast<int>(t));
+  }
+  return inconsistent;
+}
+
+}  // namespace omm

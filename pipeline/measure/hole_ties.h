@@ -1,0 +1,96 @@
+// Holes as tie points of the mosaic's registration.
+//
+// Why. A hole's top rim lies in the part's plane, and its circle fit in one
+// tile (hole_views.h) locates its centre to ~0.004-0.015 px, where a
+// template match on weak texture scatters by 0.1-0.5 px. On low-texture
+// parts the holes are most of what the tiles share: on low-texture seed 228
+// a tile that only a hole's rim and smooth shading tied to its neighbours
+// was placed 0.13 raw px off, and the measure stage then found that hole's
+// two views 0.12 px apart (chi2 56 for 2 dof). A hole seen whole by two or
+// more tiles ties them at its fit's precision.
+//
+// Model. Each view's centre c_i (part frame, through the scene it was fitted
+// on) is mapped back into its tile, q_i = the pixel where that scene shows
+// c_i. q_i is the image of the circle's centre point, which the scene moves
+// only to second order, so the views become one more track of the plane
+// bundle adjustment (pipeline/core/plane_scene.h): one part point P seen at
+// q_i in tile i, with q_i's covariance the fit's (cx, cy) covariance mapped
+// into tile pixels, floored (HoleTieOptions::min_sigma_px). The bore's
+// bottom rim is part of each fit (its parallax is modelled), so a view
+// measures the top rim alone.
+//
+// Double counting. The measure stage then fits the same rims on the final
+// scene and adds the scene's covariance to the views' edge covariance as if
+// independent. For the tie's own hole that is right to first order: with
+// equal view sigmas the views' mean and their difference (what the tie
+// fixes) are uncorrelated.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/plane_scene.h"
+#include "pipeline/measure/hole_views.h"
+
+namespace omm {
+
+struct HoleTieOptions {
+  int min_views = 2;  // tiles that must see a hole whole for it to tie them
+  // Floor of a view's centre sigma (added in quadrature), tile px: the fit's
+  // covariance leaves out its model's misfit (a small hole seen near a
+  // tile's nadir keeps a few thousandths of a px of bias towards it:
+  // circle_measure.h, Limits). On low-texture seed 228's 26 tie views, fitted
+  // on the true scene, the errors were 0.0086 px RMS per axis, rms z 0.74
+  // without the floor and 0.66 with it (hole_ties_sim_test.cc).
+  double min_sigma_px = 0.005;
+  // A BorePrior is pooled from at least this many views that resolve the
+  // wall (the measure stage's rule, hole_views.h).
+  size_t min_bore_prior_views = 3;
+  // After the adjustment, a tie whose views' residuals exceed this quantile
+  // of chi-square (2 per view less 2 dof) is inconsistent (a view misfitted:
+  // a burr, a shadow) and is dropped.
+  double consistency_probability = 0.999;
+  int num_threads = 2;
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+// A hole to tie with: where it is expected on the part and its size.
+struct TieHole {
+  Eigen::Vector2d near_part_mm = Eigen::Vector2d::Zero();
+  double radius_mm = 0.0;  // nominal
+};
+
+struct HoleTie {
+  int hole = 0;                                         // index into the holes given
+  Eigen::Vector2d centre_mm = Eigen::Vector2d::Zero();  // the views' mean: P's initial value
+  std::vector<int> tiles;                               // one per view
+  std::vector<Eigen::Vector2d> q_px;                    // the centre in each view's tile
+  std::vector<Eigen::Matrix2d> covariance_px2;          // of q_px, floored
+};
+
+// Fits every hole in the tiles that see it whole (FitHoleViews; the views
+// that resolve no wall near a nadir again with the pooled BorePrior) and
+// returns those seen by min_views tiles or more as ties. in.mosaic is not
+// used. Pure; throws InputError for invalid options.
+std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<TieHole>& holes,
+                                  const HoleTieOptions& options);
+
+// Appends each tie to `input` as a track (observations weighted by
+// input->observation_sigma_px over their sigma, shaped by their covariance)
+// and its P's initial value to scene->track_xy_mm. Returns the index of the
+// first appended observation.
+int AddHoleTieTracks(const std::vector<HoleTie>& ties, PlaneBundleInput* input, PlaneScene* scene);
+
+// The ties (indices) whose observations, from input index first_observation
+// on (AddHoleTieTracks' order), the adjusted scene's residuals (model minus
+// observed, px) leave inconsistent: sum r' C^-1 r beyond the chi-square
+// quantile of options.consistency_probability for 2 (views - 1) dof.
+std::vector<int> InconsistentHoleTies(const std::vector<HoleTie>& ties, int first_observation,
+                                      const Eigen::Matrix2Xd& residual_px,
+                                      const HoleTieOptions& options);
+
+}  // namespace omm

@@ -1,0 +1,140 @@
+#include "pipeline/measure/hole_views.h"
+
+#include <cmath>
+#include <utility>
+
+#include "pipeline/core/statistics.h"
+#include "pipeline/measure/bore_view.h"
+#include "pipeline/measure/ortho_patch.h"
+
+namespace omm {
+namespace {
+
+// A hole is one tile's picture where the other tiles' blend weights sum to
+// less than this: their ghost bottom rim is under the mosaic's noise.
+constexpr double kMaxOtherTileWeight = 0.01;
+
+// Beyond the rim, a fit reads pixels out to its rim band plus the step
+// profile's half width (circle_measure.h); one more for rounding.
+double FitReachPx(const CircleMeasureOptions& options) {
+  return options.rim_band_px + options.profile_half_width_px + 1.0;
+}
+
+CircleMeasureOptions FitOptions(const HoleViewInputs& in) {
+  CircleMeasureOptions options;
+  options.source_px = in.source_px;
+  return options;
+}
+
+// The hole in tile `tile` alone, looked for within `search_px` of expected_px:
+// a patch reaching that far plus the fit's reach, then the fit with that
+// tile's nadir, shifted back to mosaic px.
+HoleFit FitInTile(const HoleViewInputs& in, int tile, const Eigen::Vector2d& expected_px,
+                  double radius_px, CircleMeasureOptions options, double search_px) {
+  options.search_fraction = 0.0;
+  options.search_margin_px = search_px;
+  const double reach =
+      radius_px * (1.0 + options.max_radius_deviation) + search_px + FitReachPx(options) + 2.0;
+  const Eigen::Vector2i min_px = (expected_px.array() - reach).floor().cast<int>();
+  const int size = static_cast<int>(std::ceil(2.0 * reach)) + 1;
+  const OrthoPatch patch =
+      RenderTilePatch(in.geometry, tile, in.tiles[tile], in.exposure[tile],
+                      OrthoOptions{}.interpolator, min_px, Eigen::Vector2i::Constant(size));
+  const Eigen::Vector2d origin = patch.origin_px.cast<double>();
+  const Eigen::Vector2d nadir_px =
+      in.geometry.grid.MosaicFromPart(TileNadirMm(in.scene, tile)) - origin;
+  HoleFit fit{tile, {}, tile};
+  if (patch.pixels.size() == 0) {
+    fit.circle.error = "not seen by the tile";
+    return fit;
+  }
+  fit.circle = MeasureCircle(patch.pixels, expected_px - origin, radius_px, options, nadir_px,
+                             in.bore_prior);
+  fit.circle.centre_px += origin;
+  fit.circle.coarse_centre_px += origin;
+  return fit;
+}
+
+}  // namespace
+
+// The bore's bottom rim shows scaled about the nadir of the tile the mosaic
+// takes the hole from (bore_view.h); where tiles blend there are two such
+// rims and the kernel fits one free circle.
+HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_mm,
+                        double radius_mm) {
+  const OrthoGrid& grid = in.geometry.grid;
+  HoleFit fit;
+  fit.nadir_tile =
+      RenderingTile(in.lens, in.scene, centre_mm, radius_mm, in.camera.width_px,
+                    in.camera.height_px, OrthoOptions{}.blend_band_px, kMaxOtherTileWeight);
+  std::optional<Eigen::Vector2d> nadir_px;
+  if (fit.nadir_tile) nadir_px = grid.MosaicFromPart(TileNadirMm(in.scene, *fit.nadir_tile));
+  fit.circle = MeasureCircle(*in.mosaic, grid.MosaicFromPart(centre_mm), radius_mm / grid.gsd_mm,
+                             FitOptions(in), nadir_px, in.bore_prior);
+  return fit;
+}
+
+HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
+                       double radius_mm) {
+  HoleViews result;
+  const OrthoGrid& grid = in.geometry.grid;
+  const CircleMeasureOptions options = FitOptions(in);
+  const double radius_px = radius_mm / grid.gsd_mm;
+  const double reach_mm = FitReachPx(options) * grid.gsd_mm;
+  const int width_px = in.camera.width_px, height_px = in.camera.height_px;
+  const double search_px = options.search_fraction * 2.0 * radius_px + options.search_margin_px;
+  const Eigen::Vector2d expected_px = grid.MosaicFromPart(near_part_mm);
+  const std::vector<int> first = TilesSeeingDisc(in.lens, in.scene, near_part_mm,
+                                                 radius_mm + reach_mm, width_px, height_px, 0.0);
+  std::optional<HoleFit> found;
+  if (!first.empty()) {
+    found = FitInTile(in, first[0], expected_px, radius_px, options, search_px);
+    if (!found->circle.ok) found.reset();
+  }
+  if (!found && in.mosaic != nullptr) {
+    result.mosaic_fit = FitHoleInMosaic(in, near_part_mm, radius_mm);
+    if (result.mosaic_fit->circle.ok) found = *result.mosaic_fit;
+  }
+  if (!found) return result;
+  // Centres agree to well within a pixel: a small search about it.
+  const Eigen::Vector2d centre_px = found->circle.centre_px;
+  const double fitted_mm = found->circle.radius_px * grid.gsd_mm;
+  for (const int t : TilesSeeingDisc(in.lens, in.scene, grid.PartFromMosaic(centre_px),
+                                     fitted_mm + reach_mm, width_px, height_px, 0.0)) {
+    ++result.num_seeing;
+    HoleFit fit = found->tile == t
+                      ? std::move(*found)
+                      : FitInTile(in, t, centre_px, radius_px, options, options.search_margin_px);
+    if (fit.circle.ok) result.fits.push_back(std::move(fit));
+  }
+  return result;
+}
+
+BoreEvidence BoreEvidenceOf(const std::vector<HoleFit>& fits) {
+  BoreEvidence evidence;
+  for (const HoleFit& fit : fits) {
+    const CircleMeasurement& circle = fit.circle;
+    if (circle.bottom_rim_scale > 0.0 && !circle.bore_prior_used)
+      evidence.bottom_rim_scales.push_back(circle.bottom_rim_scale);
+    if (circle.wall_contrast > 0.0) evidence.wall_contrasts.push_back(circle.wall_contrast);
+    evidence.unresolved |= fit.nadir_tile.has_value() && !circle.bottom_rim_modelled;
+  }
+  return evidence;
+}
+
+std::optional<BorePrior> PoolBorePrior(const std::vector<BoreEvidence>& holes, size_t min_views) {
+  std::vector<double> scales, walls;
+  bool unresolved = false;
+  for (const BoreEvidence& hole : holes) {
+    scales.insert(scales.end(), hole.bottom_rim_scales.begin(), hole.bottom_rim_scales.end());
+    walls.insert(walls.end(), hole.wall_contrasts.begin(), hole.wall_contrasts.end());
+    unresolved |= hole.unresolved;
+  }
+  if (!unresolved || scales.size() < min_views || walls.size() < min_views) return std::nullopt;
+  const double wall = Median(walls);
+  std::vector<double> deviations;
+  for (const double w : walls) deviations.push_back(std::abs(w - wall));
+  return BorePrior{Median(std::move(scales)), wall, 1.4826 * Median(std::move(deviations))};
+}
+
+}  // namespace omm

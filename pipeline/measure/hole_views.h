@@ -1,0 +1,87 @@
+// A hole fitted in each tile that sees it whole, on the mosaic's grid: the
+// views the measure stage combines (CombineCircleViews) and the mosaic stage
+// ties the tiles with (hole_ties.h).
+//
+// Each view is one tile alone, orthorectified through the scene over a
+// window about the hole (ortho_patch.h), and fitted there (MeasureCircle)
+// with the bore's bottom rim about that tile's nadir (bore_view.h): an
+// independent picture with its own noise. The first fit is in the tile that
+// sees the expected disc best, searched as widely as a feature's near_px
+// asks; its circle then says which tiles see the hole whole, and those are
+// fitted about it. The blended mosaic is fitted only where no tile finds the
+// hole, and only when one is given.
+//
+// Views near a tile's nadir may resolve no bore wall; the other holes' views
+// that do resolve it say what the bore is (BorePrior: one plane, one
+// thickness), and those views are fitted again with it (PoolBorePrior).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/camera.h"
+#include "pipeline/core/image.h"
+#include "pipeline/core/lens_projection.h"
+#include "pipeline/core/plane_scene.h"
+#include "pipeline/measure/circle_measure.h"
+#include "pipeline/mosaic/exposure_compensation.h"
+#include "pipeline/mosaic/orthorectify.h"
+
+namespace omm {
+
+// What the fits read; shared, read only, by concurrent fits.
+struct HoleViewInputs {
+  const PlaneScene& scene;
+  const LensProjection& lens;          // the camera's lens, with scene.intrinsics
+  const OrthoGeometry& geometry;       // the scene's mosaic grid (ComputeOrthoGeometry)
+  const CameraModel& camera;           // the imager's size
+  const std::vector<ImageF>& tiles;    // gray [0, 1], in the scene's tile order
+  std::vector<TileExposure> exposure;  // per tile; identity where not compensated
+  // Raw tile pixels per mosaic pixel (how far the mosaic's edge noise is correlated).
+  double source_px = 1.0;
+  const ImageF* mosaic = nullptr;  // the blended mosaic on geometry's grid, or none
+  std::optional<BorePrior> bore_prior;
+};
+
+// One fit, in the mosaic or in one tile's patch; mosaic px.
+struct HoleFit {
+  std::optional<int> tile;  // none: in the mosaic
+  CircleMeasurement circle;
+  std::optional<int> nadir_tile;  // the tile whose nadir the bottom rim is about
+};
+
+struct HoleViews {
+  std::vector<HoleFit> fits;          // the tiles' fits that succeeded
+  int num_seeing = 0;                 // tiles that see the hole whole
+  std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole (and a mosaic is given)
+};
+
+// The hole of nominal radius radius_mm near the part point near_part_mm,
+// fitted in every tile that sees it whole. Pure.
+HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
+                       double radius_mm);
+
+// The hole in the blended mosaic (in.mosaic, which must be set).
+HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_mm,
+                        double radius_mm);
+
+// What one hole's fits say of the bore: the bottom rim's scale k and the
+// wall's level where a view resolved them, and whether a view near a nadir
+// resolved no wall (such a view is fitted again with a BorePrior).
+struct BoreEvidence {
+  std::vector<double> bottom_rim_scales, wall_contrasts;
+  bool unresolved = false;
+};
+BoreEvidence BoreEvidenceOf(const std::vector<HoleFit>& fits);
+
+// The project's bore from its holes' evidence: the median k and wall level,
+// the level's sigma for one hole the levels' spread (1.4826 MAD, not a
+// standard error: walls differ from hole to hole beyond their noise).
+// nullopt unless at least min_views views resolved each, and some hole left
+// its wall unresolved (nothing would use it).
+std::optional<BorePrior> PoolBorePrior(const std::vector<BoreEvidence>& holes, size_t min_views);
+
+}  // namespace omm
