@@ -361,11 +361,16 @@ TiedAdjustment AdjustWithHoleTies(const Project& project, const std::vector<Imag
     for (const int tile : tie.tiles)
       held.erase(std::remove(held.begin(), held.end(), tile), held.end());
   }
-  result.ties_brief = !failed.empty() ? failed
-                      : ties.empty()
-                          ? std::string("no hole seen whole by two tiles or more")
-                          : fmt::format("{} hole{} seen whole by two tiles or more tie them",
-                                        ties.size(), ties.size() == 1 ? "" : "s");
+  if (!failed.empty()) {
+    result.ties_brief = failed;
+  } else if (holes.empty()) {
+    result.ties_brief = "no feature to tie with";
+  } else if (ties.empty() && dropped.empty()) {
+    result.ties_brief = "no hole seen whole by two tiles or more";
+  } else {
+    result.ties_brief = fmt::format("{} hole{} seen whole by two tiles or more tie them",
+                                    ties.size(), ties.size() == 1 ? "" : "s");
+  }
   if (!dropped.empty()) {
     result.ties_brief +=
         fmt::format("; {} dropped: their views disagree beyond their sigma", dropped.size());
