@@ -140,4 +140,38 @@ std::vector<int> InconsistentHoleTies(const std::vector<HoleTie>& ties, int firs
   return inconsistent;
 }
 
+TiedAdjustment AdjustWithHoleTies(const CameraModel& camera,
+                                  const PlaneBundleInput& registered_input,
+                                  const PlaneScene& registered_scene, const PlateOnPart& plate,
+                                  const IntrinsicsPrior& prior,
+                                  const FinalAdjustmentOptions& options,
+                                  const std::vector<HoleTie>& ties,
+                                  const HoleTieOptions& tie_options) {
+  TiedAdjustment result;
+  std::vector<int> kept(ties.size());
+  for (size_t t = 0; t < ties.size(); ++t) kept[t] = static_cast<int>(t);
+  for (;;) {
+    result.kept.clear();
+    for (const int t : kept) result.kept.push_back(ties[t]);
+    PlaneBundleInput input = registered_input;
+    PlaneScene scene = registered_scene;
+    result.first_tie_observation = AddHoleTieTracks(result.kept, &input, &scene);
+    result.adjusted = AdjustWithPlateAndPrior(camera, input, scene, plate, prior, options);
+    if (kept.empty()) return result;
+    if (!result.adjusted.summary.usable) {
+      result.ties_failed = true;
+      result.failure = result.adjusted.summary.brief;
+      kept.clear();
+      continue;
+    }
+    const std::vector<int> inconsistent = InconsistentHoleTies(
+        result.kept, result.first_tie_observation, result.adjusted.scene.residual_px, tie_options);
+    if (inconsistent.empty()) return result;
+    for (auto it = inconsistent.rbegin(); it != inconsistent.rend(); ++it) {
+      result.dropped.push_back(kept[*it]);
+      kept.erase(kept.begin() + *it);
+    }
+  }
+}
+
 }  // namespace omm

@@ -31,8 +31,10 @@
 
 #include <Eigen/Core>
 
+#include "pipeline/core/camera.h"
 #include "pipeline/core/plane_scene.h"
 #include "pipeline/measure/hole_views.h"
+#include "pipeline/mosaic/plate_on_part.h"
 
 namespace omm {
 
@@ -92,5 +94,25 @@ int AddHoleTieTracks(const std::vector<HoleTie>& ties, PlaneBundleInput* input, 
 std::vector<int> InconsistentHoleTies(const std::vector<HoleTie>& ties, int first_observation,
                                       const Eigen::Matrix2Xd& residual_px,
                                       const HoleTieOptions& options);
+
+// The final adjustment (AdjustWithPlateAndPrior) with the ties as tracks.
+// A tie InconsistentHoleTies flags is dropped and the solve run again, until
+// none is flagged; if the solve with ties is unusable, it is run without
+// them (ties_failed, why in `failure`).
+struct TiedAdjustment {
+  FinalAdjustment adjusted;       // its input: registered_input plus the kept ties' tracks
+  std::vector<HoleTie> kept;      // in the given order
+  std::vector<int> dropped;       // indices into the given ties
+  int first_tie_observation = 0;  // of the kept ties' observations in adjusted.input
+  bool ties_failed = false;
+  std::string failure;
+};
+TiedAdjustment AdjustWithHoleTies(const CameraModel& camera,
+                                  const PlaneBundleInput& registered_input,
+                                  const PlaneScene& registered_scene, const PlateOnPart& plate,
+                                  const IntrinsicsPrior& prior,
+                                  const FinalAdjustmentOptions& options,
+                                  const std::vector<HoleTie>& ties,
+                                  const HoleTieOptions& tie_options);
 
 }  // namespace omm

@@ -272,18 +272,18 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
 // changes of the scene leave as it is. A tie the solve finds inconsistent is
 // dropped and the solve run again; the kept ties' tracks join
 // registration->input.
-struct TiedAdjustment {
+struct FinalOutcome {
   FinalAdjustment adjusted;
   std::string ties_brief;
   ReportValue ties_report;     // report.mosaic's hole_ties
   double fit_seconds = 0.0;    // the ties' hole fits
   double solve_seconds = 0.0;  // the final adjustment's solves
 };
-TiedAdjustment AdjustWithHoleTies(const Project& project, const std::vector<ImageF>& tiles,
-                                  const CameraModel& camera, const PlateOnPart& plate,
-                                  const IntrinsicsPrior& prior,
-                                  const FinalAdjustmentOptions& options,
-                                  TileRegistration* registration) {
+FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<ImageF>& tiles,
+                                      const CameraModel& camera, const PlateOnPart& plate,
+                                      const IntrinsicsPrior& prior,
+                                      const FinalAdjustmentOptions& options,
+                                      TileRegistration* registration) {
   const auto start = std::chrono::steady_clock::now();
   const PlaneScene& registered = registration->scene;
   const MrcalLensProjection lens(camera);
@@ -311,38 +311,18 @@ TiedAdjustment AdjustWithHoleTies(const Project& project, const std::vector<Imag
                           std::vector<TileExposure>(tiles.size()),
                           tile_px_per_mosaic_px > 0.0 ? 1.0 / tile_px_per_mosaic_px : 1.0};
   const HoleTieOptions tie_options;
-  std::vector<HoleTie> ties = FindHoleTies(in, holes, tie_options);
-  TiedAdjustment result;
+  const std::vector<HoleTie> ties = FindHoleTies(in, holes, tie_options);
+  FinalOutcome result;
   result.fit_seconds = SecondsSince(start);
 
-  ReportValue::Array dropped;
-  std::string failed;
-  PlaneBundleInput input;
-  int first_observation = 0;
-  for (;;) {
-    input = registration->input;
-    PlaneScene scene = registered;
-    first_observation = AddHoleTieTracks(ties, &input, &scene);
-    result.adjusted = AdjustWithPlateAndPrior(camera, input, scene, plate, prior, options);
-    if (ties.empty()) break;
-    if (!result.adjusted.summary.usable) {
-      failed = "the adjustment with them failed (" + result.adjusted.summary.brief + "): not used";
-      ties.clear();
-      continue;
-    }
-    const std::vector<int> inconsistent = InconsistentHoleTies(
-        ties, first_observation, result.adjusted.scene.residual_px, tie_options);
-    if (inconsistent.empty()) break;
-    for (auto it = inconsistent.rbegin(); it != inconsistent.rend(); ++it) {
-      dropped.emplace_back(names[ties[*it].hole]);
-      ties.erase(ties.begin() + *it);
-    }
-  }
+  TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
+                                           options, ties, tie_options);
+  result.adjusted = std::move(tied.adjusted);
   result.solve_seconds = SecondsSince(start) - result.fit_seconds;
 
   ReportValue::Array rows;
-  int index = first_observation;
-  for (const HoleTie& tie : ties) {
+  int index = tied.first_tie_observation;
+  for (const HoleTie& tie : tied.kept) {
     ReportValue::Array images;
     double sum_squares = 0.0;
     for (const int tile : tie.tiles) {
@@ -354,22 +334,25 @@ TiedAdjustment AdjustWithHoleTies(const Project& project, const std::vector<Imag
                      {"images", std::move(images)},
                      {"rms_px", std::sqrt(sum_squares / static_cast<double>(tie.tiles.size()))}});
   }
-  registration->input.observations = input.observations;
-  registration->input.num_tracks = input.num_tracks;
+  ReportValue::Array dropped;
+  for (const int t : tied.dropped) dropped.emplace_back(names[ties[t].hole]);
+  // The tracks (the plate's observations stay the final adjustment's).
+  registration->input.observations = result.adjusted.input.observations;
+  registration->input.num_tracks = result.adjusted.input.num_tracks;
   std::vector<int>& held = registration->tiles_held_by_prior;
-  for (const HoleTie& tie : ties) {
+  for (const HoleTie& tie : tied.kept) {
     for (const int tile : tie.tiles)
       held.erase(std::remove(held.begin(), held.end(), tile), held.end());
   }
-  if (!failed.empty()) {
-    result.ties_brief = failed;
+  if (tied.ties_failed) {
+    result.ties_brief = "the adjustment with them failed (" + tied.failure + "): not used";
   } else if (holes.empty()) {
     result.ties_brief = "no feature to tie with";
-  } else if (ties.empty() && dropped.empty()) {
+  } else if (ties.empty()) {
     result.ties_brief = "no hole seen whole by two tiles or more";
   } else {
     result.ties_brief = fmt::format("{} hole{} seen whole by two tiles or more tie them",
-                                    ties.size(), ties.size() == 1 ? "" : "s");
+                                    tied.kept.size(), tied.kept.size() == 1 ? "" : "s");
   }
   if (!dropped.empty()) {
     result.ties_brief +=
@@ -443,10 +426,10 @@ void RunMosaicStage(StageContext& context) {
   final_options.bundle = register_options.bundle;
   if (context.progress)
     context.progress(num_tiles + 1, num_tiles + 4, "tie holes, final adjustment");
-  TiedAdjustment tied =
-      AdjustWithHoleTies(project, tiles, camera, plate, prior, final_options, &registration);
-  FinalAdjustment& adjusted = tied.adjusted;
-  spdlog::info("mosaic: holes: {}", tied.ties_brief);
+  FinalOutcome final_outcome =
+      FinalAdjustmentWithHoles(project, tiles, camera, plate, prior, final_options, &registration);
+  FinalAdjustment& adjusted = final_outcome.adjusted;
+  spdlog::info("mosaic: holes: {}", final_outcome.ties_brief);
   spdlog::info("mosaic: final {}", adjusted.summary.brief);
   if (adjusted.observation_sigma_scale > 1.0) {
     spdlog::info(
@@ -536,7 +519,7 @@ void RunMosaicStage(StageContext& context) {
       {"intrinsics_max_change_sigmas", IntrinsicsChangeSigmas(camera, adjusted, prior)},
       {"scale_sigma_ppm", adjusted.scale_sigma_ppm},
       {"plate_scale_check", PlateReport(project, plate, adjusted)},
-      {"hole_ties", std::move(tied.ties_report)},
+      {"hole_ties", std::move(final_outcome.ties_report)},
       {"pairs", PairsReport(project, registration, pair_scatter)},
       {"tiles", TilesReport(project, registration, ortho.summary)},
       {"tiles_held_by_prior", held},
@@ -566,8 +549,8 @@ void RunMosaicStage(StageContext& context) {
                                  {"adjustment", registration.adjustment_seconds},
                                  {"plate_detection", plate.seconds},
                                  {"intrinsics_prior", prior_seconds},
-                                 {"hole_ties", tied.fit_seconds},
-                                 {"final_adjustment", tied.solve_seconds},
+                                 {"hole_ties", final_outcome.fit_seconds},
+                                 {"final_adjustment", final_outcome.solve_seconds},
                                  {"ortho_geometry", ortho.summary.geometry_seconds},
                                  {"ortho_exposure", ortho.summary.exposure_seconds},
                                  {"ortho_resample", ortho.summary.resample_seconds},
