@@ -5,9 +5,10 @@
 // template match on weak texture scatters by 0.1-0.5 px. On low-texture
 // parts the holes are most of what the tiles share: on low-texture seed 228
 // a tile that only a hole's rim and smooth shading tied to its neighbours
-// was placed 0.13 raw px off, and the measure stage then found that hole's
-// two views 0.12 px apart (chi2 56 for 2 dof). A hole seen whole by two or
-// more tiles ties them at its fit's precision.
+// was placed 0.13 raw px off, and the measure stage then found the two views
+// of a small hole it shares with a neighbour 0.12 px apart (chi2 56 for 2
+// dof). A hole seen whole by two or more tiles ties them at its fit's
+// precision.
 //
 // Model. Each view's centre c_i (part frame, through the scene it was fitted
 // on) is mapped back into its tile, q_i = the pixel where that scene shows
