@@ -130,9 +130,8 @@ TEST_F(RunProjectTest, BackgroundWritesAreCommittedOrFailTheRun) {
   options.runner = [](Stage stage, StageContext& context) {
     FakeStage(stage, context, "v2");
     if (stage != Stage::kMosaic) return;
-    context.pending_writes.push_back(std::async(std::launch::async, [] {
-      throw InputError("out/mosaic.png", "cannot write image");
-    }));
+    context.pending_writes.push_back(std::async(
+        std::launch::async, [] { throw InputError("out/mosaic.png", "cannot write image"); }));
   };
   EXPECT_THROW(RunProject(project_, options), InputError);
   EXPECT_EQ(testing::ReadTextFile(Out("report.json")), report_before);
@@ -173,6 +172,19 @@ TEST_F(RunProjectTest, ReportIsNotCurrentAfterAnInputChanges) {
   RunProject(project_, options);
   ASSERT_TRUE(ReportIsCurrent(project_));
   testing::ReplaceInFile(project_.dir / "table.csv", "108.6", "108.7");
+  EXPECT_FALSE(ReportIsCurrent(project_));
+}
+
+// An archive processed by another build (another source revision) is rerun
+// by `omm batch`: its report is not current.
+TEST_F(RunProjectTest, ReportOfAnotherOmmRevisionIsNotCurrent) {
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
+  RunProject(project_, options);
+  ASSERT_TRUE(ReportIsCurrent(project_));
+  const std::string version = SoftwareVersion();
+  ASSERT_NE(version.find('+'), std::string::npos) << version;  // the revision is in it
+  testing::ReplaceInFile(Out("report.json"), "\"" + version + "\"", "\"0.1.0+0123456789ab\"");
   EXPECT_FALSE(ReportIsCurrent(project_));
 }
 
