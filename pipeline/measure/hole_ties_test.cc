@@ -135,6 +135,9 @@ TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
   ASSERT_EQ(tied.kept.size(), 3u);
   EXPECT_EQ(tied.adjusted.input.num_tracks, s.input.num_tracks + 3);
   EXPECT_EQ(tied.first_tie_observation, static_cast<int>(s.input.observations.size()));
+  // Held by its prior before, observed (through the ties) now.
+  EXPECT_EQ(registered.summary.tiles_without_observations, std::vector<int>{options.empty_tile});
+  EXPECT_TRUE(tied.adjusted.summary.tiles_without_observations.empty());
 
   // The empty tile against its neighbours' mean (the gauge and the table's
   // scale, shared by all tiles, cancel to first order), mm.

@@ -408,7 +408,7 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   if (result.intrinsics_refined) {
     result.input.intrinsics_information = prior.information;
     result.input.intrinsics_held = prior.held;
-    result.input.intrinsics_prior_mean = camera.intrinsics;
+    result.input.intrinsics_prior_mean = registered_scene.intrinsics;
   }
   PlaneBundleConfig config;
   config.refine_intrinsics = result.intrinsics_refined;

@@ -199,9 +199,8 @@ struct FinalAdjustment {
 };
 
 // Adjusts the registered scene once more with the plate (if plate.found) and
-// the intrinsics prior (if prior.information is set: its mean is camera's
-// intrinsics, the calibration's), warm-started from `registered_scene` (its
-// intrinsics may be refined ones, e.g. an earlier final adjustment's). Data
+// the intrinsics prior (if prior.information is set), warm-started from
+// `registered_scene`, whose intrinsics must be the calibration's. Data
 // failures come back in summary (usable, brief); throws InputError for
 // invalid options or sizes.
 FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,

@@ -271,7 +271,8 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
 // view's centre is an image position, which the final adjustment's small
 // changes of the scene leave as it is. A tie the solve finds inconsistent is
 // dropped and the solve run again; the kept ties' tracks join
-// registration->input.
+// registration->input, and its tiles held by the prior are the final
+// solve's.
 struct FinalOutcome {
   FinalAdjustment adjusted;
   std::string ties_brief;
@@ -303,11 +304,9 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
     names.push_back(feature.name);
   }
   const double tile_px_per_mosaic_px = TilePxPerMosaicPx(geometry);
-  const HoleViewInputs in{registered,
-                          lens,
-                          geometry,
-                          camera,
-                          tiles,
+  const HoleViewInputs in{registered, lens, geometry, camera, tiles,
+                          // Not compensated yet (Orthorectify estimates it): each
+                          // rim's step fit takes its own levels and ramp.
                           std::vector<TileExposure>(tiles.size()),
                           tile_px_per_mosaic_px > 0.0 ? 1.0 / tile_px_per_mosaic_px : 1.0};
   const HoleTieOptions tie_options;
@@ -339,11 +338,9 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   // The tracks (the plate's observations stay the final adjustment's).
   registration->input.observations = result.adjusted.input.observations;
   registration->input.num_tracks = result.adjusted.input.num_tracks;
-  std::vector<int>& held = registration->tiles_held_by_prior;
-  for (const HoleTie& tie : tied.kept) {
-    for (const int tile : tie.tiles)
-      held.erase(std::remove(held.begin(), held.end(), tile), held.end());
-  }
+  // Held by the table prior alone: what the final solve saw no observation
+  // of (no match, tie or plate mark).
+  registration->tiles_held_by_prior = result.adjusted.summary.tiles_without_observations;
   if (tied.ties_failed) {
     result.ties_brief = "the adjustment with them failed (" + tied.failure + "): not used";
   } else if (holes.empty()) {
