@@ -1,5 +1,6 @@
 #include "adapters/mrcal/lens.h"
 
+#include <cmath>
 #include <vector>
 
 #include "adapters/mrcal/mrcal_c.h"
@@ -79,6 +80,26 @@ bool UnprojectPixels(const CameraModel& camera, const Eigen::Matrix2Xd& q_px,
   }
   for (int i = 0; i < n; ++i) v_cam->col(i) /= (*v_cam)(2, i);
   return true;
+}
+
+std::optional<Eigen::Vector2d> FirstUnmappedPixel(const CameraModel& camera,
+                                                  const Eigen::Matrix2Xd& q_px,
+                                                  double tolerance_px) {
+  Eigen::Matrix3Xd v;
+  Eigen::Matrix2Xd q_back;
+  if (q_px.cols() == 0) return std::nullopt;
+  if (!UnprojectPixels(camera, q_px, &v)) return q_px.col(0);
+  // Rays with z = 1 (UnprojectPixels): a failed one is NaN, or points behind.
+  Eigen::Matrix3Xd p = v;
+  for (Eigen::Index i = 0; i < p.cols(); ++i) {
+    if (!p.col(i).allFinite()) p.col(i) = Eigen::Vector3d::UnitZ();  // projected, then refused below
+  }
+  if (!ProjectPoints(camera, p, &q_back)) return q_px.col(0);
+  for (Eigen::Index i = 0; i < q_px.cols(); ++i) {
+    if (!v.col(i).allFinite() || !((q_back.col(i) - q_px.col(i)).norm() <= tolerance_px))
+      return q_px.col(i);
+  }
+  return std::nullopt;
 }
 
 }  // namespace omm

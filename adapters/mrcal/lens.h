@@ -6,6 +6,7 @@
 // adapter.
 #pragma once
 
+#include <optional>
 #include <string>
 
 #include <Eigen/Core>
@@ -32,5 +33,14 @@ bool ProjectPoints(const CameraModel& camera, const Eigen::Matrix3Xd& p_cam,
 // (observation rays). Iterative inside mrcal: far slower than ProjectPoints.
 bool UnprojectPixels(const CameraModel& camera, const Eigen::Matrix2Xd& q_px,
                      Eigen::Matrix3Xd* v_cam);
+
+// The first of the pixels (2 x N) that the lens maps to no ray in front of
+// the camera projecting back within tolerance_px; nullopt if every one does.
+// mrcal's unprojection leaves NaN where it finds no ray: beyond the fold of a
+// strong radial polynomial, or where a splined model extrapolates past the
+// knots that marks constrained.
+std::optional<Eigen::Vector2d> FirstUnmappedPixel(const CameraModel& camera,
+                                                  const Eigen::Matrix2Xd& q_px,
+                                                  double tolerance_px);
 
 }  // namespace omm

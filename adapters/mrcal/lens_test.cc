@@ -40,6 +40,29 @@ TEST(Lens, ProjectUnprojectRoundTrip) {
   EXPECT_LT((q_back - q).cwiseAbs().maxCoeff(), 1e-6);
 }
 
+// r_d = r (1 + k1 r^2) with k1 = -2 reaches at most 0.27 (at r = 1 /
+// sqrt 6): 272 px from the centre at f = 1000 px. No ray reaches a pixel
+// farther out.
+TEST(Lens, PixelsBeyondTheFoldOfARadialPolynomialAreUnmapped) {
+  CameraModel camera;
+  camera.lens_model = "LENSMODEL_OPENCV4";
+  camera.intrinsics.resize(8);
+  camera.intrinsics << 1000.0, 1000.0, 800.0, 600.0, -2.0, 0.0, 0.0, 0.0;
+  camera.width_px = 1600;
+  camera.height_px = 1200;
+  Eigen::Matrix2Xd inside(2, 3);
+  inside << 800.0, 1000.0, 650.0, 600.0, 700.0, 450.0;  // 0, 224 and 212 px from the centre
+  EXPECT_FALSE(FirstUnmappedPixel(camera, inside, 1e-3).has_value());
+  Eigen::Matrix2Xd border = inside;
+  border.conservativeResize(2, 5);
+  border.col(3) << 1599.0, 1199.0;
+  border.col(4) << 0.0, 0.0;
+  const std::optional<Eigen::Vector2d> unmapped = FirstUnmappedPixel(camera, border, 1e-3);
+  ASSERT_TRUE(unmapped.has_value());
+  EXPECT_EQ(*unmapped, Eigen::Vector2d(1599.0, 1199.0));
+  EXPECT_FALSE(FirstUnmappedPixel(TwelveMillimetreCamera(), border, 1e-3).has_value());
+}
+
 TEST(Lens, AnalyticGradientsMatchFiniteDifferences) {
   const CameraModel camera = TwelveMillimetreCamera();
   Eigen::Matrix3Xd p(3, 2);

@@ -6,7 +6,9 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <sstream>
+#include <string>
 
 #include <fmt/format.h>
 
@@ -169,6 +171,49 @@ bool ResidualsDropSignificantly(const LensCandidate& a, const LensCandidate& b, 
   const double h = 2.0 / (9.0 * extra);
   const double critical = std::pow(1.0 - h + z * std::sqrt(h), 3);
   return f > critical;
+}
+
+// The image's outermost pixel centres, about every step_px along each side.
+Eigen::Matrix2Xd ImageBorderPx(int width_px, int height_px, double step_px) {
+  const double w = width_px - 1.0, h = height_px - 1.0;
+  const int nx = std::max(1, static_cast<int>(std::ceil(w / step_px)));
+  const int ny = std::max(1, static_cast<int>(std::ceil(h / step_px)));
+  Eigen::Matrix2Xd border(2, 2 * (nx + ny));
+  int k = 0;
+  for (int i = 0; i < nx; ++i) {  // top left to right, bottom right to left
+    border.col(k++) << w * i / nx, 0.0;
+    border.col(k++) << w * (nx - i) / nx, h;
+  }
+  for (int i = 0; i < ny; ++i) {  // right top to bottom, left bottom to top
+    border.col(k++) << w, h * i / ny;
+    border.col(k++) << 0.0, h * (ny - i) / ny;
+  }
+  return border;
+}
+
+// Why `camera` cannot serve the tiles, which use the whole image: a border
+// pixel the lens maps to no ray (a splined model past the knots the marks
+// constrained, found only in the mosaic stage otherwise, with no hint of the
+// cause); empty if every border pixel maps.
+std::string UnmappedImageBorder(const CameraModel& camera,
+                                const std::vector<PlateObservation>& observations) {
+  constexpr double kStepPx = 8.0, kTolerancePx = 0.01;
+  const std::optional<Eigen::Vector2d> unmapped = FirstUnmappedPixel(
+      camera, ImageBorderPx(camera.width_px, camera.height_px, kStepPx), kTolerancePx);
+  if (!unmapped) return "";
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(INFINITY), hi = -lo;
+  for (const PlateObservation& o : observations) {
+    if (!o.usable || o.q_px.cols() == 0) continue;
+    lo = lo.cwiseMin(o.q_px.rowwise().minCoeff());
+    hi = hi.cwiseMax(o.q_px.rowwise().maxCoeff());
+  }
+  return fmt::format(
+      "{} does not map the whole image: no ray reaches pixel ({:.0f}, {:.0f}). The plate's marks "
+      "reached x {:.0f}..{:.0f} and y {:.0f}..{:.0f} px of the {} x {} px image, and the lens is "
+      "known only near them; the tiles use the whole image. Add calibration images that put the "
+      "plate near the image's corners and edges",
+      camera.lens_model, unmapped->x(), unmapped->y(), lo.x(), hi.x(), lo.y(), hi.y(),
+      camera.width_px, camera.height_px);
 }
 
 }  // namespace
@@ -399,6 +444,12 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     }
   }
 
+  if (const std::string why = UnmappedImageBorder(result.camera, corrected); !why.empty()) {
+    summary.brief = "calibration unusable: " + why;
+    summary.result = std::move(result);
+    summary.total_seconds = SecondsSince(start);
+    return summary;
+  }
   summary.observations = std::move(corrected);
   summary.uncertainty =
       SummarizeUncertainty(result.record, WorkingDistanceMm(result), options.uncertainty_grid_nx,

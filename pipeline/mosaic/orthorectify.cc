@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <numeric>
+#include <optional>
 
 #include <Eigen/Geometry>
 
@@ -150,6 +151,15 @@ OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& 
   // The border of the sampled region [1, W - 2] x [1, H - 2], as rays.
   const Eigen::Matrix2Xd border =
       RectangleBorderPx({1.0, 1.0}, {camera.width_px - 2.0, camera.height_px - 2.0}, 32);
+  if (const std::optional<Eigen::Vector2d> unmapped = FirstUnmappedPixel(camera, border, 0.01)) {
+    char text[256];
+    std::snprintf(text, sizeof(text),
+                  "the lens model maps no ray to pixel (%.0f, %.0f) of the image border: it does "
+                  "not cover the whole image, which the tiles use (calibrate with the plate near "
+                  "the image's corners and edges)",
+                  unmapped->x(), unmapped->y());
+    throw InputError("camera", text);
+  }
   Eigen::Matrix3Xd rays;
   if (!UnprojectPixels(camera, border, &rays))
     throw InputError("camera", "cannot unproject the image border");

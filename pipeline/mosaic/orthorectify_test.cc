@@ -16,6 +16,7 @@
 #include "adapters/mrcal/lens.h"
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/board.h"
+#include "pipeline/core/error.h"
 #include "pipeline/core/subpixel_edges.h"
 #include "pipeline/mosaic/ortho_file.h"
 #include "pipeline/simulate/simulation.h"
@@ -159,6 +160,30 @@ TEST(OrthoGeometry, GridCoversTheFootprints) {
       EXPECT_LE(m.x(), grid.size_px.x() - 0.5);
       EXPECT_LE(m.y(), grid.size_px.y() - 0.5);
     }
+  }
+}
+
+// A lens model that maps no ray to the image's corners (here a radial
+// polynomial folding 272 px from the centre; in practice a splined model
+// calibrated from marks that never neared them) is refused with the pixel
+// and the cure, not left to fail as a footprint that misses the plane.
+TEST(OrthoGeometry, LensThatDoesNotCoverTheImageIsRefused) {
+  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  CameraModel folding;
+  folding.lens_model = "LENSMODEL_OPENCV4";
+  folding.intrinsics.resize(8);
+  folding.intrinsics << 1000.0, 1000.0, 800.0, 600.0, -2.0, 0.0, 0.0, 0.0;
+  folding.width_px = 1600;
+  folding.height_px = 1200;
+  OrthoOptions options;
+  options.gsd_mm = 0.15;
+  try {
+    ComputeOrthoGeometry(folding, TruthPlaneScene(plan.truth), options);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.where(), "camera");
+    EXPECT_NE(std::string(e.what()).find("maps no ray to pixel (1, 1)"), std::string::npos)
+        << e.what();
   }
 }
 
