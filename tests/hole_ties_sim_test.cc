@@ -41,11 +41,6 @@ constexpr const char* kPreset = "low-texture";
 constexpr std::uint64_t kSeed = 228;
 constexpr int kCalibImages = 14;
 
-// A raw pixel's size on the part: distance / fx, mm.
-double RawPxMm(const SimulationTruth& truth) {
-  return std::abs(truth.cam_from_part.translation().z()) / truth.camera.model.intrinsics(0);
-}
-
 TEST(HoleTiesSim, ViewsAreTheTrueCentresInTheirTiles) {
   const testing::CachedProject sim = testing::SimulatedProject(kPreset, kSeed, kCalibImages);
   const SimulationTruth& truth = sim.truth;
@@ -144,7 +139,7 @@ TEST(HoleTiesSim, RunPlacesTheWeaklyMatchedTileByItsHole) {
   const auto errors = testing::HoleCentreErrorsAfterSimilarity(report, truth);
   ASSERT_EQ(errors.size(), truth.holes.size());
   for (const auto& [name, error_mm] : errors) {
-    const double error_px = error_mm / RawPxMm(truth);
+    const double error_px = error_mm / testing::RawPxMm(truth);
     std::printf("%s: %.4f raw px from the truth\n", name.c_str(), error_px);
     // The 0.05 raw px (its bound on the mosaic's holes, #4).
     EXPECT_LT(error_px, 0.05) << name;

@@ -61,13 +61,6 @@ struct Outcome {
 // lower rendering cost than the default 20.
 constexpr int kCalibImages = 14;
 
-// A raw pixel's size on the part: pitch * distance / focal length, mm.
-double RawPxMm(const SimulationTruth& truth) {
-  const Eigen::Isometry3d part_from_cam = truth.cam_from_part.inverse();
-  const double distance_mm = part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();
-  return truth.camera.pixel_pitch_um * 1e-3 * distance_mm / truth.camera.focal_length_mm;
-}
-
 // Every check in one test: ctest runs each test in its own process, and the
 // 35 renders and runs are shared by all of them.
 #ifdef OMM_ACCURACY_BOUNDS
@@ -103,7 +96,7 @@ TEST(MeasureRun, ThirtyFiveProjectsAgainstTheirTruth) {
         ADD_FAILURE() << name << ": " << m.name << ": " << m.error;
         continue;
       }
-      outcomes.push_back({name, spec.preset, m, truth->value_mm, RawPxMm(sim.truth)});
+      outcomes.push_back({name, spec.preset, m, truth->value_mm, testing::RawPxMm(sim.truth)});
     }
   }
   ASSERT_GE(reports.size(), 35u);

@@ -116,6 +116,12 @@ fs::path SharedDataDir() {
   return fs::path(source ? source : ".") / ".." / "shared" / "data";
 }
 
+double RawPxMm(const SimulationTruth& truth) {
+  const Eigen::Isometry3d part_from_cam = truth.cam_from_part.inverse();
+  const double distance_mm = part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();
+  return truth.camera.pixel_pitch_um * 1e-3 * distance_mm / truth.camera.focal_length_mm;
+}
+
 std::vector<std::pair<std::string, double>> HoleCentreErrorsAfterSimilarity(
     const Report& report, const SimulationTruth& truth) {
   std::vector<std::pair<std::string, double>> errors;

@@ -73,4 +73,7 @@ std::filesystem::path SharedDataDir();
 std::vector<std::pair<std::string, double>> HoleCentreErrorsAfterSimilarity(
     const Report& report, const SimulationTruth& truth);
 
+// A raw pixel's size on the part: pitch * distance / focal length, mm.
+double RawPxMm(const SimulationTruth& truth);
+
 }  // namespace omm::testing

@@ -62,15 +62,30 @@ HoleFit FitInTile(const HoleViewInputs& in, int tile, const Eigen::Vector2d& exp
 // rims and the kernel fits one free circle.
 HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_mm,
                         double radius_mm) {
-  const OrthoGrid& grid = in.geometry.grid;
+  const OrthoGrid& grid = in.mosaic_grid ? *in.mosaic_grid : in.geometry.grid;
   HoleFit fit;
   fit.nadir_tile =
       RenderingTile(in.lens, in.scene, centre_mm, radius_mm, in.camera.width_px,
                     in.camera.height_px, OrthoOptions{}.blend_band_px, kMaxOtherTileWeight);
   std::optional<Eigen::Vector2d> nadir_px;
   if (fit.nadir_tile) nadir_px = grid.MosaicFromPart(TileNadirMm(in.scene, *fit.nadir_tile));
+  CircleMeasureOptions options = FitOptions(in);
+  if (in.mosaic_grid) options.source_px = in.mosaic_source_px;
   fit.circle = MeasureCircle(*in.mosaic, grid.MosaicFromPart(centre_mm), radius_mm / grid.gsd_mm,
-                             FitOptions(in), nadir_px, in.bore_prior);
+                             options, nadir_px, in.bore_prior);
+  if (in.mosaic_grid) {
+    // To the views' grid: both grids run x along columns and y against rows.
+    const OrthoGrid& to = in.geometry.grid;
+    const double s = grid.gsd_mm / to.gsd_mm;
+    CircleMeasurement& c = fit.circle;
+    c.centre_px = to.MosaicFromPart(grid.PartFromMosaic(c.centre_px));
+    c.coarse_centre_px = to.MosaicFromPart(grid.PartFromMosaic(c.coarse_centre_px));
+    c.radius_px *= s;
+    c.covariance_px2 *= s * s;
+    c.rms_px *= s;
+    c.edge_sigma_px *= s;
+    c.correlation_px *= s;
+  }
   return fit;
 }
 
@@ -108,6 +123,19 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
     if (fit.circle.ok) result.fits.push_back(std::move(fit));
   }
   return result;
+}
+
+std::optional<OrthoGeometry> MeasurementGeometry(const CameraModel& camera,
+                                                 const PlaneScene& scene,
+                                                 const OrthoGeometry& mosaic,
+                                                 double max_ratio) {
+  const double tile_px_per_px = TilePxPerMosaicPx(mosaic);
+  if (!(tile_px_per_px > 0.0) ||
+      (tile_px_per_px <= max_ratio && tile_px_per_px * max_ratio >= 1.0))
+    return std::nullopt;
+  OrthoOptions options;
+  options.gsd_mm = mosaic.grid.gsd_mm / tile_px_per_px;
+  return ComputeOrthoGeometry(camera, scene, options);
 }
 
 BoreEvidence BoreEvidenceOf(const std::vector<HoleFit>& fits) {

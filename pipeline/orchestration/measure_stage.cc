@@ -7,8 +7,10 @@
 // Each feature is looked for where its tile and near_px put it: the pixel is
 // mapped onto the part through the adjusted scene, and that part point into
 // the mosaic's grid. A hole is measured in every tile that sees it whole,
-// each tile alone on the mosaic's grid (LocateFeature), and in the blended
-// mosaic only where no tile does. A feature that is not found, cut by the
+// each tile alone on the mosaic's grid (LocateFeature; on a finer one at
+// the tiles' resolution if the mosaic's is coarser: MeasurementGeometry, whose
+// pixels the fits' notes then give), and in the blended mosaic only where no
+// tile does. A feature that is not found, cut by the
 // mosaic's border or poorly fitted gets an error; the measurements that
 // need it get an error naming it, the others are still made.
 #include <algorithm>
@@ -182,7 +184,8 @@ void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& co
 // where no tile sees the hole whole.
 LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
                              const SavedScene& saved) {
-  const OrthoGrid& grid = in.geometry.grid;
+  const OrthoGrid& grid = in.geometry.grid;  // the views' px
+  const OrthoGrid& mosaic_grid = in.mosaic_grid ? *in.mosaic_grid : grid;
   LocatedFeature located;
   FeatureReport& report = located.report;
   report.name = spec.name;
@@ -199,7 +202,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
                                spec.near_px.x(), spec.near_px.y(), spec.image);
     return located;
   }
-  const Eigen::Vector2d expected_px = grid.MosaicFromPart(*near_part);
+  const Eigen::Vector2d expected_px = mosaic_grid.MosaicFromPart(*near_part);
   report.extra = {{"expected_mosaic_px", Pair(expected_px)}};
   const double radius_mm = 0.5 * spec.diameter_mm;
 
@@ -251,8 +254,8 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
   const CombinedCircle combined = CombineCircleViews(views, saved.scene.covariance,
                                                      kSharedEdgeFraction, kConsistencyProbability);
   CircleFeatureValue value = combined.value;
-  const Eigen::Vector2d centre_px = grid.MosaicFromPart(value.centre_mm);
-  const double combined_radius_px = 0.5 * value.diameter_mm / grid.gsd_mm;
+  const Eigen::Vector2d centre_px = mosaic_grid.MosaicFromPart(value.centre_mm);
+  const double combined_radius_px = 0.5 * value.diameter_mm / mosaic_grid.gsd_mm;
 
   int num_edge_points = 0, num_inliers = 0;
   double sum_squares = 0.0;
@@ -344,9 +347,19 @@ void RunMeasureStage(StageContext& context) {
   const std::shared_ptr<const std::vector<ImageF>> tiles =
       context.tiles ? context.tiles
                     : std::make_shared<const std::vector<ImageF>>(TileImages(project, camera));
-  HoleViewInputs inputs{saved.scene, lens,          geometry,
-                        camera,      *tiles,        TileExposures(mosaic_report, saved.tile_images),
-                        source_px,   &mosaic.pixels};
+  const std::optional<OrthoGeometry> fine = MeasurementGeometry(camera, saved.scene, geometry);
+  HoleViewInputs inputs{saved.scene,
+                        lens,
+                        fine ? *fine : geometry,
+                        camera,
+                        *tiles,
+                        TileExposures(mosaic_report, saved.tile_images),
+                        fine ? 1.0 / TilePxPerMosaicPx(*fine) : source_px,
+                        &mosaic.pixels};
+  if (fine) {
+    inputs.mosaic_grid = &geometry.grid;
+    inputs.mosaic_source_px = source_px;
+  }
 
   const int num_features = static_cast<int>(project.features.size());
   std::vector<LocatedFeature> located(num_features);
@@ -487,6 +500,8 @@ void RunMeasureStage(StageContext& context) {
                                     ReportObject{{"brief", brief},
                                                  {"intrinsics_refined", saved.intrinsics_refined},
                                                  {"bore_prior", std::move(bore_prior_report)},
+                                                 // The grid the views' fits (and their notes' px) are on.
+                                                 {"views_gsd_mm", inputs.geometry.grid.gsd_mm},
                                                  {"seconds", SecondsSince(stage_start)}});
   if (context.progress) context.progress(num_features + 1, num_features + 1, "measure done");
 }

@@ -303,8 +303,10 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
     holes.push_back({*near_mm, 0.5 * feature.diameter_mm});
     names.push_back(feature.name);
   }
-  const double tile_px_per_mosaic_px = TilePxPerMosaicPx(geometry);
-  const HoleViewInputs in{registered, lens, geometry, camera, tiles,
+  const std::optional<OrthoGeometry> fine = MeasurementGeometry(camera, registered, geometry);
+  const OrthoGeometry& views_geometry = fine ? *fine : geometry;
+  const double tile_px_per_mosaic_px = TilePxPerMosaicPx(views_geometry);
+  const HoleViewInputs in{registered, lens, views_geometry, camera, tiles,
                           // Not compensated yet (Orthorectify estimates it): each
                           // rim's step fit takes its own levels and ramp.
                           std::vector<TileExposure>(tiles.size()),
