@@ -1,0 +1,84 @@
+#include "pipeline/measure/hole_views.h"
+
+#include <cmath>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "adapters/mrcal/mrcal_lens_projection.h"
+#include "pipeline/measure/synthetic_hole.h"
+#include "pipeline/mosaic/orthorectify.h"
+#include "pipeline/simulate/simulation.h"
+
+namespace omm {
+namespace {
+
+// A hole found only in the blended mosaic, when the views are on a finer
+// grid than the mosaic's (MeasurementGeometry): the fit is made on the
+// mosaic's pixels and handed back in the views' px, where the truth is.
+TEST(HoleViews, AFitInACoarserMosaicComesBackOnTheViewsGrid) {
+  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  const PlaneScene scene = TruthPlaneScene(plan.truth);
+  const CameraModel& camera = plan.truth.camera.model;
+  const MrcalLensProjection lens(camera);
+  OrthoOptions coarse, fine;
+  coarse.gsd_mm = 0.3;
+  fine.gsd_mm = 0.15;
+  const OrthoGeometry mosaic = ComputeOrthoGeometry(camera, scene, coarse);
+  const OrthoGeometry views = ComputeOrthoGeometry(camera, scene, fine);
+
+  // A 20 mm hole (flat surface, no wall) in tile 4, 47 mm from its centre.
+  const Eigen::Vector2d centre_mm =
+      mosaic.tiles[4].footprint_mm.rowwise().mean() + Eigen::Vector2d(40.0, 25.0);
+  const double radius_mm = 10.0;
+  testing::SyntheticHole hole;
+  hole.width_px = mosaic.grid.size_px.x();
+  hole.height_px = mosaic.grid.size_px.y();
+  hole.centre_px = mosaic.grid.MosaicFromPart(centre_mm);
+  hole.radius_px = hole.bottom_radius_px = radius_mm / coarse.gsd_mm;
+  hole.noise_sigma = 0.01;
+  const ImageF image = testing::RenderSyntheticHole(hole);
+
+  const std::vector<ImageF> no_tiles;
+  const double source_px = 1.0 / TilePxPerMosaicPx(mosaic);
+  const HoleViewInputs on_mosaic{scene, lens, mosaic, camera, no_tiles, {}, source_px, &image};
+  HoleViewInputs on_views{scene, lens, views, camera, no_tiles, {}, 1.0, &image};
+  on_views.mosaic_grid = &mosaic.grid;
+  on_views.mosaic_source_px = source_px;
+  const HoleFit direct = FitHoleInMosaic(on_mosaic, centre_mm, radius_mm);
+  const HoleFit handed = FitHoleInMosaic(on_views, centre_mm, radius_mm);
+  ASSERT_TRUE(direct.circle.ok) << direct.circle.error;
+  ASSERT_TRUE(handed.circle.ok) << handed.circle.error;
+
+  // The same fit, in the views' px (half the mosaic's).
+  const Eigen::Vector2d direct_mm = mosaic.grid.PartFromMosaic(direct.circle.centre_px);
+  EXPECT_LT((views.grid.PartFromMosaic(handed.circle.centre_px) - direct_mm).norm(), 1e-9);
+  EXPECT_NEAR(handed.circle.radius_px, 2.0 * direct.circle.radius_px, 1e-9);
+  EXPECT_LT((handed.circle.covariance_px2 - 4.0 * direct.circle.covariance_px2).norm(),
+            1e-12 + 1e-9 * direct.circle.covariance_px2.norm());
+  // ... near the truth there (the fit's own accuracy is circle_measure_test's:
+  // here 0.009 mosaic px off centre, 0.001 in radius).
+  EXPECT_LT((handed.circle.centre_px - views.grid.MosaicFromPart(centre_mm)).norm(), 0.05);
+  EXPECT_NEAR(handed.circle.radius_px, radius_mm / fine.gsd_mm, 0.05);
+}
+
+// The views' own grid only when the mosaic's pixel is far from the tiles'.
+TEST(HoleViews, MeasurementGeometryOnlyForAMosaicFarFromTheTilesPixel) {
+  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  const PlaneScene scene = TruthPlaneScene(plan.truth);
+  const CameraModel& camera = plan.truth.camera.model;
+  for (const double gsd_mm : {0.1, 0.15, 0.3}) {
+    OrthoOptions options;
+    options.gsd_mm = gsd_mm;
+    const OrthoGeometry mosaic = ComputeOrthoGeometry(camera, scene, options);
+    const double ratio = TilePxPerMosaicPx(mosaic);
+    const std::optional<OrthoGeometry> views = MeasurementGeometry(camera, scene, mosaic);
+    EXPECT_EQ(views.has_value(), ratio > 1.25 || ratio < 0.8) << gsd_mm << " mm: " << ratio;
+    if (views) {
+      EXPECT_NEAR(TilePxPerMosaicPx(*views), 1.0, 0.01) << gsd_mm;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace omm
