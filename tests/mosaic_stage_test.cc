@@ -23,6 +23,7 @@
 #include "adapters/project_io/report_json.h"
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/board.h"
+#include "pipeline/core/error.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/orchestration/run_project.h"
 #include "pipeline/simulate/simulation.h"
@@ -294,6 +295,25 @@ TEST_F(MosaicStageTest, CameraFromACameraModelFile) {
   EXPECT_TRUE(fs::exists(dir / "out" / "mosaic" / "scene.json"));
 }
 
+// Runs the mosaic stage of the project in `dir`, which must fail on the
+// data and leave out/ without a mosaic or report; returns why it failed.
+std::string MosaicStageFailure(const fs::path& dir) {
+  RunOptions options;
+  options.stages = {Stage::kMosaic};
+  std::string why;
+  try {
+    RunProject(LoadProject(dir), options);
+    ADD_FAILURE() << "the stage did not fail";
+  } catch (const StageFailedError& e) {
+    std::printf("%s\n", e.what());
+    EXPECT_EQ(e.stage(), Stage::kMosaic);
+    why = e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "out" / "mosaic.png"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
+  return why;
+}
+
 // Two tiles that do not overlap (opposite corners of the 3 x 3 grid): the
 // stage fails on the data, says why, and out/ gets nothing.
 TEST_F(MosaicStageTest, TilesThatDoNotOverlapFailTheStage) {
@@ -317,17 +337,43 @@ TEST_F(MosaicStageTest, TilesThatDoNotOverlapFailTheStage) {
   const std::string yaml = testing::ReadTextFile(dir / "project.yaml");
   testing::WriteTextFile(dir / "project.yaml", yaml.substr(0, yaml.find("\nfeatures:") + 1));
   fs::remove(dir / "cmm.csv");
-  RunOptions options;
-  options.stages = {Stage::kMosaic};
+  EXPECT_FALSE(MosaicStageFailure(dir).empty());
+}
+
+// A tile that is a constant frame (a failed capture) is refused by name, as
+// a corrupt one is; before, it was held by its table position, showed as a
+// gray square in the mosaic, and its holes failed as poor fits.
+TEST_F(MosaicStageTest, BlankTileIsRefusedByName) {
+  const fs::path dir = dir_->path() / "blank";
+  testing::CopyProject(sim_->project_dir, dir);
+  const std::string& image = Truth().tiles[4].image;
+  WriteGrayImage(dir / "tiles" / image,
+                 ImageF::Constant(Truth().camera.model.height_px, Truth().camera.model.width_px,
+                                  0.5f),
+                 8);
   try {
-    RunProject(LoadProject(dir), options);
-    FAIL() << "the stage did not fail";
-  } catch (const StageFailedError& e) {
-    std::printf("%s\n", e.what());
-    EXPECT_EQ(e.stage(), Stage::kMosaic);
+    RunProject(LoadProject(dir), RunOptions{});
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.where(), (dir / "tiles" / image).string());
+    EXPECT_NE(std::string(e.what()).find("blank"), std::string::npos) << e.what();
   }
-  EXPECT_FALSE(fs::exists(dir / "out" / "mosaic.png"));
   EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
+}
+
+// A tile recorded far too dark (a 16-bit capture at 2.5 % of the exposure:
+// the texture is there, so it registers) is below the exposure fit's floor
+// everywhere: the mosaic stage fails and names it.
+TEST_F(MosaicStageTest, UnderexposedTileFailsTheStageByName) {
+  const fs::path dir = dir_->path() / "dark";
+  testing::CopyProject(sim_->project_dir, dir);
+  fs::create_directories(dir / "out");
+  WriteCameraModel(dir / "out" / "camera.cameramodel", Truth().camera.model);
+  const std::string& image = Truth().tiles[4].image;
+  const ImageF dark = ReadGrayImage(dir / "tiles" / image).pixels * 0.025f;
+  WriteGrayImage(dir / "tiles" / image, dark, 16);
+  const std::string why = MosaicStageFailure(dir);
+  EXPECT_NE(why.find(image + " has no pixel between 3 % and 97 %"), std::string::npos) << why;
 }
 
 TEST_F(MosaicStageTest, ColmapReadsTheExportedModel) {

@@ -29,6 +29,21 @@ ImageF NormalizeTileIntensity(const ImageF& image) {
   return ((image.array() - median) * scale).matrix();
 }
 
+std::optional<double> BlankImageLevel(const ImageF& image, double max_fraction) {
+  std::vector<float> sample;
+  sample.reserve(image.size() / 7 + 1);
+  for (Eigen::Index i = 0; i < image.size(); i += 7) sample.push_back(image.data()[i]);
+  if (sample.empty()) return std::nullopt;
+  std::vector<float> sorted = sample;
+  const float median = NthValue(&sorted, 0.5);
+  const auto differing = std::count_if(sample.begin(), sample.end(), [&](float v) {
+    return std::abs(v - median) > 1.0f / 255.0f;
+  });
+  if (static_cast<double>(differing) > max_fraction * static_cast<double>(sample.size()))
+    return std::nullopt;
+  return median;
+}
+
 ImageF DownsampleBox(const ImageF& image, int factor) {
   const Eigen::Index rows = image.rows() / factor, cols = image.cols() / factor;
   ImageF out(rows, cols);

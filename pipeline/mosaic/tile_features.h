@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,13 @@ namespace omm {
 // as often as after an exact flat-field correction: register_tiles_test).
 // The statistics come from every 7th pixel.
 ImageF NormalizeTileIntensity(const ImageF& image);
+
+// The level of a blank image (every pixel but a `max_fraction` within one
+// 8-bit step, 1/255, of the median; every 7th pixel looked at): a failed
+// capture, not a picture (a lit part has sensor noise of a step or more on
+// most pixels, a tile mostly of dark table still its part's pixels). nullopt
+// if the image has content.
+std::optional<double> BlankImageLevel(const ImageF& image, double max_fraction = 0.01);
 
 // Box-filter downsampling by an integer factor: output pixel (r, c) is the
 // mean of input rows [r f, r f + f), columns [c f, c f + f), so an offset of

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -25,6 +26,23 @@ ImageF Blob(int rows, int cols, double cx, double cy) {
       image(r, c) = static_cast<float>(
           std::exp(-0.5 * ((c - cx) * (c - cx) + (r - cy) * (r - cy)) / (1.2 * 1.2)));
   return image;
+}
+
+// A constant frame is blank; sensor noise of one 8-bit step is content, and
+// so is a tile 95 % of which is a uniform dark table.
+TEST(BlankImageLevel, ConstantFramesOnly) {
+  ImageF image = ImageF::Constant(120, 160, 0.5f);
+  const std::optional<double> level = BlankImageLevel(image);
+  ASSERT_TRUE(level.has_value());
+  EXPECT_FLOAT_EQ(*level, 0.5f);
+  std::mt19937 rng(3);
+  std::normal_distribution<float> noise(0.0f, 1.0f / 255.0f);
+  ImageF noisy = image;
+  for (Eigen::Index i = 0; i < noisy.size(); ++i) noisy.data()[i] += noise(rng);
+  EXPECT_FALSE(BlankImageLevel(noisy).has_value());
+  ImageF table = ImageF::Constant(120, 160, 0.02f);
+  table.rightCols(8) = noisy.rightCols(8);  // 5 % of the columns show the part
+  EXPECT_FALSE(BlankImageLevel(table).has_value());
 }
 
 TEST(DetectHarrisCorners, BlobAtItsCentre) {

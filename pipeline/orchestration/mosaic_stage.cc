@@ -28,10 +28,12 @@
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
+#include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/measure/hole_ties.h"
 #include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/ortho_file.h"
+#include "pipeline/mosaic/exposure_compensation.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/pair_scatter.h"
 #include "pipeline/mosaic/plate_on_part.h"
@@ -44,6 +46,14 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kCameraModelName = "camera.cameramodel";
+
+// The median of every 7th pixel of a tile, [0, 1].
+double MedianOfImage(const ImageF& image) {
+  std::vector<double> values;
+  values.reserve(static_cast<size_t>(image.size() / 7 + 1));
+  for (Eigen::Index k = 0; k < image.size(); k += 7) values.push_back(image.data()[k]);
+  return Median(std::move(values));
+}
 constexpr const char* kMosaicName = "mosaic.png";
 constexpr const char* kSceneName = "mosaic/scene.json";
 constexpr const char* kColmapDirName = "colmap";
@@ -451,7 +461,19 @@ void RunMosaicStage(StageContext& context) {
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options);
   spdlog::info("mosaic: {}", ortho.summary.brief);
-  if (!ortho.summary.usable) throw StageFailedError(Stage::kMosaic, ortho.summary.brief);
+  if (!ortho.summary.usable) {
+    // Name the tiles the exposure fit found nothing in, and the likely cause.
+    std::string why = ortho.summary.brief;
+    const ExposureOptions exposure_options;
+    for (const int i : ortho.summary.exposure.tiles_without_samples) {
+      why += fmt::format(
+          "; {} has no pixel between {:.0f} % and {:.0f} % of full scale where it overlaps "
+          "another tile (median {:.1f} %): a black, blank or saturated image?",
+          project.tiles[i].image, 100.0 * exposure_options.min_value,
+          100.0 * exposure_options.max_value, 100.0 * MedianOfImage(tiles[i]));
+    }
+    throw StageFailedError(Stage::kMosaic, why);
+  }
 
   if (context.progress) context.progress(num_tiles + 3, num_tiles + 4, "write mosaic");
   const auto write_start = std::chrono::steady_clock::now();

@@ -1,11 +1,14 @@
 #include "pipeline/orchestration/stage.h"
 
+#include <optional>
+
 #include <fmt/format.h>
 
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/mosaic/plate_on_part.h"
+#include "pipeline/mosaic/tile_features.h"
 
 namespace omm {
 
@@ -32,6 +35,12 @@ std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera
                                                   "is {}x{} px",
                                                   image.width(), image.height(), camera.width_px,
                                                   camera.height_px));
+    }
+    if (const std::optional<double> level = BlankImageLevel(image.pixels)) {
+      throw InputError(path.string(),
+                       fmt::format("blank: almost every pixel is within one 8-bit step of {:.1f} % "
+                                   "of full scale, no picture of the part (a failed capture?)",
+                                   100.0 * *level));
     }
     tiles[i] = std::move(image.pixels);
   });

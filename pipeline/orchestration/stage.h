@@ -83,7 +83,9 @@ struct StageContext {
 
 // The project's tiles as gray images, in its tile order, 2 at a time:
 // converted from those LoadProject decoded, else read from the files. Throws
-// InputError for a tile whose size is not the camera's.
+// InputError for a tile whose size is not the camera's, or that is blank
+// (BlankImageLevel): held by its table position alone it would show a
+// uniform square in the mosaic, and its holes would fail as poor fits.
 std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera);
 
 // Where a calibration measured the lens: the convex hull of its solve's inlier
