@@ -12,6 +12,7 @@
 // (plane_seed.h) takes the distance from the perspective between tiles,
 // which a microscope's nearly telecentric view does not have.
 #include "pipeline/mosaic/register_tiles.h"
+#include "pipeline/mosaic/tile_features.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -69,6 +70,7 @@ TEST(RegisterTilesReal, LscmSpeckleOffsetsAgreeWithPublishedRegistration) {
     std::string png = nominal[i].first;
     png.replace(png.size() - 4, 4, ".png");
     tiles.push_back(ReadGrayImage(dir / png).pixels);
+    EXPECT_FALSE(BlankImageLevel(tiles.back()).has_value()) << png;  // a real capture
     // The stage grid in its own units (one "mm" per nominal px), y flipped:
     // Fiji's y runs down the image, the table's Y up (a camera looking down
     // sees the table's axes mirrored, which the plane seed checks).
@@ -144,6 +146,8 @@ TEST(RegisterTilesReal, MistOverlapsNarrowerThanATemplateAreReported) {
     std::getline(fields, row, ',');
     std::getline(fields, col, ',');
     tiles.push_back(ReadGrayImage(dir / file).pixels);
+    // Dim 16-bit phase contrast (median 0.4 % of full scale), yet a picture.
+    EXPECT_FALSE(BlankImageLevel(tiles.back()).has_value()) << file;
     // The nominal grid, y up (as above), in px as "mm".
     commanded.emplace_back(230.0 * std::stoi(col), -172.0 * std::stoi(row));
   }

@@ -36,9 +36,8 @@ std::optional<double> BlankImageLevel(const ImageF& image, double max_fraction) 
   if (sample.empty()) return std::nullopt;
   std::vector<float> sorted = sample;
   const float median = NthValue(&sorted, 0.5);
-  const auto differing = std::count_if(sample.begin(), sample.end(), [&](float v) {
-    return std::abs(v - median) > 1.0f / 255.0f;
-  });
+  const auto differing =
+      std::count_if(sample.begin(), sample.end(), [&](float v) { return v != median; });
   if (static_cast<double>(differing) > max_fraction * static_cast<double>(sample.size()))
     return std::nullopt;
   return median;

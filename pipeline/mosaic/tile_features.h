@@ -26,11 +26,12 @@ namespace omm {
 // The statistics come from every 7th pixel.
 ImageF NormalizeTileIntensity(const ImageF& image);
 
-// The level of a blank image (every pixel but a `max_fraction` within one
-// 8-bit step, 1/255, of the median; every 7th pixel looked at): a failed
-// capture, not a picture (a lit part has sensor noise of a step or more on
-// most pixels, a tile mostly of dark table still its part's pixels). nullopt
-// if the image has content.
+// The level of a blank image (every pixel but a `max_fraction` equal to the
+// median; every 7th pixel looked at): a constant frame, a failed capture, not
+// a picture. Sensor noise moves most pixels of a real one by a quantum or more
+// (73-100 % of them on the 33 public images of ../shared/data, dim 16-bit
+// phase contrast included), and a tile mostly of dark table still has its
+// part's pixels. nullopt if the image has content.
 std::optional<double> BlankImageLevel(const ImageF& image, double max_fraction = 0.01);
 
 // Box-filter downsampling by an integer factor: output pixel (r, c) is the

@@ -28,7 +28,7 @@ ImageF Blob(int rows, int cols, double cx, double cy) {
   return image;
 }
 
-// A constant frame is blank; sensor noise of one 8-bit step is content, and
+// A constant frame is blank; sensor noise of an 8-bit step is content, and
 // so is a tile 95 % of which is a uniform dark table.
 TEST(BlankImageLevel, ConstantFramesOnly) {
   ImageF image = ImageF::Constant(120, 160, 0.5f);

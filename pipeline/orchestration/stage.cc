@@ -38,8 +38,8 @@ std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera
     }
     if (const std::optional<double> level = BlankImageLevel(image.pixels)) {
       throw InputError(path.string(),
-                       fmt::format("blank: almost every pixel is within one 8-bit step of {:.1f} % "
-                                   "of full scale, no picture of the part (a failed capture?)",
+                       fmt::format("blank: almost every pixel is {:.1f} % of full scale, no "
+                                   "picture of the part (a failed capture?)",
                                    100.0 * *level));
     }
     tiles[i] = std::move(image.pixels);
