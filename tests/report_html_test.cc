@@ -125,6 +125,22 @@ Report FullReport() {
                                         {"images", ReportValue::Array{"t1.png", "t2.png"}},
                                         {"rms_px", 0.0043}}}},
                            {"dropped", ReportValue::Array{"<hole_B>"}}}},
+             {"overlap_ties",
+              ReportObject{{"brief", "1 of 2 overlaps of held tiles aligned directly"},
+                           {"ties",
+                            ReportValue::Array{
+                                ReportObject{{"images", ReportValue::Array{"t1.png", "t<3>.png"}},
+                                             {"used", true},
+                                             {"pixels", 512000},
+                                             {"shift_px", ReportValue::Array{0.1234, -0.05}},
+                                             {"sigma_px", ReportValue::Array{0.2, 0.011}},
+                                             {"rms_px", 0.021}},
+                                ReportObject{{"images", ReportValue::Array{"t2.png", "t<3>.png"}},
+                                             {"used", false},
+                                             {"pixels", 900},
+                                             {"shift_px", ReportValue::Array{0.0, 0.0}},
+                                             {"sigma_px", ReportValue::Array{0.0, 0.0}},
+                                             {"why", "too few pixels seen by both"}}}}}},
              {"exposure", ReportObject{{"brief", "gains 0.91..1.00"},
                                        {"relative_sigma_before", 0.031},
                                        {"relative_sigma_after", 0.002}}},
@@ -225,10 +241,13 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   const std::string html = ReportHtml(FullReport(), FullInputs());
   for (const char* id :
        {"measurements-table", "features-table", "rejected-table", "per-image-table", "pairs-table",
-        "hole-ties-table", "tiles-table", "held-table"}) {
+        "hole-ties-table", "overlap-ties-table", "tiles-table", "held-table"}) {
     EXPECT_THAT(html, HasSubstr(std::string("<table id=\"") + id + "\">")) << id;
   }
   EXPECT_THAT(html, HasSubstr("<th>run_date</th><td>2026-11-22T01:00:00Z</td>"));
+  EXPECT_THAT(
+      html, HasSubstr("t&lt;3&gt;.png</td><td class=\"r\">512000</td><td class=\"r\">0.123</td>"));
+  EXPECT_THAT(html, HasSubstr("no: too few pixels seen by both"));
   EXPECT_THAT(html, HasSubstr("0.0018 px typical (median over the imager), 0.0267 px worst, "
                               "at 406 mm"));
   EXPECT_THAT(html, HasSubstr("<text>resid</text>"));

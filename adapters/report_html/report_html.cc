@@ -475,6 +475,33 @@ std::string MosaicSection(const Report& report) {
       out += "<p>Dropped (their views disagree beyond their sigma): " + names + "</p>\n";
     }
   }
+  if (const ReportObject* overlap_ties = AsObject(Member(extra, "overlap_ties"))) {
+    const ReportValue::Array* ties = AsArray(Member(*overlap_ties, "ties"));
+    if (ties != nullptr && !ties->empty()) {
+      out += "<h3>Overlaps of held tiles, aligned directly</h3>\n<p>" +
+             Text(Member(*overlap_ties, "brief")) + "</p>\n";
+      Table table({"placed tile", "aligned tile", "pixels", "shift x px", "shift y px",
+                   "sigma major px", "sigma minor px", "rms residual px", "used"},
+                  "llrrrrrrl");
+      for (const ReportValue& row : *ties) {
+        const ReportObject* tie = AsObject(&row);
+        if (tie == nullptr) continue;
+        const ReportValue::Array* images = AsArray(Member(*tie, "images"));
+        const bool two = images != nullptr && images->size() == 2;
+        auto element = [&](const char* key, size_t i) {
+          const ReportValue::Array* v = AsArray(Member(*tie, key));
+          return Number(v != nullptr && v->size() > i ? AsNumber(&(*v)[i]) : std::nullopt, 3);
+        };
+        const bool used = AsBool(Member(*tie, "used")).value_or(false);
+        table.Row({two ? Text((*images)[0]) : "?", two ? Text((*images)[1]) : "?",
+                   Text(Member(*tie, "pixels")), element("shift_px", 0), element("shift_px", 1),
+                   element("sigma_px", 0), element("sigma_px", 1), NumberOf(*tie, "rms_px"),
+                   used ? "yes" : "no: " + Text(Member(*tie, "why"))},
+                  used ? "" : "failed");
+      }
+      out += table.Html("overlap-ties-table");
+    }
+  }
   if (const ReportValue::Array* tiles = AsArray(Member(extra, "tiles"))) {
     out += "<h3>Tiles: adjusted minus commanded table position</h3>\n";
     Table table({"tile", "commanded x mm", "commanded y mm", "adjusted - commanded x &#181;m",

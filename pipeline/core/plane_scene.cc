@@ -5,6 +5,7 @@
 #include <numbers>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 namespace omm {
@@ -127,6 +128,22 @@ double PlaneTiltDeg(const Eigen::Vector3d& cam_from_part_r) {
   // The part's -Z in the camera frame against the camera's z axis.
   const double cos_tilt = std::clamp(-cam_from_part(2, 2), -1.0, 1.0);
   return std::acos(cos_tilt) * 180.0 / std::numbers::pi;
+}
+
+TrackObservation WhitenedObservation(int tile, int track, const Eigen::Vector2d& q_px,
+                                     const Eigen::Matrix2d& covariance_px2,
+                                     double observation_sigma_px) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(covariance_px2);
+  const Eigen::Vector2d sigma_px = eigen.eigenvalues().cwiseSqrt();  // ascending
+  TrackObservation observation;
+  observation.tile = tile;
+  observation.track = track;
+  observation.q_px = q_px;
+  observation.weight = observation_sigma_px / sigma_px(0);
+  observation.shape = eigen.eigenvectors() *
+                      Eigen::Vector2d(1.0, sigma_px(0) / sigma_px(1)).asDiagonal() *
+                      eigen.eigenvectors().transpose();
+  return observation;
 }
 
 }  // namespace omm

@@ -61,6 +61,14 @@ struct TrackObservation {
   Eigen::Matrix2d shape = Eigen::Matrix2d::Identity();
 };
 
+// The observation of `track` in `tile` at q_px whose error has covariance
+// covariance_px2 (positive definite): weight and shape make its residual
+// white, weight = observation_sigma_px / (the smaller sigma), shape =
+// C^-1/2 scaled to 1 along the stiffest direction.
+TrackObservation WhitenedObservation(int tile, int track, const Eigen::Vector2d& q_px,
+                                     const Eigen::Matrix2d& covariance_px2,
+                                     double observation_sigma_px);
+
 // A plate of marks with known plate coordinates lying face up on the part.
 struct PlateMarks {
   Eigen::Matrix2Xd mark_uv_mm;  // plate coordinates (u, v) of each mark, mm

@@ -2,8 +2,6 @@
 
 #include <optional>
 
-#include <Eigen/Eigenvalues>
-
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/measure/measurement_uncertainty.h"
@@ -103,18 +101,8 @@ int AddHoleTieTracks(const std::vector<HoleTie>& ties, PlaneBundleInput* input, 
     const int track = first_track + static_cast<int>(t);
     scene->track_xy_mm.col(track) = tie.centre_mm;
     for (size_t v = 0; v < tie.tiles.size(); ++v) {
-      // Weight and shape (TrackObservation): the inverse square root of the
-      // covariance, as a scale along its stiffest direction and a shape.
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(tie.covariance_px2[v]);
-      const Eigen::Vector2d sigma_px = eigen.eigenvalues().cwiseSqrt();  // ascending
-      TrackObservation observation;
-      observation.tile = tie.tiles[v];
-      observation.track = track;
-      observation.q_px = tie.q_px[v];
-      observation.weight = input->observation_sigma_px / sigma_px(0);
-      observation.shape = eigen.eigenvectors() *
-                          Eigen::Vector2d(1.0, sigma_px(0) / sigma_px(1)).asDiagonal() *
-                          eigen.eigenvectors().transpose();
+      const TrackObservation observation = WhitenedObservation(
+          tie.tiles[v], track, tie.q_px[v], tie.covariance_px2[v], input->observation_sigma_px);
       input->observations.push_back(observation);
     }
   }

@@ -17,6 +17,7 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
+#include <Eigen/Eigenvalues>
 
 #include "adapters/colmap/colmap_model.h"
 #include "adapters/colmap/colmap_sift.h"
@@ -31,9 +32,10 @@
 #include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/measure/hole_ties.h"
+#include "pipeline/measure/overlap_ties.h"
 #include "pipeline/measure/scene_sensitivity.h"
-#include "pipeline/mosaic/ortho_file.h"
 #include "pipeline/mosaic/exposure_compensation.h"
+#include "pipeline/mosaic/ortho_file.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/pair_scatter.h"
 #include "pipeline/mosaic/plate_on_part.h"
@@ -275,6 +277,47 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
   return report;
 }
 
+// report.mosaic.overlap_ties: each held tile's overlap alignments, with
+// the final solve's residual RMS of the used ones' observations (their
+// tracks follow in `ties`' order from first_observation on).
+ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapTie>& ties,
+                              int first_observation, const Eigen::Matrix2Xd& residual_px,
+                              std::string* brief) {
+  ReportValue::Array rows;
+  int index = first_observation;
+  int num_used = 0;
+  for (const OverlapTie& tie : ties) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(tie.alignment.covariance_px2);
+    ReportObject row{
+        {"images",
+         ReportValue::Array{project.tiles[tie.tile_a].image, project.tiles[tie.tile_b].image}},
+        {"used", tie.used},
+        {"pixels", tie.alignment.num_pixels},
+        {"shift_px", ReportValue::Array{tie.alignment.shift_px.x(), tie.alignment.shift_px.y()}},
+        {"sigma_px", ReportValue::Array{std::sqrt(std::max(0.0, eigen.eigenvalues()(1))),
+                                        std::sqrt(std::max(0.0, eigen.eigenvalues()(0)))}},
+        {"covariance_px2",
+         ReportValue::Array{ReportValue::Array{tie.alignment.covariance_px2(0, 0),
+                                               tie.alignment.covariance_px2(0, 1)},
+                            ReportValue::Array{tie.alignment.covariance_px2(1, 0),
+                                               tie.alignment.covariance_px2(1, 1)}}}};
+    if (tie.used) {
+      ++num_used;
+      const double sum_squares =
+          residual_px.col(index).squaredNorm() + residual_px.col(index + 1).squaredNorm();
+      index += 2;
+      row.emplace_back("rms_px", std::sqrt(sum_squares / 2.0));
+    } else {
+      row.emplace_back("why", tie.why);
+    }
+    rows.emplace_back(std::move(row));
+  }
+  *brief = ties.empty() ? "no tile held by its table prior alone"
+                        : fmt::format("{} of {} overlaps of held tiles aligned directly", num_used,
+                                      ties.size());
+  return ReportObject{{"brief", *brief}, {"ties", std::move(rows)}};
+}
+
 // The final adjustment (the plate on the part, the intrinsics prior) with
 // the holes of project.yaml's features that several tiles see whole as tie
 // points (pipeline/measure/hole_ties.h), fitted on the registered scene: a
@@ -286,9 +329,12 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
 struct FinalOutcome {
   FinalAdjustment adjusted;
   std::string ties_brief;
-  ReportValue ties_report;     // report.mosaic's hole_ties
-  double fit_seconds = 0.0;    // the ties' hole fits
-  double solve_seconds = 0.0;  // the final adjustment's solves
+  ReportValue ties_report;  // report.mosaic's hole_ties
+  std::string overlap_brief;
+  ReportValue overlap_report;    // report.mosaic's overlap_ties
+  double fit_seconds = 0.0;      // the ties' hole fits
+  double overlap_seconds = 0.0;  // the held tiles' overlap alignments
+  double solve_seconds = 0.0;    // the final adjustment's solves
 };
 FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<ImageF>& tiles,
                                       const CameraModel& camera, const PlateOnPart& plate,
@@ -326,10 +372,22 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   FinalOutcome result;
   result.fit_seconds = SecondsSince(start);
 
+  // Tiles that no match placed: their overlaps, aligned directly, as tracks.
+  const auto overlap_start = std::chrono::steady_clock::now();
+  const std::vector<OverlapTie> overlap_ties =
+      FindOverlapTies(views_geometry, tiles, registration->tiles_held_by_prior, holes,
+                      registration->input.table_sigma_mm, OverlapTieOptions());
+  const int first_overlap_observation = static_cast<int>(registration->input.observations.size());
+  AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
+  result.overlap_seconds = SecondsSince(overlap_start);
+
   TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
                                            options, ties, tie_options);
   result.adjusted = std::move(tied.adjusted);
-  result.solve_seconds = SecondsSince(start) - result.fit_seconds;
+  result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
+  result.overlap_report =
+      OverlapTiesReport(project, overlap_ties, first_overlap_observation,
+                        result.adjusted.scene.residual_px, &result.overlap_brief);
 
   ReportValue::Array rows;
   int index = tied.first_tie_observation;
@@ -439,6 +497,7 @@ void RunMosaicStage(StageContext& context) {
       FinalAdjustmentWithHoles(project, tiles, camera, plate, prior, final_options, &registration);
   FinalAdjustment& adjusted = final_outcome.adjusted;
   spdlog::info("mosaic: holes: {}", final_outcome.ties_brief);
+  spdlog::info("mosaic: overlaps: {}", final_outcome.overlap_brief);
   spdlog::info("mosaic: final {}", adjusted.summary.brief);
   if (adjusted.observation_sigma_scale > 1.0) {
     spdlog::info(
@@ -541,6 +600,7 @@ void RunMosaicStage(StageContext& context) {
       {"scale_sigma_ppm", adjusted.scale_sigma_ppm},
       {"plate_scale_check", PlateReport(project, plate, adjusted)},
       {"hole_ties", std::move(final_outcome.ties_report)},
+      {"overlap_ties", std::move(final_outcome.overlap_report)},
       {"pairs", PairsReport(project, registration, pair_scatter)},
       {"tiles", TilesReport(project, registration, ortho.summary)},
       {"tiles_held_by_prior", held},
@@ -571,6 +631,7 @@ void RunMosaicStage(StageContext& context) {
                                  {"plate_detection", plate.seconds},
                                  {"intrinsics_prior", prior_seconds},
                                  {"hole_ties", final_outcome.fit_seconds},
+                                 {"overlap_ties", final_outcome.overlap_seconds},
                                  {"final_adjustment", final_outcome.solve_seconds},
                                  {"ortho_geometry", ortho.summary.geometry_seconds},
                                  {"ortho_exposure", ortho.summary.exposure_seconds},

@@ -1,0 +1,167 @@
+#include "pipeline/measure/overlap_ties.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Cholesky>
+
+#include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
+#include "pipeline/measure/measurement_uncertainty.h"
+#include "pipeline/measure/ortho_patch.h"
+
+namespace omm {
+namespace {
+
+// dq/d(col, row) of tile `tile` at grid position x, central differences of
+// one grid px (the map is smooth over a pixel); false if not covered.
+bool TilePixelJacobian(const OrthoGeometry& geometry, int tile, const Eigen::Vector2d& x,
+                       Eigen::Matrix2d* jacobian) {
+  for (int axis = 0; axis < 2; ++axis) {
+    const Eigen::Vector2d step = Eigen::Vector2d::Unit(axis);
+    Eigen::Vector2d plus, minus;
+    if (!geometry.TilePixel(tile, x.x() + step.x(), x.y() + step.y(), &plus) ||
+        !geometry.TilePixel(tile, x.x() - step.x(), x.y() - step.y(), &minus)) {
+      return false;
+    }
+    jacobian->col(axis) = 0.5 * (plus - minus);
+  }
+  return true;
+}
+
+OverlapTie AlignPair(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles, int tile_a,
+                     int tile_b, const std::vector<TieHole>& holes, double table_sigma_mm,
+                     const OverlapTieOptions& options) {
+  OverlapTie tie;
+  tie.tile_a = tile_a;
+  tie.tile_b = tile_b;
+  const TileOrthoMap& map_a = geometry.tiles[tile_a];
+  const TileOrthoMap& map_b = geometry.tiles[tile_b];
+  const Eigen::Vector2i lo = map_a.min_px.cwiseMax(map_b.min_px);
+  const Eigen::Vector2i hi = map_a.max_px.cwiseMin(map_b.max_px);
+  const Eigen::Vector2i size = hi - lo + Eigen::Vector2i::Ones();
+  const TileExposure unit;  // the alignment fits the gain field itself
+  const OrthoInterpolator interpolator = OrthoInterpolator::kCubicBSpline;
+  const OrthoPatch a =
+      RenderTilePatch(geometry, tile_a, tiles[tile_a], unit, interpolator, lo, size);
+  const OrthoPatch b =
+      RenderTilePatch(geometry, tile_b, tiles[tile_b], unit, interpolator, lo, size);
+  if (a.pixels.size() == 0 || b.pixels.size() == 0 || a.origin_px != b.origin_px) {
+    tie.why = "the footprints do not overlap";
+    return tie;
+  }
+  const int rows = static_cast<int>(a.pixels.rows()), cols = static_cast<int>(a.pixels.cols());
+  ImageF mask = ImageF::Ones(rows, cols);
+  const double gsd = geometry.grid.gsd_mm;
+  for (const TieHole& hole : holes) {
+    const Eigen::Vector2d centre =
+        geometry.grid.MosaicFromPart(hole.near_part_mm) - a.origin_px.cast<double>();
+    // near_px is within a quarter of the diameter (project-format.md).
+    const double radius = 1.5 * hole.radius_mm / gsd + options.hole_margin_px;
+    const int r0 = std::max(0, static_cast<int>(std::floor(centre.y() - radius)));
+    const int r1 = std::min(rows - 1, static_cast<int>(std::ceil(centre.y() + radius)));
+    const int c0 = std::max(0, static_cast<int>(std::floor(centre.x() - radius)));
+    const int c1 = std::min(cols - 1, static_cast<int>(std::ceil(centre.x() + radius)));
+    for (int r = r0; r <= r1; ++r)
+      for (int c = c0; c <= c1; ++c)
+        if ((Eigen::Vector2d(c, r) - centre).squaredNorm() <= radius * radius) mask(r, c) = 0.0f;
+  }
+  tie.alignment = AlignOverlap(a.pixels, b.pixels, mask, options.alignment);
+  if (!tie.alignment.usable) {
+    tie.why = tie.alignment.why;
+    return tie;
+  }
+  const Eigen::Vector2d s = tie.alignment.shift_px;
+  // Relative table positions: 2 sigma^2 per axis, in grid px^2.
+  const double prior_px = table_sigma_mm / gsd;
+  const Eigen::Matrix2d total =
+      tie.alignment.covariance_px2 + 2.0 * prior_px * prior_px * Eigen::Matrix2d::Identity();
+  tie.prior_chi2 = s.dot(total.ldlt().solve(s));
+  if (!(tie.prior_chi2 <= ChiSquareQuantile(options.consistency_probability, 2))) {
+    tie.why = "its shift contradicts the table prior";
+    return tie;
+  }
+  // The track's point: the centroid of what both see.
+  Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+  double count = 0.0;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      if (a.pixels(r, c) > 0.0f && b.pixels(r, c) > 0.0f && mask(r, c) > 0.0f) {
+        sum += Eigen::Vector2d(c, r);
+        count += 1.0;
+      }
+    }
+  }
+  const Eigen::Vector2d x = sum / count + a.origin_px.cast<double>();
+  Eigen::Matrix2d jacobian;
+  if (!geometry.TilePixel(tile_a, x.x(), x.y(), &tie.q_a_px) ||
+      !geometry.TilePixel(tile_b, x.x() + s.x(), x.y() + s.y(), &tie.q_b_px) ||
+      !TilePixelJacobian(geometry, tile_b, x + s, &jacobian)) {
+    tie.why = "the overlap's centre is outside the lens table";
+    return tie;
+  }
+  const Eigen::Matrix2d floor =
+      options.min_sigma_px * options.min_sigma_px * Eigen::Matrix2d::Identity();
+  tie.covariance_a_px2 = floor;
+  tie.covariance_b_px2 = jacobian * tie.alignment.covariance_px2 * jacobian.transpose() + floor;
+  tie.point_mm = geometry.grid.PartFromMosaic(x);
+  tie.used = true;
+  return tie;
+}
+
+}  // namespace
+
+std::string OverlapTieOptions::Check() const {
+  if (const std::string why = alignment.Check(); !why.empty()) return "alignment: " + why;
+  if (!(hole_margin_px >= 0.0)) return "hole_margin_px must be >= 0";
+  if (!(min_sigma_px > 0.0)) return "min_sigma_px must be > 0";
+  if (!(consistency_probability > 0.0 && consistency_probability < 1.0))
+    return "consistency_probability must be in (0, 1)";
+  if (num_threads < 1) return "num_threads must be at least 1";
+  return "";
+}
+
+std::vector<OverlapTie> FindOverlapTies(const OrthoGeometry& geometry,
+                                        const std::vector<ImageF>& tiles,
+                                        const std::vector<int>& held,
+                                        const std::vector<TieHole>& holes, double table_sigma_mm,
+                                        const OverlapTieOptions& options) {
+  if (const std::string why = options.Check(); !why.empty())
+    throw InputError("OverlapTieOptions", why);
+  std::vector<std::pair<int, int>> pairs;
+  for (const int b : held) {
+    for (int a = 0; a < static_cast<int>(tiles.size()); ++a) {
+      if (std::find(held.begin(), held.end(), a) != held.end()) continue;
+      const TileOrthoMap& map_a = geometry.tiles[a];
+      const TileOrthoMap& map_b = geometry.tiles[b];
+      const Eigen::Vector2i size =
+          map_a.max_px.cwiseMin(map_b.max_px) - map_a.min_px.cwiseMax(map_b.min_px);
+      if ((size.array() > 0).all()) pairs.emplace_back(a, b);
+    }
+  }
+  std::vector<OverlapTie> ties(pairs.size());
+  ParallelFor(static_cast<int>(pairs.size()), options.num_threads, [&](int i) {
+    ties[i] =
+        AlignPair(geometry, tiles, pairs[i].first, pairs[i].second, holes, table_sigma_mm, options);
+  });
+  return ties;
+}
+
+int AddOverlapTieTracks(const std::vector<OverlapTie>& ties, PlaneBundleInput* input,
+                        PlaneScene* scene) {
+  int appended = 0;
+  for (const OverlapTie& tie : ties) {
+    if (!tie.used) continue;
+    const int track = input->num_tracks++;
+    scene->track_xy_mm.conservativeResize(2, track + 1);
+    scene->track_xy_mm.col(track) = tie.point_mm;
+    input->observations.push_back(WhitenedObservation(
+        tie.tile_a, track, tie.q_a_px, tie.covariance_a_px2, input->observation_sigma_px));
+    input->observations.push_back(WhitenedObservation(
+        tie.tile_b, track, tie.q_b_px, tie.covariance_b_px2, input->observation_sigma_px));
+    ++appended;
+  }
+  return appended;
+}
+
+}  // namespace omm

@@ -1,0 +1,274 @@
+#include "pipeline/mosaic/overlap_alignment.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "pipeline/core/cubic_weights.h"
+#include "pipeline/core/error.h"
+#include "pipeline/core/statistics.h"
+#include "pipeline/mosaic/tile_features.h"
+
+namespace omm {
+namespace {
+
+constexpr int kNumGainTerms = 10;  // cubic in u
+constexpr double kPi = std::numbers::pi;
+constexpr int kNumParameters = 2 + kNumGainTerms + 1;  // s, g, o
+// A smoothed pixel whose kernel saw only valid pixels (float rounding).
+constexpr float kFullSupport = 1.0f - 1e-4f;
+using Parameters = Eigen::Matrix<double, kNumParameters, 1>;
+using Row = Eigen::Matrix<double, 1, kNumParameters>;
+using Square = Eigen::Matrix<double, kNumParameters, kNumParameters>;
+
+// 1 where a pixel is seen and not clipped, else 0.
+ImageF ValidPixels(const ImageF& image, double max_value) {
+  return image.unaryExpr([max_value](float v) { return v > 0.0f && v < max_value ? 1.0f : 0.0f; });
+}
+
+double HuberWeight(double r, double threshold) {
+  return std::abs(r) <= threshold ? 1.0 : threshold / std::abs(r);
+}
+
+double RobustSigma(const std::vector<double>& residuals) {
+  std::vector<double> absolute(residuals.size());
+  std::transform(residuals.begin(), residuals.end(), absolute.begin(),
+                 [](double r) { return std::abs(r); });
+  return 1.4826 * Median(std::move(absolute));
+}
+
+// d/dt of CatmullRomWeights.
+void CatmullRomDerivativeWeights(double t, double w[4]) {
+  const double t2 = t * t;
+  w[0] = -0.5 + 2.0 * t - 1.5 * t2;
+  w[1] = -5.0 * t + 4.5 * t2;
+  w[2] = 0.5 + 4.0 * t - 4.5 * t2;
+  w[3] = -t + 1.5 * t2;
+}
+
+// b and its gradient at (x, y), Catmull-Rom; false if the 4 x 4 support
+// leaves the image or touches a sample whose `support` is below 1 (an
+// invalid pixel within the smoothing's reach).
+bool SampleWithGradient(const ImageF& b, const ImageF& support, double x, double y, double* value,
+                        Eigen::Vector2d* grad) {
+  const double fx = std::floor(x), fy = std::floor(y);
+  const int ix = static_cast<int>(fx) - 1, iy = static_cast<int>(fy) - 1;
+  if (ix < 0 || iy < 0 || ix + 3 >= b.cols() || iy + 3 >= b.rows()) return false;
+  double wx[4], wy[4], dwx[4], dwy[4];
+  CatmullRomWeights(x - fx, wx);
+  CatmullRomWeights(y - fy, wy);
+  CatmullRomDerivativeWeights(x - fx, dwx);
+  CatmullRomDerivativeWeights(y - fy, dwy);
+  double v = 0.0, gx = 0.0, gy = 0.0;
+  for (int r = 0; r < 4; ++r) {
+    double row_v = 0.0, row_d = 0.0;
+    for (int c = 0; c < 4; ++c) {
+      if (!(support(iy + r, ix + c) >= kFullSupport)) return false;
+      const double sample = b(iy + r, ix + c);
+      row_v += wx[c] * sample;
+      row_d += dwx[c] * sample;
+    }
+    v += wy[r] * row_v;
+    gx += wy[r] * row_d;
+    gy += dwy[r] * row_v;
+  }
+  *value = v;
+  *grad = Eigen::Vector2d(gx, gy);
+  return true;
+}
+
+// sum_p sum_q c(p) G(p - q) c(q)' over the columns c (images), G the
+// normalised Gaussian of blur_sigma_px; computed on blocks of factor x factor
+// pixels (their sums) when the kernel is wide.
+Square CorrelatedProducts(const std::vector<ImageF>& columns, double blur_sigma_px, int factor) {
+  const double factor2 = static_cast<double>(factor) * factor;
+  std::vector<ImageF> sums(columns.size()), blurred(columns.size());
+  for (size_t k = 0; k < columns.size(); ++k) {
+    sums[k] = factor == 1 ? columns[k] : ImageF(DownsampleBox(columns[k], factor) * factor2);
+    blurred[k] = GaussianBlur(sums[k], blur_sigma_px / factor);
+  }
+  Square products;
+  for (int j = 0; j < kNumParameters; ++j) {
+    for (int k = j; k < kNumParameters; ++k) {
+      // A block's kernel weight is factor^2 pixels' (G in block units / factor^2).
+      products(j, k) = products(k, j) =
+          sums[j].cast<double>().cwiseProduct(blurred[k].cast<double>()).sum() / factor2;
+    }
+  }
+  return products;
+}
+
+}  // namespace
+
+std::string OverlapAlignmentOptions::Check() const {
+  if (!(smoothing_sigma_px > 0.0)) return "smoothing_sigma_px must be > 0";
+  if (max_iterations < 1) return "max_iterations must be at least 1";
+  if (!(shift_tolerance_px > 0.0)) return "shift_tolerance_px must be > 0";
+  if (!(huber_sigmas > 0.0)) return "huber_sigmas must be > 0";
+  if (!(max_value > 0.0 && max_value <= 1.0)) return "max_value must be in (0, 1]";
+  if (min_pixels < kNumParameters) return "min_pixels must be at least the 13 parameters";
+  if (!(max_shift_px > 0.0)) return "max_shift_px must be > 0";
+  if (!(min_sigma_px >= 0.0)) return "min_sigma_px must be >= 0";
+  if (!(misfit_scale_px > smoothing_sigma_px))
+    return "misfit_scale_px must exceed smoothing_sigma_px";
+  if (!(misfit_relative >= 0.0)) return "misfit_relative must be >= 0";
+  return "";
+}
+
+OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& mask,
+                              const OverlapAlignmentOptions& options) {
+  if (const std::string why = options.Check(); !why.empty())
+    throw InputError("OverlapAlignmentOptions", why);
+  if (a.rows() != b.rows() || a.cols() != b.cols() ||
+      (mask.size() != 0 && (mask.rows() != a.rows() || mask.cols() != a.cols()))) {
+    throw InputError("AlignOverlap", "the patches and the mask must have one size");
+  }
+  OverlapAlignment result;
+  const int rows = static_cast<int>(a.rows()), cols = static_cast<int>(a.cols());
+  const double sigma = options.smoothing_sigma_px;
+  // Masked pixels count as unseen in both patches: nothing within the
+  // smoothing's reach of them counts.
+  ImageF valid_a = ValidPixels(a, options.max_value), valid_b = ValidPixels(b, options.max_value);
+  if (mask.size() != 0) {
+    const ImageF keep = mask.unaryExpr([](float m) { return m > 0.0f ? 1.0f : 0.0f; });
+    valid_a = valid_a.cwiseProduct(keep);
+    valid_b = valid_b.cwiseProduct(keep);
+  }
+  const ImageF support_a = GaussianBlur(valid_a, sigma);
+  const ImageF support_b = GaussianBlur(valid_b, sigma);
+  const ImageF smooth_a = GaussianBlur(a, sigma), smooth_b = GaussianBlur(b, sigma);
+  // Raw b is sampled for the noise estimate only where all its samples are valid.
+  const ImageF& raw_support_b = valid_b;
+  // The blur clamps at the window's border: pixels within its reach are left out.
+  const int margin = static_cast<int>(std::ceil(3.0 * sigma)) + 2;
+  std::vector<Eigen::Vector2i> pixels;
+  for (int r = margin; r < rows - margin; ++r) {
+    for (int c = margin; c < cols - margin; ++c) {
+      if (!(support_a(r, c) >= kFullSupport)) continue;
+      pixels.emplace_back(c, r);
+    }
+  }
+  const Eigen::Vector2d centre(0.5 * (cols - 1), 0.5 * (rows - 1));
+  const Eigen::Vector2d half_size = centre.cwiseMax(1.0);
+  const auto gain_terms = [&](const Eigen::Vector2i& p) {
+    const Eigen::Vector2d u = (p.cast<double>() - centre).cwiseQuotient(half_size);
+    const double x = u.x(), y = u.y();
+    return std::array<double, kNumGainTerms>{1.0,   x,         y,         x * x,     x * y,
+                                             y * y, x * x * x, x * x * y, x * y * y, y * y * y};
+  };
+  const auto gain_at = [&](const Parameters& theta, const std::array<double, kNumGainTerms>& t) {
+    double gain = 0.0;
+    for (int k = 0; k < kNumGainTerms; ++k) gain += theta(2 + k) * t[k];
+    return gain;
+  };
+
+  Parameters theta = Parameters::Zero();
+  theta(2) = 1.0;  // g0
+  Square normal;
+  std::vector<Eigen::Vector2i> used;
+  std::vector<double> residuals;
+  std::vector<Row> jacobian;
+  double huber_threshold = 0.0;
+  const auto no_gradient = [&result] {
+    result.why = "the overlap holds no gradient to align on";
+    return result;
+  };
+  for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
+    result.num_iterations = iteration + 1;
+    used.clear();
+    residuals.clear();
+    jacobian.clear();
+    const Eigen::Vector2d shift = theta.head<2>();
+    for (const Eigen::Vector2i& p : pixels) {
+      double value;
+      Eigen::Vector2d grad;
+      if (!SampleWithGradient(smooth_b, support_b, p.x() + shift.x(), p.y() + shift.y(), &value,
+                              &grad)) {
+        continue;
+      }
+      const std::array<double, kNumGainTerms> terms = gain_terms(p);
+      const double gain = gain_at(theta, terms);
+      // r = a - (g b(x + s) + o); J = dr/dtheta.
+      Row row;
+      row.head<2>() = -gain * grad.transpose();
+      for (int k = 0; k < kNumGainTerms; ++k) row(2 + k) = -terms[k] * value;
+      row(kNumParameters - 1) = -1.0;
+      used.push_back(p);
+      residuals.push_back(smooth_a(p.y(), p.x()) - (gain * value + theta(kNumParameters - 1)));
+      jacobian.push_back(row);
+    }
+    result.num_pixels = static_cast<int>(residuals.size());
+    if (result.num_pixels < options.min_pixels) {
+      result.why = "too few pixels seen by both";
+      return result;
+    }
+    huber_threshold = options.huber_sigmas * std::max(RobustSigma(residuals), 1e-9);
+    normal.setZero();
+    Parameters gradient = Parameters::Zero();
+    for (size_t i = 0; i < residuals.size(); ++i) {
+      const double w = HuberWeight(residuals[i], huber_threshold);
+      normal.noalias() += w * jacobian[i].transpose() * jacobian[i];
+      gradient.noalias() += w * jacobian[i].transpose() * residuals[i];
+    }
+    const Eigen::LDLT<Square> ldlt(normal);
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return no_gradient();
+    const Parameters step = -ldlt.solve(gradient);
+    if (!step.allFinite()) return no_gradient();
+    theta += step;
+    if (theta.head<2>().cwiseAbs().maxCoeff() > options.max_shift_px) {
+      result.why = "the shift left the allowed range";
+      return result;
+    }
+    if (step.head<2>().norm() < options.shift_tolerance_px) break;
+  }
+
+  // The raw residuals' robust sigma: the noise of a - g b, unsmoothed.
+  std::vector<double> raw_residuals;
+  for (const Eigen::Vector2i& p : used) {
+    double value;
+    Eigen::Vector2d grad;
+    if (!SampleWithGradient(b, raw_support_b, p.x() + theta(0), p.y() + theta(1), &value, &grad))
+      continue;
+    raw_residuals.push_back(a(p.y(), p.x()) -
+                            (gain_at(theta, gain_terms(p)) * value + theta(kNumParameters - 1)));
+  }
+  if (raw_residuals.size() < static_cast<size_t>(options.min_pixels)) {
+    result.why = "too few pixels seen by both";
+    return result;
+  }
+  result.residual_sigma = RobustSigma(raw_residuals);
+  // Each column of W J as an image.
+  std::vector<ImageF> columns(kNumParameters, ImageF::Zero(rows, cols));
+  for (size_t i = 0; i < used.size(); ++i) {
+    const double w = HuberWeight(residuals[i], huber_threshold);
+    for (int k = 0; k < kNumParameters; ++k)
+      columns[k](used[i].y(), used[i].x()) = static_cast<float>(w * jacobian[i](k));
+  }
+  const Square inverse = normal.ldlt().solve(Square::Identity());
+  // The noise: its smoothed residuals correlate as K = G * G.
+  const Square noise_middle = CorrelatedProducts(columns, std::sqrt(2.0) * sigma, 1);
+  Square covariance =
+      result.residual_sigma * result.residual_sigma * inverse * noise_middle * inverse;
+  // The misfit: a smooth field of misfit_relative of the level.
+  double level = 0.0;
+  for (const Eigen::Vector2i& p : used) level += smooth_a(p.y(), p.x());
+  level /= static_cast<double>(used.size());
+  const double scale = options.misfit_scale_px;
+  const int factor = std::max(1, static_cast<int>(scale / 8.0));
+  result.misfit_sigma = options.misfit_relative * level;
+  const Square misfit_middle =
+      4.0 * kPi * scale * scale * CorrelatedProducts(columns, std::sqrt(2.0) * scale, factor);
+  covariance += result.misfit_sigma * result.misfit_sigma * inverse * misfit_middle * inverse;
+  result.covariance_px2 = covariance.topLeftCorner<2, 2>() +
+                          options.min_sigma_px * options.min_sigma_px * Eigen::Matrix2d::Identity();
+  result.shift_px = theta.head<2>();
+  result.usable = result.covariance_px2.allFinite();
+  if (!result.usable) result.why = "the shift's covariance is not finite";
+  return result;
+}
+
+}  // namespace omm
