@@ -86,17 +86,20 @@ bool SampleWithGradient(const ImageF& b, const ImageF& support, double x, double
 // pixels (their sums) when the kernel is wide.
 Square CorrelatedProducts(const std::vector<ImageF>& columns, double blur_sigma_px, int factor) {
   const double factor2 = static_cast<double>(factor) * factor;
-  std::vector<ImageF> sums(columns.size()), blurred(columns.size());
-  for (size_t k = 0; k < columns.size(); ++k) {
-    sums[k] = factor == 1 ? columns[k] : ImageF(DownsampleBox(columns[k], factor) * factor2);
-    blurred[k] = GaussianBlur(sums[k], blur_sigma_px / factor);
+  std::vector<ImageF> block_sums;
+  if (factor > 1) {
+    for (const ImageF& column : columns)
+      block_sums.push_back(DownsampleBox(column, factor) * static_cast<float>(factor2));
   }
+  const std::vector<ImageF>& sums = factor > 1 ? block_sums : columns;
+  // G is symmetric: sum c_k (G c_j) = sum c_j (G c_k); one blurred image at a time.
   Square products;
   for (int j = 0; j < kNumParameters; ++j) {
+    const ImageF blurred = GaussianBlur(sums[j], blur_sigma_px / factor);
     for (int k = j; k < kNumParameters; ++k) {
       // A block's kernel weight is factor^2 pixels' (G in block units / factor^2).
       products(j, k) = products(k, j) =
-          sums[j].cast<double>().cwiseProduct(blurred[k].cast<double>()).sum() / factor2;
+          sums[k].cast<double>().cwiseProduct(blurred.cast<double>()).sum() / factor2;
     }
   }
   return products;
@@ -171,7 +174,22 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   Square normal;
   std::vector<Eigen::Vector2i> used;
   std::vector<double> residuals;
-  std::vector<Row> jacobian;
+  // b(x + s), its gradient and g(u) at each used pixel: J's row is rebuilt
+  // from them (storing 13 doubles a pixel would take ~100 MB an overlap).
+  struct Sample {
+    float value, gx, gy, gain;
+  };
+  std::vector<Sample> samples;
+  const auto jacobian_row = [&](const Eigen::Vector2i& p, const Sample& sample) {
+    // r = a - (g b(x + s) + o); J = dr/dtheta.
+    const std::array<double, kNumGainTerms> terms = gain_terms(p);
+    Row row;
+    row(0) = -sample.gain * sample.gx;
+    row(1) = -sample.gain * sample.gy;
+    for (int k = 0; k < kNumGainTerms; ++k) row(2 + k) = -terms[k] * sample.value;
+    row(kNumParameters - 1) = -1.0;
+    return row;
+  };
   double huber_threshold = 0.0;
   const auto no_gradient = [&result] {
     result.why = "the overlap holds no gradient to align on";
@@ -181,7 +199,7 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
     result.num_iterations = iteration + 1;
     used.clear();
     residuals.clear();
-    jacobian.clear();
+    samples.clear();
     const Eigen::Vector2d shift = theta.head<2>();
     for (const Eigen::Vector2i& p : pixels) {
       double value;
@@ -190,16 +208,11 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
                               &grad)) {
         continue;
       }
-      const std::array<double, kNumGainTerms> terms = gain_terms(p);
-      const double gain = gain_at(theta, terms);
-      // r = a - (g b(x + s) + o); J = dr/dtheta.
-      Row row;
-      row.head<2>() = -gain * grad.transpose();
-      for (int k = 0; k < kNumGainTerms; ++k) row(2 + k) = -terms[k] * value;
-      row(kNumParameters - 1) = -1.0;
+      const double gain = gain_at(theta, gain_terms(p));
       used.push_back(p);
       residuals.push_back(smooth_a(p.y(), p.x()) - (gain * value + theta(kNumParameters - 1)));
-      jacobian.push_back(row);
+      samples.push_back({static_cast<float>(value), static_cast<float>(grad.x()),
+                         static_cast<float>(grad.y()), static_cast<float>(gain)});
     }
     result.num_pixels = static_cast<int>(residuals.size());
     if (result.num_pixels < options.min_pixels) {
@@ -211,8 +224,9 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
     Parameters gradient = Parameters::Zero();
     for (size_t i = 0; i < residuals.size(); ++i) {
       const double w = HuberWeight(residuals[i], huber_threshold);
-      normal.noalias() += w * jacobian[i].transpose() * jacobian[i];
-      gradient.noalias() += w * jacobian[i].transpose() * residuals[i];
+      const Row row = jacobian_row(used[i], samples[i]);
+      normal.noalias() += w * row.transpose() * row;
+      gradient.noalias() += w * row.transpose() * residuals[i];
     }
     const Eigen::LDLT<Square> ldlt(normal);
     if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return no_gradient();
@@ -245,8 +259,9 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   std::vector<ImageF> columns(kNumParameters, ImageF::Zero(rows, cols));
   for (size_t i = 0; i < used.size(); ++i) {
     const double w = HuberWeight(residuals[i], huber_threshold);
+    const Row row = jacobian_row(used[i], samples[i]);
     for (int k = 0; k < kNumParameters; ++k)
-      columns[k](used[i].y(), used[i].x()) = static_cast<float>(w * jacobian[i](k));
+      columns[k](used[i].y(), used[i].x()) = static_cast<float>(w * row(k));
   }
   const Square inverse = normal.ldlt().solve(Square::Identity());
   // The noise: its smoothed residuals correlate as K = G * G.
