@@ -106,7 +106,8 @@ TEST(OverlapTiesSim, RunPlacesTheTileNoMatchHeld) {
   for (const ReportValue& value : *ties) {
     const ReportObject& tie = *AsObject(&value);
     const ReportValue::Array& images = *AsArray(Member(tie, "images"));
-    used_r2c0 += *AsString(&images[1]) == "tile_r2c0.png" && *AsNumber(Member(tie, "used")) > 0;
+    used_r2c0 +=
+        *AsString(&images[1]) == "tile_r2c0.png" && AsBool(Member(tie, "used")).value_or(false);
   }
   EXPECT_GE(used_r2c0, 2) << *AsString(Member(*overlap_ties, "brief"));
 
