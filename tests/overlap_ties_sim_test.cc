@@ -5,6 +5,9 @@
 //  - On the TRUE scene every pair of overlapping tiles' shift is 0: the
 //    alignments' shifts scatter about it within their stated covariance,
 //    and the part's edge holds its normal to a few hundredths of a pixel.
+//  - A tile displaced in the scene by a known amount: each overlap finds the
+//    displacement within its covariance under a loose prior, and refuses it
+//    as contradicting the project's 0.02 mm prior.
 //  - `omm run`: no tile is left to its table prior; r2c0's hole and every
 //    other sits within 0.05 raw px of the truth after a similarity fit
 //    (held by its prior, on this seed with 20 calibration images, hole_14
@@ -40,27 +43,37 @@ constexpr const char* kPreset = "low-texture";
 constexpr std::uint64_t kSeed = 201;
 constexpr int kCalibImages = 14;
 
+// The project's tiles, its holes as project.yaml's near points would put
+// them (0.3 mm off) and the views' grid of `scene`.
+struct Inputs {
+  std::vector<ImageF> tiles;
+  std::vector<TieHole> holes;
+  OrthoGeometry geometry;
+};
+Inputs InputsOn(const testing::CachedProject& sim, const PlaneScene& scene) {
+  Inputs in;
+  for (const TileTruth& tile : sim.truth.tiles)
+    in.tiles.push_back(ReadGrayImage(sim.project_dir / "tiles" / tile.image).pixels);
+  for (const HoleTruth& hole : sim.truth.holes)
+    in.holes.push_back(
+        {hole.center_part_mm + Eigen::Vector2d(0.3, -0.2), 0.5 * hole.nominal_diameter_mm});
+  OrthoOptions ortho_options;
+  ortho_options.gsd_mm = testing::RawPxMm(sim.truth);  // the views' grid (hole_views.h)
+  in.geometry = ComputeOrthoGeometry(sim.truth.camera.model, scene, ortho_options);
+  return in;
+}
+
 TEST(OverlapTiesSim, ShiftsOnTheTrueSceneAreWithinTheirSigma) {
   const testing::CachedProject sim = testing::SimulatedProject(kPreset, kSeed, kCalibImages);
   const SimulationTruth& truth = sim.truth;
-  const PlaneScene scene = TruthPlaneScene(truth);
-  std::vector<ImageF> tiles;
-  for (const TileTruth& tile : truth.tiles)
-    tiles.push_back(ReadGrayImage(sim.project_dir / "tiles" / tile.image).pixels);
-  OrthoOptions ortho_options;
-  ortho_options.gsd_mm = testing::RawPxMm(truth);  // the views' grid (hole_views.h)
-  const OrthoGeometry geometry = ComputeOrthoGeometry(truth.camera.model, scene, ortho_options);
-  // Masked about near points 0.3 mm off, as project.yaml's would be.
-  std::vector<TieHole> holes;
-  for (const HoleTruth& hole : truth.holes)
-    holes.push_back(
-        {hole.center_part_mm + Eigen::Vector2d(0.3, -0.2), 0.5 * hole.nominal_diameter_mm});
+  const Inputs in = InputsOn(sim, TruthPlaneScene(truth));
+  const std::vector<ImageF>& tiles = in.tiles;
   // Every overlapping pair once: each tile in turn as the one aligned.
   double sum_z2 = 0.0, max_z2 = 0.0, best_sigma_px = INFINITY;
   int num_shifts = 0;
   for (int b = 0; b < static_cast<int>(tiles.size()); ++b) {
-    const std::vector<OverlapTie> ties =
-        FindOverlapTies(geometry, tiles, {b}, holes, truth.table_sigma_mm, OverlapTieOptions{});
+    const std::vector<OverlapTie> ties = FindOverlapTies(in.geometry, tiles, {b}, in.holes,
+                                                         truth.table_sigma_mm, OverlapTieOptions{});
     for (const OverlapTie& tie : ties) {
       if (tie.tile_a > b || !tie.alignment.usable) continue;
       const Eigen::Vector2d s = tie.alignment.shift_px;
@@ -83,6 +96,45 @@ TEST(OverlapTiesSim, ShiftsOnTheTrueSceneAreWithinTheirSigma) {
   EXPECT_GT(rms_z, 0.4);
   EXPECT_LT(rms_z, 1.3);
   EXPECT_LT(best_sigma_px, 0.02);  // across the part's edge
+}
+
+TEST(OverlapTiesSim, ADisplacedTileIsFoundOrRefusedByThePrior) {
+  // r2c0 placed 0.25 mm, -0.15 mm off in the scene: its picture in the
+  // grid moves by -delta (columns along +X, rows along -Y), so the shift
+  // that brings it back is s = (-delta_x, +delta_y) / gsd, ~(-1.7, -1.0) px.
+  const testing::CachedProject sim = testing::SimulatedProject(kPreset, kSeed, kCalibImages);
+  const SimulationTruth& truth = sim.truth;
+  constexpr int kTile = 6;
+  ASSERT_EQ(truth.tiles[kTile].image, "tile_r2c0.png");
+  PlaneScene scene = TruthPlaneScene(truth);
+  const Eigen::Vector2d delta_mm(0.25, -0.15);
+  scene.table_pos_mm[kTile] += delta_mm;
+  const Inputs in = InputsOn(sim, scene);
+  const double gsd = in.geometry.grid.gsd_mm;
+  const Eigen::Vector2d expected_px(-delta_mm.x() / gsd, delta_mm.y() / gsd);
+
+  // A prior loose enough to allow it: every overlap finds it within its sigma.
+  const std::vector<OverlapTie> found =
+      FindOverlapTies(in.geometry, in.tiles, {kTile}, in.holes, 0.2, OverlapTieOptions{});
+  ASSERT_EQ(found.size(), 3u);  // r1c0, r1c1, r2c1
+  for (const OverlapTie& tie : found) {
+    ASSERT_TRUE(tie.used) << tie.why;
+    const Eigen::Vector2d error = tie.alignment.shift_px - expected_px;
+    std::printf("%s: shift (%+.3f, %+.3f) px, expected (%+.3f, %+.3f)\n",
+                truth.tiles[tie.tile_a].image.c_str(), tie.alignment.shift_px.x(),
+                tie.alignment.shift_px.y(), expected_px.x(), expected_px.y());
+    EXPECT_LT(error.dot(tie.alignment.covariance_px2.ldlt().solve(error)), 13.8);
+  }
+  // The project's 0.02 mm: 1.9 px is 10 sigma of two tiles' relative prior.
+  const std::vector<OverlapTie> refused = FindOverlapTies(
+      in.geometry, in.tiles, {kTile}, in.holes, truth.table_sigma_mm, OverlapTieOptions{});
+  ASSERT_EQ(refused.size(), 3u);
+  for (const OverlapTie& tie : refused) {
+    std::printf("%s: prior chi2 %.1f, %s\n", truth.tiles[tie.tile_a].image.c_str(), tie.prior_chi2,
+                tie.used ? "used" : tie.why.c_str());
+    EXPECT_FALSE(tie.used);
+    EXPECT_EQ(tie.why, "its shift contradicts the table prior");
+  }
 }
 
 TEST(OverlapTiesSim, RunPlacesTheTileNoMatchHeld) {

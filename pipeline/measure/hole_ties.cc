@@ -10,30 +10,16 @@
 namespace omm {
 namespace {
 
-// One view as a tie observation: the centre's pixel in its tile and the
-// fit's covariance carried there (d q / d mosaic px by central differences
-// over a mosaic pixel: the map is smooth at that scale).
+// One view as a tie observation: the fit's centre and covariance carried
+// into its tile.
 bool TileObservation(const HoleViewInputs& in, const HoleFit& fit, double min_sigma_px,
                      Eigen::Vector2d* q_px, Eigen::Matrix2d* covariance_px2) {
   const OrthoGrid& grid = in.geometry.grid;
   const auto pixel = [&](const Eigen::Vector2d& mosaic_px) {
     return TilePixelOfPartPoint(in.lens, in.scene, *fit.tile, grid.PartFromMosaic(mosaic_px));
   };
-  const Eigen::Vector2d& c = fit.circle.centre_px;
-  const std::optional<Eigen::Vector2d> q = pixel(c);
-  if (!q) return false;
-  Eigen::Matrix2d jacobian;
-  for (int k = 0; k < 2; ++k) {
-    const Eigen::Vector2d step = 0.5 * Eigen::Vector2d::Unit(k);
-    const std::optional<Eigen::Vector2d> plus = pixel(c + step), minus = pixel(c - step);
-    if (!plus || !minus) return false;
-    jacobian.col(k) = *plus - *minus;
-  }
-  *q_px = *q;
-  *covariance_px2 =
-      jacobian * fit.circle.covariance_px2.topLeftCorner<2, 2>() * jacobian.transpose() +
-      min_sigma_px * min_sigma_px * Eigen::Matrix2d::Identity();
-  return true;
+  return CarryToTile(pixel, fit.circle.centre_px, fit.circle.covariance_px2.topLeftCorner<2, 2>(),
+                     min_sigma_px, q_px, covariance_px2);
 }
 
 }  // namespace
@@ -92,21 +78,41 @@ std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<Ti
   return ties;
 }
 
+bool CarryToTile(const std::function<std::optional<Eigen::Vector2d>(const Eigen::Vector2d&)>& pixel,
+                 const Eigen::Vector2d& x, const Eigen::Matrix2d& covariance_mosaic_px2,
+                 double min_sigma_px, Eigen::Vector2d* q_px, Eigen::Matrix2d* covariance_px2) {
+  const std::optional<Eigen::Vector2d> q = pixel(x);
+  if (!q) return false;
+  Eigen::Matrix2d jacobian;
+  for (int k = 0; k < 2; ++k) {
+    const Eigen::Vector2d step = 0.5 * Eigen::Vector2d::Unit(k);
+    const std::optional<Eigen::Vector2d> plus = pixel(x + step), minus = pixel(x - step);
+    if (!plus || !minus) return false;
+    jacobian.col(k) = *plus - *minus;
+  }
+  *q_px = *q;
+  *covariance_px2 = jacobian * covariance_mosaic_px2 * jacobian.transpose() +
+                    min_sigma_px * min_sigma_px * Eigen::Matrix2d::Identity();
+  return true;
+}
+
+void AppendTieTrack(const Eigen::Vector2d& point_mm, const std::vector<int>& tiles,
+                    const std::vector<Eigen::Vector2d>& q_px,
+                    const std::vector<Eigen::Matrix2d>& covariance_px2, PlaneBundleInput* input,
+                    PlaneScene* scene) {
+  const int track = input->num_tracks++;
+  scene->track_xy_mm.conservativeResize(2, track + 1);
+  scene->track_xy_mm.col(track) = point_mm;
+  for (size_t v = 0; v < tiles.size(); ++v) {
+    input->observations.push_back(WhitenedObservation(tiles[v], track, q_px[v], covariance_px2[v],
+                                                      input->observation_sigma_px));
+  }
+}
+
 int AddHoleTieTracks(const std::vector<HoleTie>& ties, PlaneBundleInput* input, PlaneScene* scene) {
   const int first_observation = static_cast<int>(input->observations.size());
-  const int first_track = input->num_tracks;
-  scene->track_xy_mm.conservativeResize(2, first_track + static_cast<int>(ties.size()));
-  for (size_t t = 0; t < ties.size(); ++t) {
-    const HoleTie& tie = ties[t];
-    const int track = first_track + static_cast<int>(t);
-    scene->track_xy_mm.col(track) = tie.centre_mm;
-    for (size_t v = 0; v < tie.tiles.size(); ++v) {
-      const TrackObservation observation = WhitenedObservation(
-          tie.tiles[v], track, tie.q_px[v], tie.covariance_px2[v], input->observation_sigma_px);
-      input->observations.push_back(observation);
-    }
-  }
-  input->num_tracks = first_track + static_cast<int>(ties.size());
+  for (const HoleTie& tie : ties)
+    AppendTieTrack(tie.centre_mm, tie.tiles, tie.q_px, tie.covariance_px2, input, scene);
   return first_observation;
 }
 

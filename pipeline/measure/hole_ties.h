@@ -27,6 +27,8 @@
 // fixes) are uncorrelated.
 #pragma once
 
+#include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -81,6 +83,22 @@ struct HoleTie {
 // used. Pure; throws InputError for invalid options.
 std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<TieHole>& holes,
                                   const HoleTieOptions& options);
+
+// A view's pixel and covariance in its tile: q = pixel(x) for the mosaic
+// position x, and Cov(q) = J C J' + min_sigma_px^2 I, C the covariance of
+// x (mosaic px^2), J = dq/dx by central differences over a mosaic pixel
+// (the map is smooth at that scale). False where `pixel` fails.
+bool CarryToTile(const std::function<std::optional<Eigen::Vector2d>(const Eigen::Vector2d&)>& pixel,
+                 const Eigen::Vector2d& x, const Eigen::Matrix2d& covariance_mosaic_px2,
+                 double min_sigma_px, Eigen::Vector2d* q_px, Eigen::Matrix2d* covariance_px2);
+
+// Appends one track to `input`: the part point seen in tiles[v] at q_px[v]
+// with covariance covariance_px2[v], each observation whitened
+// (WhitenedObservation); its initial value point_mm to scene->track_xy_mm.
+void AppendTieTrack(const Eigen::Vector2d& point_mm, const std::vector<int>& tiles,
+                    const std::vector<Eigen::Vector2d>& q_px,
+                    const std::vector<Eigen::Matrix2d>& covariance_px2, PlaneBundleInput* input,
+                    PlaneScene* scene);
 
 // Appends each tie to `input` as a track (observations weighted by
 // input->observation_sigma_px over their sigma, shaped by their covariance)

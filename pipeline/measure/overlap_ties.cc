@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <Eigen/Cholesky>
 
@@ -12,22 +13,6 @@
 
 namespace omm {
 namespace {
-
-// dq/d(col, row) of tile `tile` at grid position x, central differences of
-// one grid px (the map is smooth over a pixel); false if not covered.
-bool TilePixelJacobian(const OrthoGeometry& geometry, int tile, const Eigen::Vector2d& x,
-                       Eigen::Matrix2d* jacobian) {
-  for (int axis = 0; axis < 2; ++axis) {
-    const Eigen::Vector2d step = Eigen::Vector2d::Unit(axis);
-    Eigen::Vector2d plus, minus;
-    if (!geometry.TilePixel(tile, x.x() + step.x(), x.y() + step.y(), &plus) ||
-        !geometry.TilePixel(tile, x.x() - step.x(), x.y() - step.y(), &minus)) {
-      return false;
-    }
-    jacobian->col(axis) = 0.5 * (plus - minus);
-  }
-  return true;
-}
 
 OverlapTie AlignPair(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles, int tile_a,
                      int tile_b, const std::vector<TieHole>& holes, double table_sigma_mm,
@@ -93,17 +78,20 @@ OverlapTie AlignPair(const OrthoGeometry& geometry, const std::vector<ImageF>& t
     }
   }
   const Eigen::Vector2d x = sum / count + a.origin_px.cast<double>();
-  Eigen::Matrix2d jacobian;
-  if (!geometry.TilePixel(tile_a, x.x(), x.y(), &tie.q_a_px) ||
-      !geometry.TilePixel(tile_b, x.x() + s.x(), x.y() + s.y(), &tie.q_b_px) ||
-      !TilePixelJacobian(geometry, tile_b, x + s, &jacobian)) {
+  const auto pixel_of = [&geometry](int tile) {
+    return [&geometry, tile](const Eigen::Vector2d& mosaic_px) -> std::optional<Eigen::Vector2d> {
+      Eigen::Vector2d q;
+      if (!geometry.TilePixel(tile, mosaic_px.x(), mosaic_px.y(), &q)) return std::nullopt;
+      return q;
+    };
+  };
+  if (!CarryToTile(pixel_of(tile_a), x, Eigen::Matrix2d::Zero(), options.min_sigma_px, &tie.q_a_px,
+                   &tie.covariance_a_px2) ||
+      !CarryToTile(pixel_of(tile_b), x + s, tie.alignment.covariance_px2, options.min_sigma_px,
+                   &tie.q_b_px, &tie.covariance_b_px2)) {
     tie.why = "the overlap's centre is outside the lens table";
     return tie;
   }
-  const Eigen::Matrix2d floor =
-      options.min_sigma_px * options.min_sigma_px * Eigen::Matrix2d::Identity();
-  tie.covariance_a_px2 = floor;
-  tie.covariance_b_px2 = jacobian * tie.alignment.covariance_px2 * jacobian.transpose() + floor;
   tie.point_mm = geometry.grid.PartFromMosaic(x);
   tie.used = true;
   return tie;
@@ -147,21 +135,13 @@ std::vector<OverlapTie> FindOverlapTies(const OrthoGeometry& geometry,
   return ties;
 }
 
-int AddOverlapTieTracks(const std::vector<OverlapTie>& ties, PlaneBundleInput* input,
-                        PlaneScene* scene) {
-  int appended = 0;
+void AddOverlapTieTracks(const std::vector<OverlapTie>& ties, PlaneBundleInput* input,
+                         PlaneScene* scene) {
   for (const OverlapTie& tie : ties) {
     if (!tie.used) continue;
-    const int track = input->num_tracks++;
-    scene->track_xy_mm.conservativeResize(2, track + 1);
-    scene->track_xy_mm.col(track) = tie.point_mm;
-    input->observations.push_back(WhitenedObservation(
-        tie.tile_a, track, tie.q_a_px, tie.covariance_a_px2, input->observation_sigma_px));
-    input->observations.push_back(WhitenedObservation(
-        tie.tile_b, track, tie.q_b_px, tie.covariance_b_px2, input->observation_sigma_px));
-    ++appended;
+    AppendTieTrack(tie.point_mm, {tie.tile_a, tie.tile_b}, {tie.q_a_px, tie.q_b_px},
+                   {tie.covariance_a_px2, tie.covariance_b_px2}, input, scene);
   }
-  return appended;
 }
 
 }  // namespace omm

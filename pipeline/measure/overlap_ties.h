@@ -74,10 +74,8 @@ std::vector<OverlapTie> FindOverlapTies(const OrthoGeometry& geometry,
                                         const std::vector<TieHole>& holes, double table_sigma_mm,
                                         const OverlapTieOptions& options);
 
-// Appends each used tie to `input` as a track of two whitened observations
-// (WhitenedObservation) and its point to scene->track_xy_mm. Returns the
-// number of tracks appended.
-int AddOverlapTieTracks(const std::vector<OverlapTie>& ties, PlaneBundleInput* input,
-                        PlaneScene* scene);
+// Appends each used tie to `input` as a track of two views (AppendTieTrack).
+void AddOverlapTieTracks(const std::vector<OverlapTie>& ties, PlaneBundleInput* input,
+                         PlaneScene* scene);
 
 }  // namespace omm

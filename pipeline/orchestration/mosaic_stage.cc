@@ -301,6 +301,7 @@ ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapT
                                                tie.alignment.covariance_px2(0, 1)},
                             ReportValue::Array{tie.alignment.covariance_px2(1, 0),
                                                tie.alignment.covariance_px2(1, 1)}}}};
+    if (tie.alignment.usable) row.emplace_back("prior_chi2", tie.prior_chi2);
     if (tie.used) {
       ++num_used;
       const double sum_squares =
