@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -24,14 +25,22 @@ struct Pair {
 };
 
 // The two independent rows of [m_j]x (m_j's z is 1) applied to
-// m_i + K (dT (x) m_i): coefficients of vec(K) (column-major, 18) and the
-// right-hand side, so that rows * vec(K) = rhs.
-void PairEquations(const Pair& p, Eigen::Matrix<double, 2, 18>* rows, Eigen::Vector2d* rhs) {
+// m_i + K a: coefficients of vec(K) (column-major) and the right-hand side,
+// so that rows * vec(K) = rhs. kTerms 6: the table moved in two directions,
+// a = dT (x) m_i and K = [B_1 l^T, B_2 l^T]; 3: along one line u only,
+// a = (u . dT) m_i and K = (B u) l^T (`along` is u, read for 3 only).
+template <int kTerms>
+void PairEquations(const Pair& p, const Eigen::Vector2d& along,
+                   Eigen::Matrix<double, 2, 3 * kTerms>* rows, Eigen::Vector2d* rhs) {
   Eigen::Matrix<double, 2, 3> cross;
   cross << 0.0, -1.0, p.m_j.y(), 1.0, 0.0, -p.m_j.x();
-  Eigen::Matrix<double, 6, 1> a;
-  a << p.delta_table_mm.x() * p.m_i, p.delta_table_mm.y() * p.m_i;
-  for (int c = 0; c < 6; ++c) {
+  Eigen::Matrix<double, kTerms, 1> a;
+  if constexpr (kTerms == 6) {
+    a << p.delta_table_mm.x() * p.m_i, p.delta_table_mm.y() * p.m_i;
+  } else {
+    a = along.dot(p.delta_table_mm) * p.m_i;
+  }
+  for (int c = 0; c < kTerms; ++c) {
     for (int row = 0; row < 3; ++row) rows->col(3 * c + row) = a[c] * cross.col(row);
   }
   *rhs = -cross * p.m_i;
@@ -42,21 +51,138 @@ void PairEquations(const Pair& p, Eigen::Matrix<double, 2, 18>* rows, Eigen::Vec
 // reads), element by element: as an 18 x 2 by 2 x 18 product each pair went
 // through Eigen's blocked GEMM, half of the seed's time, for the same
 // two-term sums.
-Eigen::Matrix<double, 18, 1> SolveK(const std::vector<Pair>& pairs, const std::vector<bool>& keep) {
-  Eigen::Matrix<double, 18, 18> normal = Eigen::Matrix<double, 18, 18>::Zero();
-  Eigen::Matrix<double, 18, 1> rhs_sum = Eigen::Matrix<double, 18, 1>::Zero();
+template <int kTerms>
+Eigen::Matrix<double, 3 * kTerms, 1> SolveK(const std::vector<Pair>& pairs,
+                                            const std::vector<bool>& keep,
+                                            const Eigen::Vector2d& along) {
+  constexpr int kN = 3 * kTerms;
+  Eigen::Matrix<double, kN, kN> normal = Eigen::Matrix<double, kN, kN>::Zero();
+  Eigen::Matrix<double, kN, 1> rhs_sum = Eigen::Matrix<double, kN, 1>::Zero();
   for (size_t n = 0; n < pairs.size(); ++n) {
     if (!keep[n]) continue;
-    Eigen::Matrix<double, 2, 18> rows;
+    Eigen::Matrix<double, 2, kN> rows;
     Eigen::Vector2d rhs;
-    PairEquations(pairs[n], &rows, &rhs);
-    for (int j = 0; j < 18; ++j) {
-      for (int i = j; i < 18; ++i)
+    PairEquations<kTerms>(pairs[n], along, &rows, &rhs);
+    for (int j = 0; j < kN; ++j) {
+      for (int i = j; i < kN; ++i)
         normal(i, j) += rows(0, i) * rows(0, j) + rows(1, i) * rows(1, j);
     }
     rhs_sum += rows.transpose() * rhs;
   }
   return normal.ldlt().solve(rhs_sum);
+}
+
+// K by least squares, once more without the gross outliers (pairs with an
+// algebraic residual above 5x the median).
+template <int kTerms>
+Eigen::Matrix<double, 3 * kTerms, 1> SolveKRobust(const std::vector<Pair>& pairs,
+                                                  const Eigen::Vector2d& along) {
+  std::vector<bool> keep(pairs.size(), true);
+  Eigen::Matrix<double, 3 * kTerms, 1> vec_k = SolveK<kTerms>(pairs, keep, along);
+  std::vector<double> errors(pairs.size());
+  for (size_t n = 0; n < pairs.size(); ++n) {
+    Eigen::Matrix<double, 2, 3 * kTerms> rows;
+    Eigen::Vector2d rhs;
+    PairEquations<kTerms>(pairs[n], along, &rows, &rhs);
+    errors[n] = (rows * vec_k - rhs).norm();
+  }
+  const double threshold = 5.0 * Median(errors);
+  for (size_t n = 0; n < pairs.size(); ++n) keep[n] = errors[n] <= threshold;
+  return SolveK<kTerms>(pairs, keep, along);
+}
+
+// The unit direction of the line the commanded table motion lies on, when
+// it moved along one line only (a strip of tiles: the spread across it under
+// 1 % of the spread along it), else nullopt.
+std::optional<Eigen::Vector2d> SingleMotionDirection(const std::vector<Pair>& pairs) {
+  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+  for (const Pair& p : pairs) scatter += p.delta_table_mm * p.delta_table_mm.transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(scatter);
+  if (eigen.eigenvalues()(0) > 1e-4 * eigen.eigenvalues()(1)) return std::nullopt;
+  return eigen.eigenvectors().col(1);
+}
+
+// The plane's rotation R and l = n / delta from K, with the table moving
+// along the one line u (a strip): K = b l^T, b = B u the line's direction in
+// the camera frame. The motion cannot tell the part frame's handedness, so
+// the normal is taken as Z up, towards the camera (plane_scene.h's part
+// frame): n = -l / |l|; then r1 = u_x b - u_y (n x b), r2 = u_y b + u_x
+// (n x b). Returns b's angle out of the plane, deg (~0 for consistent
+// data); nullopt if the motion is not that of a plane seen from above.
+std::optional<double> RotationFromStrip(const std::vector<Pair>& pairs, const Eigen::Vector2d& u,
+                                        Eigen::Matrix3d* cam_from_part, Eigen::Vector3d* l) {
+  // Each pair oriented to move by s = u . dT > 0. Where every pair moved by
+  // the same s, m_j ~ (I + s K) m_i fixes I + s K only up to scale: K is
+  // known up to K -> (K - mu I) / (1 + s mu), any mu. The true K = b l^T
+  // has the double eigenvalue 0, so mu is the solution's double eigenvalue
+  // (~0 where the steps differ).
+  std::vector<Pair> oriented = pairs;
+  double mean_step = 0.0;
+  for (Pair& p : oriented) {
+    if (u.dot(p.delta_table_mm) < 0.0) p = {p.m_j, p.m_i, -p.delta_table_mm};
+    mean_step += u.dot(p.delta_table_mm) / static_cast<double>(oriented.size());
+  }
+  const Eigen::Matrix<double, 9, 1> vec_k = SolveKRobust<3>(oriented, u);
+  const Eigen::Map<const Eigen::Matrix3d> k_ls(vec_k.data());
+  const Eigen::Vector3cd mu = Eigen::EigenSolver<Eigen::Matrix3d>(k_ls, false).eigenvalues();
+  int apart = 0;  // the eigenvalue that is not one of the closest two
+  for (int e = 1; e < 3; ++e) {
+    if (std::abs(mu((e + 1) % 3) - mu((e + 2) % 3)) <
+        std::abs(mu((apart + 1) % 3) - mu((apart + 2) % 3))) {
+      apart = e;
+    }
+  }
+  const double double_mu = 0.5 * (mu((apart + 1) % 3) + mu((apart + 2) % 3)).real();
+  const Eigen::Matrix3d k_mat =
+      (k_ls - double_mu * Eigen::Matrix3d::Identity()) / (1.0 + mean_step * double_mu);
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(k_mat, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Vector3d b = svd.matrixU().col(0);
+  *l = svd.singularValues()[0] * svd.matrixV().col(0);
+  if (l->z() < 0.0) {
+    b = -b;
+    *l = -*l;
+  }
+  const Eigen::Vector3d normal = -l->normalized();
+  const double out_of_plane = std::abs(b.dot(normal));
+  if (out_of_plane > 0.5 || std::abs(normal.z()) < 0.5) return std::nullopt;
+  b = (b - b.dot(normal) * normal).normalized();
+  const Eigen::Vector3d b_perp = normal.cross(b);
+  *cam_from_part << u.x() * b - u.y() * b_perp, u.y() * b + u.x() * b_perp, normal;
+  return Deg(std::asin(out_of_plane));
+}
+
+// The same with the table moving in two directions: K = [B_1 l^T, B_2 l^T]
+// rearranged is vec(B) l^T, rank 1; its best rank-1 approximation gives B
+// (scale |B_1| = |B_2| = 1) and l (sign: l_3 > 0, the points in front); R is
+// the rotation nearest [B, B_1 x B_2]. Returns the angle between l and n,
+// deg.
+std::optional<double> RotationFromGrid(const std::vector<Pair>& pairs,
+                                       Eigen::Matrix3d* cam_from_part, Eigen::Vector3d* l) {
+  const Eigen::Matrix<double, 18, 1> vec_k = SolveKRobust<6>(pairs, Eigen::Vector2d::Zero());
+  Eigen::Matrix<double, 6, 3> rearranged;
+  for (int a = 0; a < 2; ++a) {
+    for (int b = 0; b < 3; ++b) {
+      for (int row = 0; row < 3; ++row) rearranged(3 * a + row, b) = vec_k[3 * (3 * a + b) + row];
+    }
+  }
+  const Eigen::JacobiSVD<Eigen::Matrix<double, 6, 3>> svd(
+      rearranged, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix<double, 6, 1> vec_b = std::sqrt(2.0) * svd.matrixU().col(0);
+  *l = svd.singularValues()[0] / std::sqrt(2.0) * svd.matrixV().col(0);
+  if (l->z() < 0.0) {
+    vec_b = -vec_b;
+    *l = -*l;
+  }
+  Eigen::Matrix<double, 3, 2> b_mat;
+  b_mat << vec_b.head<3>(), vec_b.tail<3>();
+  const Eigen::JacobiSVD<Eigen::MatrixXd> polar(Eigen::MatrixXd(b_mat),
+                                                 Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const Eigen::Matrix<double, 3, 2> r12 = polar.matrixU() * polar.matrixV().transpose();
+  *cam_from_part << r12, r12.col(0).cross(r12.col(1));
+  const Eigen::Vector3d normal = cam_from_part->col(2);
+  const double n_dot_l = normal.dot(*l);
+  if (!(std::abs(n_dot_l) > 0.5 * l->norm()) || std::abs(normal.z()) < 0.5) return std::nullopt;
+  return Deg(std::acos(std::min(1.0, std::abs(n_dot_l) / l->norm())));
 }
 
 // Pixel residual RMS of the scene over all used observations.
@@ -125,52 +251,21 @@ PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInpu
     return summary;
   }
 
-  // K by least squares, once more without the gross outliers.
-  std::vector<bool> keep(pairs.size(), true);
-  Eigen::Matrix<double, 18, 1> vec_k = SolveK(pairs, keep);
-  std::vector<double> errors(pairs.size());
-  for (size_t n = 0; n < pairs.size(); ++n) {
-    Eigen::Matrix<double, 2, 18> rows;
-    Eigen::Vector2d rhs;
-    PairEquations(pairs[n], &rows, &rhs);
-    errors[n] = (rows * vec_k - rhs).norm();
-  }
-  const double threshold = 5.0 * Median(errors);
-  for (size_t n = 0; n < pairs.size(); ++n) keep[n] = errors[n] <= threshold;
-  vec_k = SolveK(pairs, keep);
-
-  // Split K = [B_1 l^T, B_2 l^T]: rearranged, vec(B) l^T is rank 1.
-  Eigen::Matrix<double, 6, 3> rearranged;
-  for (int a = 0; a < 2; ++a) {
-    for (int b = 0; b < 3; ++b) {
-      for (int row = 0; row < 3; ++row) rearranged(3 * a + row, b) = vec_k[3 * (3 * a + b) + row];
-    }
-  }
-  const Eigen::JacobiSVD<Eigen::Matrix<double, 6, 3>> svd(
-      rearranged, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix<double, 6, 1> vec_b = std::sqrt(2.0) * svd.matrixU().col(0);
-  Eigen::Vector3d l = svd.singularValues()[0] / std::sqrt(2.0) * svd.matrixV().col(0);
-  if (l.z() < 0.0) {
-    vec_b = -vec_b;
-    l = -l;
-  }
-  Eigen::Matrix<double, 3, 2> b_mat;
-  b_mat << vec_b.head<3>(), vec_b.tail<3>();
-  const Eigen::JacobiSVD<Eigen::MatrixXd> polar(Eigen::MatrixXd(b_mat),
-                                                 Eigen::ComputeThinU | Eigen::ComputeThinV);
-  const Eigen::Matrix<double, 3, 2> r12 = polar.matrixU() * polar.matrixV().transpose();
   Eigen::Matrix3d cam_from_part;
-  cam_from_part << r12, r12.col(0).cross(r12.col(1));
-  const Eigen::Vector3d normal = cam_from_part.col(2);
-  const double n_dot_l = normal.dot(l);
-  if (!(std::abs(n_dot_l) > 0.5 * l.norm()) || std::abs(normal.z()) < 0.5) {
+  Eigen::Vector3d l;
+  const std::optional<Eigen::Vector2d> strip = SingleMotionDirection(pairs);
+  const std::optional<double> disagreement =
+      strip ? RotationFromStrip(pairs, *strip, &cam_from_part, &l)
+            : RotationFromGrid(pairs, &cam_from_part, &l);
+  if (!disagreement) {
     summary.why_failed = "the tile-to-tile motion is not that of a plane seen from above";
     return summary;
   }
+  const Eigen::Vector3d normal = cam_from_part.col(2);
+  const double n_dot_l = normal.dot(l);
   const double delta = 1.0 / n_dot_l;
   summary.distance_mm = std::abs(delta);
-  summary.normal_disagreement_deg =
-      Deg(std::acos(std::min(1.0, std::abs(n_dot_l) / l.norm())));
+  summary.normal_disagreement_deg = *disagreement;
 
   const Eigen::AngleAxisd angle_axis(cam_from_part);
   scene->cam_from_part_r = angle_axis.angle() * angle_axis.axis();

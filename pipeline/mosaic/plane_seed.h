@@ -15,7 +15,12 @@
 // median), then split into B and l by the best rank-1 approximation of its
 // rearrangement vec(B) l^T, the scale fixed by |B_1| = |B_2| = 1 (B's columns
 // are a rotation's) and the sign by l_3 > 0 (points in front). R is the
-// rotation nearest [B, B_1 x B_2], delta = 1 / (n . l), t = (0, 0, delta / n_z)
+// rotation nearest [B, B_1 x B_2]. A strip (the table moved along one line
+// u only) sees only b l^T, b = B u, 9 entries, solved alike (where all steps
+// are equal, up to the family the scale of I + s K leaves: plane_seed.cc);
+// then n = -l / |l| (the part frame's Z up, towards the camera: one motion
+// cannot tell the frame's handedness) and r1, r2 from b and n. In both,
+// delta = 1 / (n . l), t = (0, 0, delta / n_z)
 // (the gauge kOriginOnOpticalAxis). Each track's P is the mean over its tiles
 // of the ray's intersection with the plane, minus the commanded T_i; a
 // plate's pose is the 2-D Procrustes fit of its marks' intersections (height
@@ -37,13 +42,14 @@ struct PlaneSeedSummary {
   double rms_px = 0.0;     // reprojection RMS of the seeded scene
   double distance_mm = 0.0;  // |delta|: the camera centre's distance to the plane
   double tilt_deg = 0.0;
-  // Angle between l and n, deg: ~0 for consistent data, a quality check.
+  // Angle between l and n (a strip: of b out of the plane), deg: ~0 for
+  // consistent data, a quality check.
   double normal_disagreement_deg = 0.0;
 };
 
 // Fills *scene with initial values for SolvePlaneBundle (intrinsics: the
-// camera's). Needs tracks seen in >= 2 tiles whose table positions differ in
-// two directions. Failures are reported in the summary (scene then unusable).
+// camera's). Needs tracks seen in >= 2 tiles at different table positions.
+// Failures are reported in the summary (scene then unusable).
 PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInput& input,
                                 PlaneScene* scene);
 

@@ -60,9 +60,12 @@ SyntheticPlane MakeSyntheticPlane(const SyntheticPlaneOptions& options) {
   std::normal_distribution<double> normal(0.0, 1.0);
   s.input.table_sigma_mm = options.table_sigma_mm;
   s.input.observation_sigma_px = options.observation_sigma_px;
-  for (int iy = -1; iy <= 1; ++iy) {
-    for (int ix = -1; ix <= 1; ++ix) {
-      const Eigen::Vector2d commanded(ix * options.step_x_mm, iy * options.step_y_mm);
+  const Eigen::Rotation2Dd grid_turn(Rad(options.grid_angle_deg));
+  for (int row = 0; row < options.num_rows; ++row) {
+    for (int col = 0; col < options.num_cols; ++col) {
+      const Eigen::Vector2d commanded =
+          grid_turn * Eigen::Vector2d((col - 0.5 * (options.num_cols - 1)) * options.step_x_mm,
+                                      (row - 0.5 * (options.num_rows - 1)) * options.step_y_mm);
       s.input.commanded_table_pos_mm.push_back(commanded);
       const Eigen::Vector2d error(normal(noise_rng), normal(noise_rng));
       s.truth.table_pos_mm.push_back(commanded / (1.0 + options.table_scale_error) +
@@ -73,12 +76,15 @@ SyntheticPlane MakeSyntheticPlane(const SyntheticPlaneOptions& options) {
 
   // Tracks: uniform part points kept if seen in >= 2 tiles.
   std::mt19937_64 scene_rng(options.scene_seed);
-  const double half_x = options.step_x_mm + 0.6 * options.distance_mm * 1600 / 2667.0;
-  const double half_y = options.step_y_mm + 0.6 * options.distance_mm * 1200 / 2667.0;
+  const double half_x =
+      0.5 * (options.num_cols - 1) * options.step_x_mm + 0.6 * options.distance_mm * 1600 / 2667.0;
+  const double half_y =
+      0.5 * (options.num_rows - 1) * options.step_y_mm + 0.6 * options.distance_mm * 1200 / 2667.0;
   std::uniform_real_distribution<double> ux(-half_x, half_x), uy(-half_y, half_y);
   std::vector<Eigen::Vector2d> points;
   while (static_cast<int>(points.size()) < options.num_tracks) {
-    const Eigen::Vector3d p(ux(scene_rng), uy(scene_rng), 0.0);
+    const Eigen::Vector2d xy = grid_turn * Eigen::Vector2d(ux(scene_rng), uy(scene_rng));
+    const Eigen::Vector3d p(xy.x(), xy.y(), 0.0);
     std::vector<TrackObservation> seen;
     for (int i = 0; i < num_tiles; ++i) {
       const Eigen::Vector2d q = ProjectPartPoint(s.camera, s.truth, p, s.truth.table_pos_mm[i]);

@@ -21,8 +21,13 @@ struct SyntheticPlaneOptions {
   double tilt_deg = 3.0;                  // plane tilt
   double tilt_azimuth_deg = 60.0;         // direction of the tilt axis in the plane
   double distance_mm = 390.0;             // camera centre to the plane, along z
-  double step_x_mm = 140.0;               // 3 x 3 grid: T = (ix step_x, iy step_y), ix, iy in -1..1
+  // Tiles on a num_cols x num_rows grid about the origin, T = (ix step_x,
+  // iy step_y) with ix in -(num_cols - 1) / 2 .. (num_cols - 1) / 2 (iy
+  // alike), turned by grid_angle_deg about Z. One row or column: a strip.
+  int num_cols = 3, num_rows = 3;
+  double step_x_mm = 140.0;
   double step_y_mm = 105.0;
+  double grid_angle_deg = 0.0;
   double table_sigma_mm = 0.02;  // actual = commanded + N(0, sigma) per axis
   // Commanded = actual * (1 + table_scale_error): a systematic encoder scale.
   double table_scale_error = 0.0;
