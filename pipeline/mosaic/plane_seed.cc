@@ -114,27 +114,24 @@ std::optional<double> RotationFromStrip(const std::vector<Pair>& pairs, const Ei
   // Each pair oriented to move by s = u . dT > 0. Where every pair moved by
   // the same s, m_j ~ (I + s K) m_i fixes I + s K only up to scale: K is
   // known up to K -> (K - mu I) / (1 + s mu), any mu. The true K = b l^T
-  // has the double eigenvalue 0, so mu is the solution's double eigenvalue
-  // (~0 where the steps differ).
+  // has the trace b . l = 0 (the motion lies in the plane), so mu is the
+  // solution's trace / 3 (~0 where the steps differ). (Not its eigenvalues:
+  // b l^T with b . l = 0 is nilpotent, and a nilpotent matrix's eigenvalues
+  // move by the square root of a perturbation.) s is the pairs' mean step
+  // weighted as the least squares weigh them, by s^2.
   std::vector<Pair> oriented = pairs;
-  double mean_step = 0.0;
+  double sum_s2 = 0.0, sum_s3 = 0.0;
   for (Pair& p : oriented) {
     if (u.dot(p.delta_table_mm) < 0.0) p = {p.m_j, p.m_i, -p.delta_table_mm};
-    mean_step += u.dot(p.delta_table_mm) / static_cast<double>(oriented.size());
+    const double step = u.dot(p.delta_table_mm);
+    sum_s2 += step * step;
+    sum_s3 += step * step * step;
   }
+  const double mean_step = sum_s3 / sum_s2;
   const Eigen::Matrix<double, 9, 1> vec_k = SolveKRobust<3>(oriented, u);
   const Eigen::Map<const Eigen::Matrix3d> k_ls(vec_k.data());
-  const Eigen::Vector3cd mu = Eigen::EigenSolver<Eigen::Matrix3d>(k_ls, false).eigenvalues();
-  int apart = 0;  // the eigenvalue that is not one of the closest two
-  for (int e = 1; e < 3; ++e) {
-    if (std::abs(mu((e + 1) % 3) - mu((e + 2) % 3)) <
-        std::abs(mu((apart + 1) % 3) - mu((apart + 2) % 3))) {
-      apart = e;
-    }
-  }
-  const double double_mu = 0.5 * (mu((apart + 1) % 3) + mu((apart + 2) % 3)).real();
-  const Eigen::Matrix3d k_mat =
-      (k_ls - double_mu * Eigen::Matrix3d::Identity()) / (1.0 + mean_step * double_mu);
+  const double mu = k_ls.trace() / 3.0;
+  const Eigen::Matrix3d k_mat = (k_ls - mu * Eigen::Matrix3d::Identity()) / (1.0 + mean_step * mu);
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(k_mat, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Vector3d b = svd.matrixU().col(0);
   *l = svd.singularValues()[0] * svd.matrixV().col(0);
@@ -245,7 +242,15 @@ PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInpu
   for (const std::vector<int>& obs : obs_of_track) {
     add_pairs(obs, [&](int n) { return input.observations[n].tile; });
   }
+  // A tile taken twice at one place: its pairs say nothing of K, and their
+  // tiny residuals would lower the outlier threshold.
+  const size_t num_all_pairs = pairs.size();
+  std::erase_if(pairs, [](const Pair& p) { return p.delta_table_mm.norm() == 0.0; });
   summary.num_pairs = static_cast<int>(pairs.size());
+  if (summary.num_pairs == 0 && num_all_pairs > 0) {
+    summary.why_failed = "the tiles that overlap were all taken at one table position";
+    return summary;
+  }
   if (summary.num_pairs < kMinPairs) {
     summary.why_failed = "fewer than " + std::to_string(kMinPairs) + " track pairs";
     return summary;

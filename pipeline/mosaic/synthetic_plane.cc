@@ -72,6 +72,13 @@ SyntheticPlane MakeSyntheticPlane(const SyntheticPlaneOptions& options) {
                                      options.table_sigma_mm * error);
     }
   }
+  if (options.repeated_tile >= 0) {
+    const Eigen::Vector2d commanded = s.input.commanded_table_pos_mm[options.repeated_tile];
+    s.input.commanded_table_pos_mm.push_back(commanded);
+    const Eigen::Vector2d error(normal(noise_rng), normal(noise_rng));
+    s.truth.table_pos_mm.push_back(commanded / (1.0 + options.table_scale_error) +
+                                   options.table_sigma_mm * error);
+  }
   const int num_tiles = static_cast<int>(s.truth.table_pos_mm.size());
 
   // Tracks: uniform part points kept if seen in >= 2 tiles.

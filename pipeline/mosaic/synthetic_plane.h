@@ -34,6 +34,7 @@ struct SyntheticPlaneOptions {
   double observation_sigma_px = 0.07;
   int num_tracks = 1500;  // tracks seen in >= 2 tiles
   int empty_tile = -1;    // if >= 0, that tile's observations are dropped
+  int repeated_tile = -1;  // if >= 0, that tile is taken once more (last), same commanded place
   bool with_plate = false;  // a 7 x 7, 12.5 mm caltab lying on the part
   double plate_height_mm = 3.0;
 };
