@@ -604,6 +604,13 @@ Project LoadProject(const fs::path& dir_in) {
     if (project.tiles.size() < 2) {
       throw InputError(table_file.string(), "a mosaic needs at least 2 tiles");
     }
+    if (std::all_of(project.tiles.begin(), project.tiles.end(), [&](const TilePosition& tile) {
+          return tile.table_pos_mm == project.tiles.front().table_pos_mm;
+        })) {
+      throw InputError(table_file.string(),
+                       "every tile is at one table position: a mosaic needs the table to move "
+                       "between tiles (its motion is the mosaic's scale)");
+    }
     for (size_t i = 0; i < project.features.size(); ++i) {
       const FeatureSpec& feature = project.features[i];
       if (positions.count(feature.image) == 0) {

@@ -327,6 +327,13 @@ TEST_F(ProjectReaderTest, TableRowWithTwoBadValuesNamesTheFirst) {
   ExpectError({"table.csv:3", "column 'x_mm'", "got 'b'"});
 }
 
+TEST_F(ProjectReaderTest, TableWithEveryTileAtOnePlace) {
+  Replace("table.csv", "Part_02.png,108.6,0", "Part_02.png,0,0");
+  Replace("table.csv", "Part_03.png,0,80.25", "Part_03.png,0,0");
+  Replace("table.csv", "Part_04.png,108.6,80.25", "Part_04.png,0,0");
+  ExpectError({"table.csv", "every tile is at one table position"});
+}
+
 TEST_F(ProjectReaderTest, TableDuplicateTile) {
   Replace("table.csv", "Part_02.png,108.6,0", "Part_01.png,108.6,0");
   ExpectError({"table.csv:3", "'Part_01.png' is listed twice"});

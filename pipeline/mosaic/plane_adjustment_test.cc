@@ -175,6 +175,20 @@ TEST(PlaneAdjustment, AStripOfTilesSeedsAndSolves) {
   }
 }
 
+// Two tiles taken at one table position show no motion: nothing to seed
+// the plane from, said by name.
+TEST(PlaneAdjustment, TilesAtOneTablePositionFailTheSeedByName) {
+  SyntheticPlaneOptions options;
+  options.num_cols = options.num_rows = 1;
+  options.repeated_tile = 0;
+  options.num_tracks = 300;
+  const PlaneAdjustment a = Adjust(MakeSyntheticPlane(options));
+  EXPECT_FALSE(a.seed.ok);
+  EXPECT_NE(a.seed.why_failed.find("all taken at one table position"), std::string::npos)
+      << a.seed.why_failed;
+  EXPECT_FALSE(a.summary.usable);
+}
+
 // (a) The images pin every direction of the table positions except the four
 // the table prior alone holds, so adjusted - actual must be the projection of
 // (commanded - actual) onto those four modes, up to the images' own noise.
