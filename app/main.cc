@@ -1,6 +1,7 @@
 // `omm`: on-machine vision metrology from the command line. See README.md.
 #include <malloc.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -167,6 +168,24 @@ int main(int argc, char** argv) {
       ->add_option("--calib-images", simulation.num_calib_images,
                    "calibration images (3..100: one partly outside the image, one without "
                    "the plate, the rest full)")
+      ->capture_default_str();
+  simulate
+      ->add_option_function<std::string>(
+          "--grid",
+          [&simulation](const std::string& grid) {
+            int cols = 0, rows = 0;
+            char x = 0, rest = 0;
+            if (std::sscanf(grid.c_str(), "%d%c%d%c", &cols, &x, &rows, &rest) != 3 || x != 'x') {
+              throw CLI::ValidationError("--grid", "expected COLSxROWS, e.g. 3x3, got '" + grid + "'");
+            }
+            simulation.grid_cols = cols;
+            simulation.grid_rows = rows;
+          },
+          "tiles per row x rows, COLSxROWS (default 3x3; 4x1 is a strip along the machine's X)")
+      ->type_name("COLSxROWS");
+  simulate
+      ->add_option("--table-sigma", simulation.table_sigma_mm,
+                   "1-sigma error of each table position, mm per axis (also table.sigma_mm)")
       ->capture_default_str();
   simulate->add_option("--truth", truth, "where to write the truth JSON");
 

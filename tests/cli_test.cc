@@ -67,6 +67,16 @@ TEST_F(CliTest, SimulateRefusesTooFewCalibImagesBeforeWriting) {
   EXPECT_FALSE(fs::exists(dir_.path() / "sim"));
 }
 
+TEST_F(CliTest, SimulateRefusesABadGridBeforeWriting) {
+  for (const char* grid : {"3y3", "1x1", "7x2", "3x"}) {
+    const auto result =
+        testing::RunOmm("simulate " + Quoted(dir_.path() / "sim") + " --grid " + grid);
+    EXPECT_EQ(result.exit_code, 2) << grid << ": " << result.output;
+    EXPECT_THAT(result.output, HasSubstr("grid")) << grid;
+    EXPECT_FALSE(fs::exists(dir_.path() / "sim")) << grid;
+  }
+}
+
 TEST_F(CliTest, MissingProjectExitsTwo) {
   const auto result = testing::RunOmm("run " + Quoted(dir_.path() / "nowhere"));
   EXPECT_EQ(result.exit_code, 2);

@@ -36,12 +36,16 @@ class FileLock {
 }  // namespace
 
 CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
-                               std::optional<int> num_calib_images, bool plate_on_part) {
+                               std::optional<int> num_calib_images, bool plate_on_part,
+                               TileGrid grid) {
   const fs::path cache = OMM_SIM_CACHE_DIR;
   fs::create_directories(cache);
-  const std::string name = preset + "-" + std::to_string(seed) +
-                           (num_calib_images ? "-calib" + std::to_string(*num_calib_images) : "") +
-                           (plate_on_part ? "-plate" : "");
+  const bool grid3 = grid.cols == 3 && grid.rows == 3;
+  const std::string name =
+      preset + "-" + std::to_string(seed) +
+      (num_calib_images ? "-calib" + std::to_string(*num_calib_images) : "") +
+      (plate_on_part ? "-plate" : "") +
+      (grid3 ? "" : "-g" + std::to_string(grid.cols) + "x" + std::to_string(grid.rows));
   const fs::path final_dir = cache / name;
   {
     FileLock lock(cache / (name + ".lock"));
@@ -54,6 +58,8 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
       options.seed = seed;
       if (num_calib_images) options.num_calib_images = *num_calib_images;
       options.plate_on_part = plate_on_part;
+      options.grid_cols = grid.cols;
+      options.grid_rows = grid.rows;
       try {
         SimulateProjectDirectory(options, temp / "project", temp / "truth.json", {});
       } catch (const std::exception& e) {

@@ -38,7 +38,6 @@ constexpr double kNominalFocalMm = 12.0;
 constexpr int kWidthPx = 1600;
 constexpr int kHeightPx = 1200;
 constexpr double kWorkingDistanceMm = 390.0;
-constexpr double kTableSigmaMm = 0.02;
 constexpr double kPlateSizeMm = 120.0;  // caltab plate with a 10 mm white margin
 constexpr double kMosaicGsdMm = 0.15;
 constexpr double kCmmSigmaMm = 0.001;
@@ -669,6 +668,11 @@ std::string SimulationOptions::Check() const {
   if (num_calib_images < 3 || num_calib_images > 100) {
     return "num_calib_images must be in 3..100 (one partial, one without the plate, the rest full)";
   }
+  if (grid_cols < 1 || grid_cols > 6 || grid_rows < 1 || grid_rows > 6 ||
+      grid_cols * grid_rows < 2) {
+    return "the grid must be 1..6 tiles per row by 1..6 rows, 2 tiles or more";
+  }
+  if (!(table_sigma_mm > 0.0 && table_sigma_mm <= 1.0)) return "table_sigma_mm must be in (0, 1]";
   if (supersampling < 2 || supersampling > 16) return "supersampling must be in 2..16";
   if (edge_supersampling < 1 || edge_supersampling > 64)
     return "edge_supersampling must be in 1..64";
@@ -703,7 +707,7 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   truth.preset = options.preset;
   truth.seed = options.seed;
   truth.plate_size_mm = kPlateSizeMm;
-  truth.table_sigma_mm = kTableSigmaMm;
+  truth.table_sigma_mm = options.table_sigma_mm;
   plan.texture_seed = SimRandom(options.seed, kTextureStream).Next();
 
   SimRandom camera_random(options.seed, kCameraStream);
@@ -732,15 +736,29 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   truth.part_max_mm << std::round(part_random.Uniform(430, 470)),
       std::round(part_random.Uniform(430, 470));
   truth.part_thickness_mm = std::round(part_random.Uniform(8, 16));
-  const Eigen::Vector2d part_centre = 0.5 * (truth.part_min_mm + truth.part_max_mm);
   const Eigen::Vector2d table_centre(std::round(part_random.Uniform(150, 300)),
                                      std::round(part_random.Uniform(80, 200)));
   const double step_x =
       0.5 * std::round(2.0 * (1.0 - part_random.Uniform(0.35, 0.45)) * footprint0.extent_x_mm);
   const double step_y =
       0.5 * std::round(2.0 * (1.0 - part_random.Uniform(0.35, 0.45)) * footprint0.extent_y_mm);
-  // Tile (1, 1) looks at the part centre (within 8 mm): move the camera so
-  // that its axis meets the machine plane at part centre + table centre.
+  // Another grid than 3 x 3: the part grows or shrinks with the grid's
+  // reach (footprint plus steps), its margin kept.
+  const auto scaled_extent = [](double extent_3x3, double footprint, double step, int tiles) {
+    return std::round(extent_3x3 * (footprint + (tiles - 1) * step) / (footprint + 2 * step));
+  };
+  if (options.grid_cols != 3) {
+    truth.part_max_mm.x() =
+        scaled_extent(truth.part_max_mm.x(), footprint0.extent_x_mm, step_x, options.grid_cols);
+  }
+  if (options.grid_rows != 3) {
+    truth.part_max_mm.y() =
+        scaled_extent(truth.part_max_mm.y(), footprint0.extent_y_mm, step_y, options.grid_rows);
+  }
+  const Eigen::Vector2d part_centre = 0.5 * (truth.part_min_mm + truth.part_max_mm);
+  // The grid's middle looks at the part centre (within 8 mm): move the
+  // camera so that its axis meets the machine plane at part centre + table
+  // centre.
   const Eigen::Vector2d axis_mm =
       part_centre + table_centre +
       Eigen::Vector2d(part_random.Uniform(-8, 8), part_random.Uniform(-8, 8));
@@ -751,17 +769,19 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   footprint.centre_mm += shift;
 
   SimRandom table_random(options.seed, kTableStream);
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) {
+  for (int r = 0; r < options.grid_rows; ++r) {
+    for (int c = 0; c < options.grid_cols; ++c) {
       TileTruth tile;
       char name[32];
       std::snprintf(name, sizeof(name), "tile_r%dc%d.png", r, c);
       tile.image = name;
       tile.grid_row = r;
       tile.grid_col = c;
-      tile.commanded_mm = table_centre + Eigen::Vector2d((c - 1) * step_x, (r - 1) * step_y);
-      tile.actual_mm = tile.commanded_mm + Eigen::Vector2d(table_random.Normal(0.0, kTableSigmaMm),
-                                                           table_random.Normal(0.0, kTableSigmaMm));
+      tile.commanded_mm = table_centre + Eigen::Vector2d((c - 0.5 * (options.grid_cols - 1)) * step_x,
+                                                         (r - 0.5 * (options.grid_rows - 1)) * step_y);
+      tile.actual_mm =
+          tile.commanded_mm + Eigen::Vector2d(table_random.Normal(0.0, options.table_sigma_mm),
+                                              table_random.Normal(0.0, options.table_sigma_mm));
       tile.exposure.psf_sigma_px = truth.camera.psf_sigma_px;
       tile.exposure.vignetting = vignetting;
       tile.exposure.gain = table_random.Uniform(0.95, 1.05);
@@ -770,10 +790,11 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   }
   if (plan.preset.exposure_variation) {
     // Gains spread over 0.6 .. 1.15 in a random order, vignetting 0.1 .. 0.45.
+    const int n = static_cast<int>(truth.tiles.size());
     std::vector<double> gains;
-    for (int i = 0; i < 9; ++i) gains.push_back(0.6 + 0.55 * i / 8.0);
-    for (int i = 8; i > 0; --i) std::swap(gains[i], gains[table_random.UniformInt(i + 1)]);
-    for (int i = 0; i < 9; ++i) {
+    for (int i = 0; i < n; ++i) gains.push_back(0.6 + 0.55 * i / (n - 1));
+    for (int i = n - 1; i > 0; --i) std::swap(gains[i], gains[table_random.UniformInt(i + 1)]);
+    for (int i = 0; i < n; ++i) {
       truth.tiles[i].exposure.gain = gains[i];
       truth.tiles[i].exposure.vignetting = table_random.Uniform(0.1, 0.45);
     }
@@ -794,7 +815,7 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   // has to find out that OPENCV8 is not enough.
   if (!plan.preset.splined_truth) project.camera.lens_model = truth.camera.model.lens_model;
   project.board = truth.board;
-  project.table_sigma_mm = kTableSigmaMm;
+  project.table_sigma_mm = options.table_sigma_mm;
   project.mosaic_gsd_mm = kMosaicGsdMm;
   for (const TileTruth& tile : truth.tiles)
     project.tiles.push_back({tile.image, tile.commanded_mm});

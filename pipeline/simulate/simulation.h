@@ -16,7 +16,9 @@
 // - Workpiece: a ~450 mm square plate, top surface at Z = 0, textured, with
 //   through-holes (8-60 mm), optionally paper AprilTags and the caltab lying
 //   on it; imaged as a 3 x 3 grid with 35-45 % overlap; actual table
-//   positions = commanded + N(0, table sigma).
+//   positions = commanded + N(0, table sigma). Other grids (a strip of one
+//   row, 4 x 3, ...) keep the step and the part's margin: the part is
+//   ~450 mm times the grid's reach over the 3 x 3 grid's, per axis.
 // - Images: rays from the camera's ray table (RayTable) into exact analytic
 //   scenes (scene.h), 2 x 2 Gauss points per pixel and 16 x 16 rays where an
 //   edge crosses it (IntegratePixels), then the sensor (render.h): Gaussian
@@ -50,6 +52,8 @@ struct SimulationOptions {
   // Also lay the caltab on the part (the demo preset always does): a
   // capture in the paper's set-up, with a scale reference on the workpiece.
   bool plate_on_part = false;
+  int grid_cols = 3, grid_rows = 3;  // tiles per row, rows (1..6 each, 2 tiles or more)
+  double table_sigma_mm = 0.02;      // actual - commanded table position, 1-sigma per axis
   bool sensor_noise = true;     // shot and read noise (images are quantised either way)
   int supersampling = 4;        // S: the ray table's S x S rays per pixel (IntegratePixels)
   int edge_supersampling = 16;  // rays per axis in pixels an edge crosses (IntegrationOptions)

@@ -91,6 +91,14 @@ TEST(SimulationOptions, CheckNamesTheProblem) {
   options.preset = "demo";
   options.num_calib_images = 2;
   EXPECT_NE(options.Check().find("num_calib_images"), std::string::npos);
+  options.num_calib_images = 20;
+  options.grid_cols = options.grid_rows = 1;
+  EXPECT_NE(options.Check().find("the grid must be"), std::string::npos);
+  options.grid_cols = 7;
+  EXPECT_NE(options.Check().find("the grid must be"), std::string::npos);
+  options.grid_cols = 3;
+  options.table_sigma_mm = 0.0;
+  EXPECT_NE(options.Check().find("table_sigma_mm"), std::string::npos);
 }
 
 TEST(SimulationPresets, HasTheRequiredOnes) {
@@ -309,6 +317,66 @@ TEST(PlanSimulation, NeighbouringTilesOverlap30To50Percent) {
           }
         }
       }
+    }
+  }
+}
+
+// Other grids than 3 x 3 (a strip, a larger grid): the tiles in rows and
+// columns at the steps the same seed's 3 x 3 grid has, neighbours
+// overlapping 30-50 %, the middle of the grid over the part's centre and
+// the part grown or shrunk with the grid, so that every tile looks at it and
+// its holes are found and seen whole; the table's sigma as asked.
+TEST(PlanSimulation, OtherGridsKeepTheStepsAndFitThePart) {
+  const SimulationTruth grid3 = Plan("exposure", 7).truth;
+  const Eigen::Vector2d step(grid3.tiles[1].commanded_mm.x() - grid3.tiles[0].commanded_mm.x(),
+                             grid3.tiles[3].commanded_mm.y() - grid3.tiles[0].commanded_mm.y());
+  for (const auto& [cols, rows] : {std::pair{4, 1}, std::pair{1, 3}, std::pair{4, 3},
+                                   std::pair{2, 2}}) {
+    SCOPED_TRACE(std::to_string(cols) + " x " + std::to_string(rows));
+    SimulationOptions options;
+    options.preset = "exposure";
+    options.seed = 7;
+    options.grid_cols = cols;
+    options.grid_rows = rows;
+    options.table_sigma_mm = 0.005;
+    const SimulationPlan plan = PlanSimulation(options);
+    const SimulationTruth& truth = plan.truth;
+    ASSERT_EQ(truth.tiles.size(), static_cast<size_t>(cols * rows));
+    EXPECT_EQ(truth.table_sigma_mm, 0.005);
+    EXPECT_EQ(plan.project.table_sigma_mm, 0.005);
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        const int i = cols * r + c;
+        const TileTruth& tile = truth.tiles[i];
+        EXPECT_EQ(tile.grid_row, r);
+        EXPECT_EQ(tile.grid_col, c);
+        EXPECT_EQ(tile.commanded_mm,
+                  truth.tiles[0].commanded_mm + Eigen::Vector2d(c * step.x(), r * step.y()));
+        EXPECT_LT((tile.actual_mm - tile.commanded_mm).norm(), 5 * 0.005);
+        // The part under the tile's image centre.
+        const Eigen::Vector2d centre = PartAtPixel(truth, i, Eigen::Vector2d(800, 600));
+        EXPECT_TRUE((centre.array() > truth.part_min_mm.array()).all() &&
+                    (centre.array() < truth.part_max_mm.array()).all())
+            << tile.image;
+        if (c + 1 < cols) {
+          EXPECT_GE(Overlap(truth, i, i + 1), 0.30);
+          EXPECT_LE(Overlap(truth, i, i + 1), 0.50);
+        }
+        if (r + 1 < rows) {
+          EXPECT_GE(Overlap(truth, i, i + cols), 0.30);
+          EXPECT_LE(Overlap(truth, i, i + cols), 0.50);
+        }
+      }
+    }
+    EXPECT_GE(truth.holes.size(), 10u);
+    for (size_t h = 0; h < truth.holes.size(); ++h) {
+      const int tile = TileIndex(truth, plan.project.features[h].image);
+      ASSERT_GE(tile, 0);
+      const HoleTruth& hole = truth.holes[h];
+      EXPECT_GE(Margin(truth, ProjectPart(truth, tile,
+                                          Circle(hole.center_part_mm, 0.5 * hole.diameter_mm))),
+                30.0)
+          << hole.name;
     }
   }
 }
