@@ -26,7 +26,8 @@ namespace fs = std::filesystem;
 namespace omm {
 namespace {
 
-void ExpectAGridRuns(const std::string& preset, testing::TileGrid grid) {
+// The checks above; the run's report into *report if given.
+void ExpectAGridRuns(const std::string& preset, testing::TileGrid grid, Report* report_out = nullptr) {
   const testing::CachedProject sim = testing::SimulatedProject(preset, 103, 14, false, grid);
   testing::TempDir dir;
   const fs::path project_dir = dir.path() / "grid";
@@ -35,6 +36,7 @@ void ExpectAGridRuns(const std::string& preset, testing::TileGrid grid) {
   ASSERT_EQ(project.tiles.size(), static_cast<size_t>(grid.cols * grid.rows));
   RunProject(project, RunOptions{});
   const Report report = ReadReportJson(project_dir / "out" / "report.json");
+  if (report_out) *report_out = report;
   ASSERT_TRUE(report.features.has_value());
   ASSERT_TRUE(report.measurements.has_value());
   const double raw_px_mm = testing::RawPxMm(sim.truth);
@@ -66,6 +68,31 @@ TEST(GridRun, OneRowOfFourTiles) { ExpectAGridRuns("exposure", {4, 1}); }
 TEST(GridRun, OneColumnOfThreeTiles) { ExpectAGridRuns("markers", {1, 3}); }
 
 TEST(GridRun, FourByThreeTiles) { ExpectAGridRuns("sparse-texture", {4, 3}); }
+
+// Low texture on 4 x 3: some tiles are tied to one neighbour only (by
+// matches or a hole), and their other overlaps are aligned directly
+// (pipeline/measure/overlap_ties.h): the report lists those ties, used.
+TEST(GridRun, LowTextureFourByThreeAlignsTheWeaklyTiedTiles) {
+  Report report;
+  ExpectAGridRuns("low-texture", {4, 3}, &report);
+  ASSERT_TRUE(report.mosaic.has_value());
+  const ReportObject* overlap_ties = AsObject(Member(report.mosaic->extra, "overlap_ties"));
+  ASSERT_NE(overlap_ties, nullptr);
+  const ReportValue::Array* ties = AsArray(Member(*overlap_ties, "ties"));
+  ASSERT_NE(ties, nullptr);
+  const ReportValue::Array* held = AsArray(Member(report.mosaic->extra, "tiles_held_by_prior"));
+  ASSERT_NE(held, nullptr);
+  EXPECT_TRUE(held->empty());  // so every tie is a weakly tied tile's
+  int used = 0;
+  for (const ReportValue& tie : *ties) {
+    const ReportObject* row = AsObject(&tie);
+    ASSERT_NE(row, nullptr);
+    used += AsBool(Member(*row, "used")).value_or(false) ? 1 : 0;
+  }
+  if (const std::string* brief = AsString(Member(*overlap_ties, "brief")))
+    std::printf("%s\n", brief->c_str());
+  EXPECT_GE(used, 1);
+}
 
 }  // namespace
 }  // namespace omm

@@ -63,6 +63,19 @@ Inputs InputsOn(const testing::CachedProject& sim, const PlaneScene& scene) {
   return in;
 }
 
+// The overlaps of tile `held` alone, held, as if all the others were well
+// tied to each other.
+std::vector<std::pair<int, int>> HeldTilesOverlaps(const OrthoGeometry& geometry, int held) {
+  std::vector<std::pair<int, int>> links;
+  const int n = static_cast<int>(geometry.tiles.size());
+  for (int a = 0; a < n; ++a) {
+    for (int b = a + 1; b < n; ++b) {
+      if (a != held && b != held) links.emplace_back(a, b);
+    }
+  }
+  return OverlapsToAlign(geometry, {held}, links);
+}
+
 TEST(OverlapTiesSim, ShiftsOnTheTrueSceneAreWithinTheirSigma) {
   const testing::CachedProject sim = testing::SimulatedProject(kPreset, kSeed, kCalibImages);
   const SimulationTruth& truth = sim.truth;
@@ -72,8 +85,9 @@ TEST(OverlapTiesSim, ShiftsOnTheTrueSceneAreWithinTheirSigma) {
   double sum_z2 = 0.0, max_z2 = 0.0, best_sigma_px = INFINITY;
   int num_shifts = 0;
   for (int b = 0; b < static_cast<int>(tiles.size()); ++b) {
-    const std::vector<OverlapTie> ties = FindOverlapTies(in.geometry, tiles, {b}, in.holes,
-                                                         truth.table_sigma_mm, OverlapTieOptions{});
+    const std::vector<OverlapTie> ties =
+        FindOverlapTies(in.geometry, tiles, HeldTilesOverlaps(in.geometry, b), in.holes,
+                        truth.table_sigma_mm, OverlapTieOptions{});
     for (const OverlapTie& tie : ties) {
       if (tie.tile_a > b || !tie.alignment.usable) continue;
       const Eigen::Vector2d s = tie.alignment.shift_px;
@@ -114,8 +128,8 @@ TEST(OverlapTiesSim, ADisplacedTileIsFoundOrRefusedByThePrior) {
   const Eigen::Vector2d expected_px(-delta_mm.x() / gsd, delta_mm.y() / gsd);
 
   // A prior loose enough to allow it: every overlap finds it within its sigma.
-  const std::vector<OverlapTie> found =
-      FindOverlapTies(in.geometry, in.tiles, {kTile}, in.holes, 0.2, OverlapTieOptions{});
+  const std::vector<OverlapTie> found = FindOverlapTies(
+      in.geometry, in.tiles, HeldTilesOverlaps(in.geometry, kTile), in.holes, 0.2, OverlapTieOptions{});
   ASSERT_EQ(found.size(), 3u);  // r1c0, r1c1, r2c1
   for (const OverlapTie& tie : found) {
     ASSERT_TRUE(tie.used) << tie.why;
@@ -126,8 +140,9 @@ TEST(OverlapTiesSim, ADisplacedTileIsFoundOrRefusedByThePrior) {
     EXPECT_LT(error.dot(tie.alignment.covariance_px2.ldlt().solve(error)), 13.8);
   }
   // The project's 0.02 mm: 1.9 px is 10 sigma of two tiles' relative prior.
-  const std::vector<OverlapTie> refused = FindOverlapTies(
-      in.geometry, in.tiles, {kTile}, in.holes, truth.table_sigma_mm, OverlapTieOptions{});
+  const std::vector<OverlapTie> refused =
+      FindOverlapTies(in.geometry, in.tiles, HeldTilesOverlaps(in.geometry, kTile), in.holes,
+                      truth.table_sigma_mm, OverlapTieOptions{});
   ASSERT_EQ(refused.size(), 3u);
   for (const OverlapTie& tie : refused) {
     std::printf("%s: prior chi2 %.1f, %s\n", truth.tiles[tie.tile_a].image.c_str(), tie.prior_chi2,

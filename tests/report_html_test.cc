@@ -126,7 +126,7 @@ Report FullReport() {
                                         {"rms_px", 0.0043}}}},
                            {"dropped", ReportValue::Array{"<hole_B>"}}}},
              {"overlap_ties",
-              ReportObject{{"brief", "1 of 2 overlaps of held tiles aligned directly"},
+              ReportObject{{"brief", "1 of 2 overlaps of held or weakly tied tiles aligned directly"},
                            {"ties",
                             ReportValue::Array{
                                 ReportObject{{"images", ReportValue::Array{"t1.png", "t<3>.png"}},

@@ -478,7 +478,7 @@ std::string MosaicSection(const Report& report) {
   if (const ReportObject* overlap_ties = AsObject(Member(extra, "overlap_ties"))) {
     const ReportValue::Array* ties = AsArray(Member(*overlap_ties, "ties"));
     if (ties != nullptr && !ties->empty()) {
-      out += "<h3>Overlaps of held tiles, aligned directly</h3>\n<p>" +
+      out += "<h3>Overlaps aligned directly (held or weakly tied tiles)</h3>\n<p>" +
              Text(Member(*overlap_ties, "brief")) + "</p>\n";
       Table table({"placed tile", "aligned tile", "pixels", "shift x px", "shift y px",
                    "sigma major px", "sigma minor px", "rms residual px", "used"},

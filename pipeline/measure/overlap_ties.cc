@@ -109,17 +109,29 @@ std::string OverlapTieOptions::Check() const {
   return "";
 }
 
-std::vector<OverlapTie> FindOverlapTies(const OrthoGeometry& geometry,
-                                        const std::vector<ImageF>& tiles,
-                                        const std::vector<int>& held,
-                                        const std::vector<TieHole>& holes, double table_sigma_mm,
-                                        const OverlapTieOptions& options) {
-  if (const std::string why = options.Check(); !why.empty())
-    throw InputError("OverlapTieOptions", why);
+std::vector<std::pair<int, int>> OverlapsToAlign(const OrthoGeometry& geometry,
+                                                 const std::vector<int>& held,
+                                                 const std::vector<std::pair<int, int>>& links) {
+  const int num_tiles = static_cast<int>(geometry.tiles.size());
+  const auto is_held = [&held](int tile) {
+    return std::find(held.begin(), held.end(), tile) != held.end();
+  };
+  const auto linked = [&links](int a, int b) {
+    return std::find(links.begin(), links.end(), std::pair(std::min(a, b), std::max(a, b))) !=
+           links.end();
+  };
+  std::vector<bool> weak(num_tiles, false);
+  for (int b = 0; b < num_tiles; ++b) {
+    int num_linked = 0;
+    for (int a = 0; a < num_tiles; ++a) num_linked += a != b && linked(a, b) ? 1 : 0;
+    weak[b] = !is_held(b) && num_linked <= 1;
+  }
   std::vector<std::pair<int, int>> pairs;
-  for (const int b : held) {
-    for (int a = 0; a < static_cast<int>(tiles.size()); ++a) {
-      if (std::find(held.begin(), held.end(), a) != held.end()) continue;
+  for (int b = 0; b < num_tiles; ++b) {
+    if (!is_held(b) && !weak[b]) continue;
+    for (int a = 0; a < num_tiles; ++a) {
+      // Two weak tiles' overlap once.
+      if (a == b || is_held(a) || linked(a, b) || (weak[a] && weak[b] && a > b)) continue;
       const TileOrthoMap& map_a = geometry.tiles[a];
       const TileOrthoMap& map_b = geometry.tiles[b];
       const Eigen::Vector2i size =
@@ -127,6 +139,16 @@ std::vector<OverlapTie> FindOverlapTies(const OrthoGeometry& geometry,
       if ((size.array() > 0).all()) pairs.emplace_back(a, b);
     }
   }
+  return pairs;
+}
+
+std::vector<OverlapTie> FindOverlapTies(const OrthoGeometry& geometry,
+                                        const std::vector<ImageF>& tiles,
+                                        const std::vector<std::pair<int, int>>& pairs,
+                                        const std::vector<TieHole>& holes, double table_sigma_mm,
+                                        const OverlapTieOptions& options) {
+  if (const std::string why = options.Check(); !why.empty())
+    throw InputError("OverlapTieOptions", why);
   std::vector<OverlapTie> ties(pairs.size());
   ParallelFor(static_cast<int>(pairs.size()), options.num_threads, [&](int i) {
     ties[i] =

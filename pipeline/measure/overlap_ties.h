@@ -1,4 +1,5 @@
-// Overlaps as tie points of a tile that nothing else places.
+// Overlaps as tie points of a tile that nothing else places, or that one
+// neighbour alone does.
 //
 // Why. A tile whose pairs all lack good matches and which sees no hole
 // whole with a neighbour (low-texture seed 201: shading of 20-40 mm, the
@@ -7,10 +8,13 @@
 // still fix it: the direct alignment of the two tiles' pictures of each
 // overlap (pipeline/mosaic/overlap_alignment.h) uses every pixel's
 // gradient, so a straight edge fixes it across the edge and the shading,
-// over ~10^5 pixels, in every direction, each with its covariance.
+// over ~10^5 pixels, in every direction, each with its covariance. A tile
+// that matches or a hole tie to one neighbour only place has no check on
+// them (a corner tile of a low-texture 4 x 3 grid, placed by 14 matches
+// with one neighbour); its other overlaps are aligned too.
 //
-// Model. For a held tile b and each placed tile a whose footprint meets
-// b's, both are orthorectified over the overlap on `geometry`'s grid
+// Model. For a tile b to place and a placed tile a whose footprint meets
+// b's (OverlapsToAlign), both are orthorectified over the overlap on `geometry`'s grid
 // through the registered scene (RenderTilePatch, no exposure: the
 // alignment fits its own gain field), holes masked (their walls move with
 // the view; 1.5 nominal radii about the near point, plus hole_margin_px). The alignment's shift
@@ -24,6 +28,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -52,8 +57,8 @@ struct OverlapTieOptions {
 };
 
 struct OverlapTie {
-  int tile_a = 0;              // placed by its matches
-  int tile_b = 0;              // held by its prior: aligned to tile_a
+  int tile_a = 0;              // placed
+  int tile_b = 0;              // to place: aligned to tile_a
   OverlapAlignment alignment;  // shift and its covariance, geometry's grid px
   bool used = false;
   std::string why;          // if not used
@@ -64,13 +69,22 @@ struct OverlapTie {
   Eigen::Matrix2d covariance_b_px2 = Eigen::Matrix2d::Zero();
 };
 
-// One tie per (held tile, placed tile whose footprint's box meets it), in
-// the order of `held` then the placed tiles'. geometry: on the registered
-// scene; tiles: gray [0, 1]; holes: masked (near_part_mm, radius_mm).
-// Pure; throws InputError for invalid options.
+// The overlaps to align, (placed tile a, tile b to place): each held tile
+// b's with every tile a not held whose footprint's box meets b's; and each
+// weakly placed tile b's (not held, linked to one tile at most: `links`
+// holds the unordered pairs (lower index first) of tiles that usable
+// matches or a hole tie join) with every such a it is not linked to, the
+// overlap of two weak tiles once. In the order of b, then a.
+std::vector<std::pair<int, int>> OverlapsToAlign(const OrthoGeometry& geometry,
+                                                 const std::vector<int>& held,
+                                                 const std::vector<std::pair<int, int>>& links);
+
+// One tie per pair of OverlapsToAlign, in its order. geometry: on the
+// registered scene; tiles: gray [0, 1]; holes: masked (near_part_mm,
+// radius_mm). Pure; throws InputError for invalid options.
 std::vector<OverlapTie> FindOverlapTies(const OrthoGeometry& geometry,
                                         const std::vector<ImageF>& tiles,
-                                        const std::vector<int>& held,
+                                        const std::vector<std::pair<int, int>>& pairs,
                                         const std::vector<TieHole>& holes, double table_sigma_mm,
                                         const OverlapTieOptions& options);
 

@@ -277,7 +277,7 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
   return report;
 }
 
-// report.mosaic.overlap_ties: each held tile's overlap alignments, with
+// report.mosaic.overlap_ties: the overlap alignments (OverlapsToAlign), with
 // the final solve's residual RMS of the used ones' observations (their
 // tracks follow in `ties`' order from first_observation on).
 ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapTie>& ties,
@@ -313,9 +313,10 @@ ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapT
     }
     rows.emplace_back(std::move(row));
   }
-  *brief = ties.empty() ? "no tile held by its table prior alone"
-                        : fmt::format("{} of {} overlaps of held tiles aligned directly", num_used,
-                                      ties.size());
+  *brief = ties.empty()
+               ? "no tile held by its table prior alone or tied to one neighbour only"
+               : fmt::format("{} of {} overlaps of held or weakly tied tiles aligned directly",
+                             num_used, ties.size());
   return ReportObject{{"brief", *brief}, {"ties", std::move(rows)}};
 }
 
@@ -373,11 +374,25 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   FinalOutcome result;
   result.fit_seconds = SecondsSince(start);
 
-  // Tiles that no match placed: their overlaps, aligned directly, as tracks.
+  // Tiles that no match placed, or that matches and holes tie to one
+  // neighbour only: their other overlaps, aligned directly, as tracks.
   const auto overlap_start = std::chrono::steady_clock::now();
-  const std::vector<OverlapTie> overlap_ties =
-      FindOverlapTies(views_geometry, tiles, registration->tiles_held_by_prior, holes,
-                      registration->input.table_sigma_mm, OverlapTieOptions());
+  std::vector<std::pair<int, int>> links;
+  for (const PairRegistration& pair : registration->pairs) {
+    if (pair.usable) links.emplace_back(pair.tile_a, pair.tile_b);
+  }
+  for (const HoleTie& tie : ties) {
+    for (size_t u = 0; u < tie.tiles.size(); ++u) {
+      for (size_t v = u + 1; v < tie.tiles.size(); ++v) {
+        links.emplace_back(std::min(tie.tiles[u], tie.tiles[v]),
+                           std::max(tie.tiles[u], tie.tiles[v]));
+      }
+    }
+  }
+  const std::vector<OverlapTie> overlap_ties = FindOverlapTies(
+      views_geometry, tiles,
+      OverlapsToAlign(views_geometry, registration->tiles_held_by_prior, links), holes,
+      registration->input.table_sigma_mm, OverlapTieOptions());
   const int first_overlap_observation = static_cast<int>(registration->input.observations.size());
   AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
   result.overlap_seconds = SecondsSince(overlap_start);
