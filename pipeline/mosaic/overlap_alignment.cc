@@ -16,7 +16,8 @@
 namespace omm {
 namespace {
 
-constexpr int kNumGainTerms = 10;  // cubic in u
+constexpr int kGainDegree = 5;  // the gain field's polynomial degree (header)
+constexpr int kNumGainTerms = (kGainDegree + 1) * (kGainDegree + 2) / 2;
 constexpr double kPi = std::numbers::pi;
 constexpr int kNumParameters = 2 + kNumGainTerms + 1;  // s, g, o
 // A smoothed pixel whose kernel saw only valid pixels (float rounding).
@@ -81,22 +82,21 @@ bool SampleWithGradient(const ImageF& b, const ImageF& support, double x, double
   return true;
 }
 
-// sum_p sum_q c(p) G(p - q) c(q)' over the columns c (images), G the
-// normalised Gaussian of blur_sigma_px; computed on blocks of factor x factor
-// pixels (their sums) when the kernel is wide.
-Square CorrelatedProducts(const std::vector<ImageF>& columns, double blur_sigma_px, int factor) {
+// sum_p sum_q e(p) G(p - q) e(q)' over the images e = (e_0, e_1), G the
+// normalised Gaussian of blur_sigma_px; computed on blocks of factor x
+// factor pixels (their sums) when the kernel is wide.
+Eigen::Matrix2d CorrelatedProducts(const std::array<ImageF, 2>& e, double blur_sigma_px,
+                                   int factor) {
   const double factor2 = static_cast<double>(factor) * factor;
-  std::vector<ImageF> block_sums;
+  std::array<ImageF, 2> sums = e;
   if (factor > 1) {
-    for (const ImageF& column : columns)
-      block_sums.push_back(DownsampleBox(column, factor) * static_cast<float>(factor2));
+    for (int i = 0; i < 2; ++i) sums[i] = DownsampleBox(e[i], factor) * static_cast<float>(factor2);
   }
-  const std::vector<ImageF>& sums = factor > 1 ? block_sums : columns;
-  // G is symmetric: sum c_k (G c_j) = sum c_j (G c_k); one blurred image at a time.
-  Square products;
-  for (int j = 0; j < kNumParameters; ++j) {
+  // G is symmetric: (e_0, G e_1) = (e_1, G e_0).
+  Eigen::Matrix2d products;
+  for (int j = 0; j < 2; ++j) {
     const ImageF blurred = GaussianBlur(sums[j], blur_sigma_px / factor);
-    for (int k = j; k < kNumParameters; ++k) {
+    for (int k = j; k < 2; ++k) {
       // A block's kernel weight is factor^2 pixels' (G in block units / factor^2).
       products(j, k) = products(k, j) =
           sums[k].cast<double>().cwiseProduct(blurred.cast<double>()).sum() / factor2;
@@ -113,7 +113,9 @@ std::string OverlapAlignmentOptions::Check() const {
   if (!(shift_tolerance_px > 0.0)) return "shift_tolerance_px must be > 0";
   if (!(huber_sigmas > 0.0)) return "huber_sigmas must be > 0";
   if (!(max_value > 0.0 && max_value <= 1.0)) return "max_value must be in (0, 1]";
-  if (min_pixels < kNumParameters) return "min_pixels must be at least the 13 parameters";
+  if (min_pixels < kNumParameters) {
+    return "min_pixels must be at least the " + std::to_string(kNumParameters) + " parameters";
+  }
   if (!(max_shift_px > 0.0)) return "max_shift_px must be > 0";
   if (!(min_sigma_px >= 0.0)) return "min_sigma_px must be >= 0";
   if (!(misfit_scale_px > smoothing_sigma_px))
@@ -160,8 +162,16 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   const auto gain_terms = [&](const Eigen::Vector2i& p) {
     const Eigen::Vector2d u = (p.cast<double>() - centre).cwiseQuotient(half_size);
     const double x = u.x(), y = u.y();
-    return std::array<double, kNumGainTerms>{1.0,   x,         y,         x * x,     x * y,
-                                             y * y, x * x * x, x * x * y, x * y * y, y * y * y};
+    // x^(d - j) y^j, degree d = 0..kGainDegree: each degree's from the last's.
+    std::array<double, kNumGainTerms> t;
+    t[0] = 1.0;
+    int first = 0, k = 1;
+    for (int d = 1; d <= kGainDegree; ++d) {
+      for (int j = 0; j < d; ++j) t[k++] = t[first + j] * x;
+      t[k++] = t[first + d - 1] * y;
+      first += d;
+    }
+    return t;
   };
   const auto gain_at = [&](const Parameters& theta, const std::array<double, kNumGainTerms>& t) {
     double gain = 0.0;
@@ -175,7 +185,7 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   std::vector<Eigen::Vector2i> used;
   std::vector<double> residuals;
   // b(x + s), its gradient and g(u) at each used pixel: J's row is rebuilt
-  // from them (storing 13 doubles a pixel would take ~100 MB an overlap).
+  // from them (storing 24 doubles a pixel would take ~100 MB an overlap).
   struct Sample {
     float value, gx, gy, gain;
   };
@@ -220,14 +230,25 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
       return result;
     }
     huber_threshold = options.huber_sigmas * std::max(RobustSigma(residuals), 1e-9);
+    // J' W J and J' W r by blocks of rows (a matrix product each: the
+    // 24 x 24 outer products one row at a time took most of the fit's time).
     normal.setZero();
     Parameters gradient = Parameters::Zero();
-    for (size_t i = 0; i < residuals.size(); ++i) {
-      const double w = HuberWeight(residuals[i], huber_threshold);
-      const Row row = jacobian_row(used[i], samples[i]);
-      normal.noalias() += w * row.transpose() * row;
-      gradient.noalias() += w * row.transpose() * residuals[i];
+    constexpr int kBlock = 512;
+    Eigen::Matrix<double, kNumParameters, kBlock> block;
+    Eigen::Matrix<double, kBlock, 1> block_residuals;
+    for (size_t first = 0; first < residuals.size(); first += kBlock) {
+      const int n = static_cast<int>(std::min<size_t>(kBlock, residuals.size() - first));
+      for (int k = 0; k < n; ++k) {
+        const size_t i = first + k;
+        const double root_w = std::sqrt(HuberWeight(residuals[i], huber_threshold));
+        block.col(k) = root_w * jacobian_row(used[i], samples[i]).transpose();
+        block_residuals(k) = root_w * residuals[i];
+      }
+      normal.selfadjointView<Eigen::Lower>().rankUpdate(block.leftCols(n));
+      gradient.noalias() += block.leftCols(n) * block_residuals.head(n);
     }
+    normal = normal.selfadjointView<Eigen::Lower>();
     const Eigen::LDLT<Square> ldlt(normal);
     if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return no_gradient();
     const Parameters step = -ldlt.solve(gradient);
@@ -255,19 +276,20 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
     return result;
   }
   result.residual_sigma = RobustSigma(raw_residuals);
-  // Each column of W J as an image.
-  std::vector<ImageF> columns(kNumParameters, ImageF::Zero(rows, cols));
+  // Cov(theta) = H^-1 J' W K W J H^-1 (header): its shift block is (e_i, K
+  // e_j) with e_i = W J H^-1's column i as an image, two images whatever
+  // the number of gain terms.
+  const Square inverse = normal.ldlt().solve(Square::Identity());
+  std::array<ImageF, 2> e = {ImageF::Zero(rows, cols), ImageF::Zero(rows, cols)};
   for (size_t i = 0; i < used.size(); ++i) {
     const double w = HuberWeight(residuals[i], huber_threshold);
     const Row row = jacobian_row(used[i], samples[i]);
-    for (int k = 0; k < kNumParameters; ++k)
-      columns[k](used[i].y(), used[i].x()) = static_cast<float>(w * row(k));
+    for (int k = 0; k < 2; ++k)
+      e[k](used[i].y(), used[i].x()) = static_cast<float>(w * row.dot(inverse.row(k)));
   }
-  const Square inverse = normal.ldlt().solve(Square::Identity());
   // The noise: its smoothed residuals correlate as K = G * G.
-  const Square noise_middle = CorrelatedProducts(columns, std::sqrt(2.0) * sigma, 1);
-  Square covariance =
-      result.residual_sigma * result.residual_sigma * inverse * noise_middle * inverse;
+  Eigen::Matrix2d covariance = result.residual_sigma * result.residual_sigma *
+                               CorrelatedProducts(e, std::sqrt(2.0) * sigma, 1);
   // The misfit: a smooth field of misfit_relative of the level.
   double level = 0.0;
   for (const Eigen::Vector2i& p : used) level += smooth_a(p.y(), p.x());
@@ -275,10 +297,9 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   const double scale = options.misfit_scale_px;
   const int factor = std::max(1, static_cast<int>(scale / 8.0));
   result.misfit_sigma = options.misfit_relative * level;
-  const Square misfit_middle =
-      4.0 * kPi * scale * scale * CorrelatedProducts(columns, std::sqrt(2.0) * scale, factor);
-  covariance += result.misfit_sigma * result.misfit_sigma * inverse * misfit_middle * inverse;
-  result.covariance_px2 = covariance.topLeftCorner<2, 2>() +
+  covariance += result.misfit_sigma * result.misfit_sigma * 4.0 * kPi * scale * scale *
+                CorrelatedProducts(e, std::sqrt(2.0) * scale, factor);
+  result.covariance_px2 = covariance +
                           options.min_sigma_px * options.min_sigma_px * Eigen::Matrix2d::Identity();
   result.shift_px = theta.head<2>();
   result.usable = result.covariance_px2.allFinite();

@@ -12,11 +12,12 @@
 // Model. a and b are two patches on one grid (the part plane, resampled
 // through the current scene), each with its own exposure. With x the grid
 // position, u = (x - centre) / half_size in [-1, 1]^2,
-//     a(x) = g(u) b(x + s) + o,   g a cubic polynomial in u = (u, v),
+//     a(x) = g(u) b(x + s) + o,   g a quintic polynomial in u = (u, v),
 // s the shift (grid px) that the scene misplaces b's content by, g a smooth
 // gain field (the two tiles' gain and vignetting ratio: a quadratic leaves
-// 7e-4 of a 0.13 fall-off's ratio over a 34 % overlap, a cubic 3e-5) and o
-// an offset.
+// 7e-4 of a 0.13 fall-off's ratio over a 34 % overlap, a cubic 3e-5, but up
+// to 5e-3 of the ratio of a 0.1 and a 0.45 fall-off, which a quintic
+// follows) and o an offset.
 //
 // Both patches are first smoothed by a Gaussian (smoothing_sigma_px): on
 // weak shading the raw gradient is mostly noise (the shading's ~1e-4 per px
@@ -39,15 +40,23 @@
 // exp(-d^2 / 4 L^2) (L = misfit_scale_px); it adds
 // sigma_m^2 H^-1 J' W C W J H^-1 to Cov(s). A sharp edge's few pixels of
 // large gradient are hardly moved by it; shading's many of small gradient
-// are. misfit_relative is set from 14 low-texture projects rendered through
-// their true scene (seeds 201-207, with and without exposure differences;
-// every pair of overlapping tiles, 276 shifts whose truth is 0): the shifts'
-// rms z per axis is 0.65 (low-texture) and 1.10 (with exposure differences)
-// with it, 1.36 and 1.70 without; on 10 unseen ones (seeds 243-247) 0.57
-// and 1.55: with strong, unequal vignetting (0.1-0.45) the misfit is
-// larger than this term holds (a cubic leaves up to 5e-3 of the ratio of a
-// 0.1 and a 0.45 fall-off over a 34 % overlap). A floor (min_sigma_px)
+// are. misfit_relative was set with a cubic gain field from 14 low-texture
+// projects rendered through their true scene (seeds 201-207, with and
+// without exposure differences; every pair of overlapping tiles, whose
+// shift's truth is 0): the shifts' rms z per axis was 0.65 (low-texture)
+// and 1.10 (with exposure differences) with it, 1.36 and 1.70 without. On
+// 20 more (seeds 243-252) the cubic left 0.59 and 1.74 (17 of 159 shading
+// shifts beyond chi2's 99.9 %), growing with the tiles' vignetting
+// difference (rms z 1.51 under 0.05, 2.01 over 0.15): the ratio of unequal
+// fall-offs, which a cubic cannot follow. With the quintic, the same term
+// and no other change: 0.81 and 0.94 there (none beyond 99.9 %), 0.89 and
+// 1.04 on seeds 201-207, 0.76 and 0.94 on 10 projects of other grids (4 x
+// 1 to 5 x 2), flat in the vignetting difference. A floor (min_sigma_px)
 // stays for what neither term holds (resampling).
+//
+// Covariance of s. Only its 2 x 2 block is needed: (e_i, K e_j) with e_i the
+// image of W J H^-1's column i, two blurred images for K, whatever the
+// number of gain terms.
 //
 // Only pixels where both patches are valid (> 0, below saturation) and
 // `mask` is set, over the smoothing's support, count: the caller masks

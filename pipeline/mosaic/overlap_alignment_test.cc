@@ -46,7 +46,7 @@ struct Pair {
 
 // a sees the region at x, b at x - shift (so b's content at x + shift is
 // a's at x) with a gain ramp and, relative to the level, a misfit (a
-// smooth ripple no cubic gain field holds); both with Gaussian noise of
+// ripple no quintic gain field holds); both with Gaussian noise of
 // `noise` sigma.
 Pair Render(const Region& region, const Eigen::Vector2d& shift, double noise, int seed,
             double misfit = 0.0) {
@@ -57,7 +57,7 @@ Pair Render(const Region& region, const Eigen::Vector2d& shift, double noise, in
   for (int r = 0; r < kHeight; ++r) {
     for (int c = 0; c < kWidth; ++c) {
       pair.a(r, c) = static_cast<float>(region.Value(c, r) + gauss(random));
-      const double ripple = misfit * std::sin(2 * std::numbers::pi * (c / 130.0 + r / 170.0));
+      const double ripple = misfit * std::sin(2 * std::numbers::pi * (c / 50.0 + r / 70.0));
       const double gain = (0.9 + 0.05 * c / kWidth - 0.03 * r / kHeight) * (1.0 + ripple);
       pair.b(r, c) =
           static_cast<float>(gain * region.Value(c - shift.x(), r - shift.y()) + gauss(random));
@@ -143,11 +143,13 @@ TEST(OverlapAlignment, MaskedPixelsDoNotCount) {
 }
 
 TEST(OverlapAlignment, TheMisfitTermCoversASmoothPhotometricMisfitOfItsSize) {
-  // A ripple of 0.3 % of the level (rms 0.21 %) that the cubic gain field
-  // cannot hold: the noise-only covariance is far too tight for the shift's
-  // error; with misfit_relative at the ripple's rms it covers it. Across
-  // the edge the sigma grows by under 30 %, along it more than twice.
-  constexpr double kRipple = 3e-3;
+  // A ripple of 0.6 % of the level (rms 0.42 %, periods of 50-70 px) that
+  // the quintic gain field cannot hold: the noise-only covariance is far too
+  // tight for the shift's error; with misfit_relative at the ripple's rms it
+  // covers it. The term widens the sigma along the edge more than across
+  // it, where the edge still fixes the shift to a few hundredths of a pixel
+  // (0.011 px from the noise alone, 0.022 with the term).
+  constexpr double kRipple = 6e-3;
   const Region region;
   const Eigen::Vector2d truth(0.37, -0.61);
   const Eigen::Vector2d normal(std::cos(region.edge_angle_rad), -std::sin(region.edge_angle_rad));
@@ -168,8 +170,9 @@ TEST(OverlapAlignment, TheMisfitTermCoversASmoothPhotometricMisfitOfItsSize) {
     const auto sigma = [](const OverlapAlignment& a, const Eigen::Vector2d& d) {
       return std::sqrt(d.dot(a.covariance_px2 * d));
     };
-    EXPECT_LT(sigma(with_misfit, normal), 1.3 * sigma(noise_only, normal));
-    EXPECT_GT(sigma(with_misfit, along), 2.0 * sigma(noise_only, along));
+    EXPECT_GT(sigma(with_misfit, along) / sigma(noise_only, along),
+              sigma(with_misfit, normal) / sigma(noise_only, normal));
+    EXPECT_LT(sigma(with_misfit, normal), 0.03);
   }
   EXPECT_GT(std::sqrt(sum_noise_z2 / (2.0 * kSeeds)), 2.0);  // rms z per axis
   EXPECT_LT(std::sqrt(sum_misfit_z2 / (2.0 * kSeeds)), 1.3);
