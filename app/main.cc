@@ -176,7 +176,8 @@ int main(int argc, char** argv) {
             int cols = 0, rows = 0;
             char x = 0, rest = 0;
             if (std::sscanf(grid.c_str(), "%d%c%d%c", &cols, &x, &rows, &rest) != 3 || x != 'x') {
-              throw CLI::ValidationError("--grid", "expected COLSxROWS, e.g. 3x3, got '" + grid + "'");
+              throw CLI::ValidationError("--grid",
+                                         "expected COLSxROWS, e.g. 3x3, got '" + grid + "'");
             }
             simulation.grid_cols = cols;
             simulation.grid_rows = rows;

@@ -27,7 +27,8 @@ namespace omm {
 namespace {
 
 // The checks above; the run's report into *report if given.
-void ExpectAGridRuns(const std::string& preset, testing::TileGrid grid, Report* report_out = nullptr) {
+void ExpectAGridRuns(const std::string& preset, testing::TileGrid grid,
+                     Report* report_out = nullptr) {
   const testing::CachedProject sim = testing::SimulatedProject(preset, 103, 14, false, grid);
   testing::TempDir dir;
   const fs::path project_dir = dir.path() / "grid";

@@ -14,14 +14,15 @@
 // with one neighbour); its other overlaps are aligned too.
 //
 // Model. For a tile b to place and a placed tile a whose footprint meets
-// b's (OverlapsToAlign), both are orthorectified over the overlap on `geometry`'s grid
-// through the registered scene (RenderTilePatch, no exposure: the
-// alignment fits its own gain field), holes masked (their walls move with
-// the view; 1.5 nominal radii about the near point, plus hole_margin_px). The alignment's shift
-// s (b's content at x + s is a's at x) becomes one track: the part point at
-// the overlap's centroid x, seen in a at q_a (where the scene shows x; a is
-// placed by its matches: only the floor as covariance) and in b at q_b (where
-// the scene shows x + s, covariance J Cov(s) J' plus the floor, J = dq_b/dx).
+// b's (OverlapsToAlign), both are orthorectified over the overlap on
+// `geometry`'s grid through the registered scene (RenderTilePatch, no
+// exposure: the alignment fits its own gain field), holes masked (their
+// walls move with the view; 1.5 nominal radii about the near point, plus
+// hole_margin_px). The alignment's shift s (b's content at x + s is a's at
+// x) becomes one track: the part point at the overlap's centroid x, seen in
+// a at q_a (where the scene shows x; a is placed: only the floor as
+// covariance) and in b at q_b (where the scene shows x + s, covariance
+// J Cov(s) J' plus the floor, J = dq_b/dx).
 // A shift that the table prior makes implausible (chi-square of s against
 // Cov(s) plus the prior's 2 sigma^2 per axis beyond consistency_probability)
 // is not used.

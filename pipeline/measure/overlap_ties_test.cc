@@ -42,7 +42,8 @@ Pairs AllLinksBut(const std::vector<int>& except) {
 
 TEST(OverlapsToAlign, AHeldTileWithEveryPlacedTileItOverlaps) {
   // Corner tile 0 held: its neighbours 1, 3 and the diagonal 4.
-  EXPECT_EQ(OverlapsToAlign(ThreeByThree(), {0}, AllLinksBut({0})), (Pairs{{1, 0}, {3, 0}, {4, 0}}));
+  EXPECT_EQ(OverlapsToAlign(ThreeByThree(), {0}, AllLinksBut({0})),
+            (Pairs{{1, 0}, {3, 0}, {4, 0}}));
   // Two held tiles are not aligned to each other.
   EXPECT_EQ(OverlapsToAlign(ThreeByThree(), {0, 1}, AllLinksBut({0, 1})),
             (Pairs{{3, 0}, {4, 0}, {2, 1}, {3, 1}, {4, 1}, {5, 1}}));

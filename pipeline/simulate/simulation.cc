@@ -777,8 +777,9 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
       tile.image = name;
       tile.grid_row = r;
       tile.grid_col = c;
-      tile.commanded_mm = table_centre + Eigen::Vector2d((c - 0.5 * (options.grid_cols - 1)) * step_x,
-                                                         (r - 0.5 * (options.grid_rows - 1)) * step_y);
+      const double col_steps = c - 0.5 * (options.grid_cols - 1);
+      const double row_steps = r - 0.5 * (options.grid_rows - 1);
+      tile.commanded_mm = table_centre + Eigen::Vector2d(col_steps * step_x, row_steps * step_y);
       tile.actual_mm =
           tile.commanded_mm + Eigen::Vector2d(table_random.Normal(0.0, options.table_sigma_mm),
                                               table_random.Normal(0.0, options.table_sigma_mm));
