@@ -4,7 +4,8 @@
 // neighbours and sees no hole whole with them (slow: needs a render).
 //  - On the TRUE scene every pair of overlapping tiles' shift is 0: the
 //    alignments' shifts scatter about it within their stated covariance,
-//    and the part's edge holds its normal to a few hundredths of a pixel.
+//    and the part's edge holds its normal to a few hundredths of a pixel;
+//    also with exposure differences (low-texture-exposure seed 251).
 //  - A tile displaced in the scene by a known amount: each overlap finds the
 //    displacement within its covariance under a loose prior, and refuses it
 //    as contradicting the project's 0.02 mm prior.
@@ -76,32 +77,41 @@ std::vector<std::pair<int, int>> HeldTilesOverlaps(const OrthoGeometry& geometry
   return OverlapsToAlign(geometry, {held}, links);
 }
 
-TEST(OverlapTiesSim, ShiftsOnTheTrueSceneAreWithinTheirSigma) {
-  const testing::CachedProject sim = testing::SimulatedProject(kPreset, kSeed, kCalibImages);
+// Every overlapping pair of tiles once, aligned through the TRUE scene,
+// where every shift is 0: the shifts scatter within their covariance, and
+// the part's edge holds its normal to a few hundredths of a pixel.
+void ExpectTrueSceneShiftsWithinTheirSigma(const std::string& preset, std::uint64_t seed,
+                                           int calib_images) {
+  const testing::CachedProject sim = testing::SimulatedProject(preset, seed, calib_images);
   const SimulationTruth& truth = sim.truth;
   const Inputs in = InputsOn(sim, TruthPlaneScene(truth));
-  const std::vector<ImageF>& tiles = in.tiles;
-  // Every overlapping pair once: each tile in turn as the one aligned.
+  std::vector<std::pair<int, int>> pairs;
+  for (int b = 0; b < static_cast<int>(in.tiles.size()); ++b) {
+    for (int a = 0; a < b; ++a) {
+      const TileOrthoMap& map_a = in.geometry.tiles[a];
+      const TileOrthoMap& map_b = in.geometry.tiles[b];
+      const Eigen::Vector2i size =
+          map_a.max_px.cwiseMin(map_b.max_px) - map_a.min_px.cwiseMax(map_b.min_px);
+      if ((size.array() > 0).all()) pairs.emplace_back(a, b);
+    }
+  }
+  const std::vector<OverlapTie> ties = FindOverlapTies(in.geometry, in.tiles, pairs, in.holes,
+                                                       truth.table_sigma_mm, OverlapTieOptions{});
   double sum_z2 = 0.0, max_z2 = 0.0, best_sigma_px = INFINITY;
   int num_shifts = 0;
-  for (int b = 0; b < static_cast<int>(tiles.size()); ++b) {
-    const std::vector<OverlapTie> ties =
-        FindOverlapTies(in.geometry, tiles, HeldTilesOverlaps(in.geometry, b), in.holes,
-                        truth.table_sigma_mm, OverlapTieOptions{});
-    for (const OverlapTie& tie : ties) {
-      if (tie.tile_a > b || !tie.alignment.usable) continue;
-      const Eigen::Vector2d s = tie.alignment.shift_px;
-      const double z2 = s.dot(tie.alignment.covariance_px2.ldlt().solve(s));
-      std::printf("%s -> %s: shift (%+.3f, %+.3f) px, sigma (%.3f, %.3f), z2 %.1f\n",
-                  truth.tiles[tie.tile_a].image.c_str(), truth.tiles[b].image.c_str(), s.x(), s.y(),
-                  std::sqrt(tie.alignment.covariance_px2(0, 0)),
-                  std::sqrt(tie.alignment.covariance_px2(1, 1)), z2);
-      sum_z2 += z2;
-      max_z2 = std::max(max_z2, z2);
-      best_sigma_px = std::min(
-          best_sigma_px, std::sqrt(tie.alignment.covariance_px2.eigenvalues().real().minCoeff()));
-      ++num_shifts;
-    }
+  for (const OverlapTie& tie : ties) {
+    if (!tie.alignment.usable) continue;
+    const Eigen::Vector2d s = tie.alignment.shift_px;
+    const double z2 = s.dot(tie.alignment.covariance_px2.ldlt().solve(s));
+    std::printf("%s -> %s: shift (%+.3f, %+.3f) px, sigma (%.3f, %.3f), z2 %.1f\n",
+                truth.tiles[tie.tile_a].image.c_str(), truth.tiles[tie.tile_b].image.c_str(),
+                s.x(), s.y(), std::sqrt(tie.alignment.covariance_px2(0, 0)),
+                std::sqrt(tie.alignment.covariance_px2(1, 1)), z2);
+    sum_z2 += z2;
+    max_z2 = std::max(max_z2, z2);
+    best_sigma_px = std::min(
+        best_sigma_px, std::sqrt(tie.alignment.covariance_px2.eigenvalues().real().minCoeff()));
+    ++num_shifts;
   }
   const double rms_z = std::sqrt(sum_z2 / (2.0 * num_shifts));
   std::printf("%d shifts: rms z per axis %.2f, largest z2 %.1f\n", num_shifts, rms_z, max_z2);
@@ -110,6 +120,18 @@ TEST(OverlapTiesSim, ShiftsOnTheTrueSceneAreWithinTheirSigma) {
   EXPECT_GT(rms_z, 0.4);
   EXPECT_LT(rms_z, 1.3);
   EXPECT_LT(best_sigma_px, 0.02);  // across the part's edge
+}
+
+TEST(OverlapTiesSim, ShiftsOnTheTrueSceneAreWithinTheirSigma) {
+  ExpectTrueSceneShiftsWithinTheirSigma(kPreset, kSeed, kCalibImages);
+}
+
+// With exposure differences the tiles' vignetting is unequal (0.1-0.45
+// fall-off), and a cubic gain field could not follow the ratio: on this
+// seed its shifts came out at rms z 3.09, largest z2 128. (The tiles do not
+// depend on the number of calibration images.)
+TEST(OverlapTiesSim, WithUnequalVignettingTooTheShiftsAreWithinTheirSigma) {
+  ExpectTrueSceneShiftsWithinTheirSigma("low-texture-exposure", 251, 3);
 }
 
 TEST(OverlapTiesSim, ADisplacedTileIsFoundOrRefusedByThePrior) {
