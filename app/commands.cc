@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <functional>
+#include <map>
+#include <stdexcept>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -13,6 +16,7 @@
 #include "adapters/project_io/report_json.h"
 #include "adapters/project_io/text_file.h"
 #include "adapters/report_html/report_html.h"
+#include "app/child_process.h"
 #include "app/exit_codes.h"
 #include "app/terminal_progress.h"
 #include "pipeline/core/error.h"
@@ -110,6 +114,43 @@ std::vector<fs::path> FindProjects(const std::vector<fs::path>& dirs) {
   return projects;
 }
 
+// One line of `omm batch`'s summary table.
+struct BatchRow {
+  std::string project, result = "ok", measurements = "-";
+  double seconds = 0.0;
+};
+
+// A temporary folder, removed with what it holds when this goes.
+class ScratchDir {
+ public:
+  explicit ScratchDir(const std::string& prefix) {
+    std::string pattern = (fs::temp_directory_path() / (prefix + "-XXXXXX")).string();
+    if (mkdtemp(pattern.data()) == nullptr) {
+      throw std::runtime_error("cannot create a folder in " + fs::temp_directory_path().string());
+    }
+    path_ = pattern;
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+// The outcome of a child `omm run`; its warnings are relayed, naming the
+// project.
+Outcome ChildOutcome(const ChildEnd& end, const std::string& log, const std::string& project) {
+  const ChildLog said = ParseChildLog(log);
+  for (const std::string& warning : said.warnings) spdlog::warn("{}: {}", project, warning);
+  const ChildVerdict verdict = Verdict(end, said);
+  return {verdict.exit_code, verdict.message};
+}
+
 }  // namespace
 
 int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
@@ -131,60 +172,110 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
   }));
 }
 
-int BatchCommand(const std::vector<fs::path>& dirs, bool force,
-                 const std::optional<fs::path>& csv) {
+int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optional<fs::path>& csv,
+                 int jobs) {
   std::vector<fs::path> projects;
   if (const Outcome found = Guarded([&] { projects = FindProjects(dirs); });
       found.exit_code != kExitOk) {
     return Finish(found);
   }
-  struct Row {
-    std::string project, result, measurements;
-    double seconds = 0.0;
-  };
-  std::vector<Row> rows;
-  std::vector<ProjectMeasurements> measurements;
-  bool any_failed = false;
-  for (size_t i = 0; i < projects.size(); ++i) {
-    const fs::path& dir = projects[i];
-    spdlog::info("[{}/{}] {}", i + 1, projects.size(), dir.string());
-    Row row{dir.string(), "ok", "-"};
-    ProjectMeasurements made{dir.string(), {}, ""};
-    const auto start = std::chrono::steady_clock::now();
-    const Outcome outcome = Guarded([&] {
-      const Project project = LoadProject(dir);
-      if (!force && ReportIsCurrent(project)) {
-        row.result = "current (skipped)";
-      } else {
-        TerminalProgress progress(IsStderrTerminal());
-        RunOptions options;
-        options.progress = progress.Callback();
-        RunProject(project, options);
-      }
-      const Report report = ReadReportJson(project.OutDir() / "report.json");
-      row.measurements = MeasurementBrief(report);
-      if (report.measurements) made.measurements = *report.measurements;
-    });
-    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (outcome.exit_code != kExitOk) {
-      any_failed = true;
-      row.result = fmt::format("FAILED ({}): {}", outcome.exit_code, outcome.message);
-      spdlog::error("{}: {}", dir.string(), outcome.message);
-      made = {dir.string(), {}, outcome.message};  // out/ is an earlier run's, if any
+  const size_t total = projects.size();
+  std::vector<BatchRow> rows(total);
+  std::vector<ProjectMeasurements> measurements(total);
+  for (size_t i = 0; i < total; ++i) {
+    rows[i].project = projects[i].string();
+    measurements[i].project = projects[i].string();
+  }
+  size_t done = 0;
+  // After project i has ended (or was skipped), with the outcome of `omm run`.
+  const auto conclude = [&](size_t i, const Outcome& run) {
+    BatchRow& row = rows[i];
+    ProjectMeasurements& made = measurements[i];
+    Outcome outcome = run;
+    if (outcome.exit_code == kExitOk) {
+      outcome = Guarded([&] {
+        const Report report = ReadReportJson(projects[i] / "out" / "report.json");
+        row.measurements = MeasurementBrief(report);
+        if (report.measurements) made.measurements = *report.measurements;
+      });
     }
-    rows.push_back(row);
-    measurements.push_back(std::move(made));
+    if (outcome.exit_code != kExitOk) {
+      row.result = fmt::format("FAILED ({}): {}", outcome.exit_code, outcome.message);
+      row.measurements = "-";
+      made = {projects[i].string(), {}, outcome.message};  // out/ is an earlier run's, if any
+    }
+    ++done;
+    if (outcome.exit_code != kExitOk) {
+      spdlog::error("[{}/{}] {}: {}", done, total, rows[i].project, outcome.message);
+    } else if (row.seconds == 0.0) {
+      spdlog::info("[{}/{}] {}: {}", done, total, rows[i].project, row.result);
+    } else {
+      spdlog::info("[{}/{}] {}: {} in {:.1f} s", done, total, rows[i].project, row.result,
+                   row.seconds);
+    }
+  };
+
+  // Which projects to run: the others are skipped (report current) or
+  // refused (project files unreadable) here, without a child.
+  std::vector<size_t> to_run;
+  for (size_t i = 0; i < total; ++i) {
+    bool current = false;
+    const Outcome loaded = Guarded([&] {
+      const Project project = LoadProject(projects[i]);
+      current = !force && ReportIsCurrent(project);
+    });
+    if (loaded.exit_code != kExitOk || current) {
+      rows[i].result = current ? "current (skipped)" : "";
+      conclude(i, loaded);
+    } else {
+      to_run.push_back(i);
+    }
   }
 
+  // Each project as its own `omm run -q`, up to `jobs` at a time; their logs
+  // go to a scratch folder, and their warnings and errors are relayed.
+  const Outcome ran = Guarded([&] {
+    if (to_run.empty()) return;
+    const fs::path program = OwnExecutable();
+    ScratchDir logs("omm-batch");
+    struct Running {
+      size_t index;
+      fs::path log;
+      std::chrono::steady_clock::time_point start;
+    };
+    std::map<pid_t, Running> running;
+    size_t next = 0;
+    while (next < to_run.size() || !running.empty()) {
+      while (next < to_run.size() && running.size() < static_cast<size_t>(jobs)) {
+        const size_t i = to_run[next++];
+        const fs::path log = logs.path() / fmt::format("{}.log", i);
+        const pid_t pid = StartChild({program.string(), "-q", "run", projects[i].string()}, log);
+        running.emplace(pid, Running{i, log, std::chrono::steady_clock::now()});
+        spdlog::info("started {}", rows[i].project);
+      }
+      const ChildEnd end = WaitForAnyChild();
+      const auto it = running.find(end.pid);
+      if (it == running.end()) continue;
+      const Running child = it->second;
+      running.erase(it);
+      rows[child.index].seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - child.start).count();
+      rows[child.index].result = "ok";
+      conclude(child.index, ChildOutcome(end, ReadTextFile(child.log, "log not found"),
+                                         rows[child.index].project));
+    }
+  });
+  if (ran.exit_code != kExitOk) return Finish(ran);
+
   size_t width = 7;
-  for (const Row& row : rows) width = std::max(width, row.project.size());
+  for (const BatchRow& row : rows) width = std::max(width, row.project.size());
   fmt::print("{:<{}}  {:>8}  {:<34}  {}\n", "project", width, "time_s", "measurements", "result");
-  for (const Row& row : rows) {
+  for (const BatchRow& row : rows) {
     fmt::print("{:<{}}  {:>8.1f}  {:<34}  {}\n", row.project, width, row.seconds, row.measurements,
                row.result);
   }
-  const auto failed = std::count_if(rows.begin(), rows.end(),
-                                    [](const Row& r) { return r.result.rfind("FAILED", 0) == 0; });
+  const auto failed = std::count_if(
+      rows.begin(), rows.end(), [](const BatchRow& r) { return r.result.rfind("FAILED", 0) == 0; });
   fmt::print("{} projects, {} failed\n", rows.size(), failed);
   fmt::print("{}\n", CmmAgreement(measurements));
   if (csv) {
@@ -193,7 +284,7 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force,
     if (written.exit_code != kExitOk) return Finish(written);
     fmt::print("{}\n", csv->string());
   }
-  return any_failed ? kExitFailed : kExitOk;
+  return failed > 0 ? kExitFailed : kExitOk;
 }
 
 int SimulateCommand(const fs::path& project_dir, const SimulationOptions& options,

@@ -20,12 +20,13 @@ int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage
 
 // `omm batch`: each argument is a project directory or a directory whose
 // subdirectories are projects. Projects whose report is current are skipped
-// unless `force`. Prints a summary table and how the measurements agree with
+// unless `force`. Each other project runs as its own `omm run` process, up to
+// `jobs` at once (child_process.h). Prints a summary table and how the measurements agree with
 // the CMM values over all projects; with `csv`, also writes every
 // measurement to that file (measurements_csv.h). Exits kExitFailed if any
 // project failed.
 int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force,
-                 const std::optional<std::filesystem::path>& csv = std::nullopt);
+                 const std::optional<std::filesystem::path>& csv = std::nullopt, int jobs = 1);
 
 // `omm simulate`.
 int SimulateCommand(const std::filesystem::path& project_dir, const SimulationOptions& options,

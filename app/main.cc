@@ -1,12 +1,14 @@
 // `omm`: on-machine vision metrology from the command line. See README.md.
 #include <malloc.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <map>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -102,10 +104,11 @@ int main(int argc, char** argv) {
       "Writes PROJECT/out/camera.cameramodel, out/calibration/ (solve record, plots) and the\n"
       "report's calibration section.",
       project, stage);
-  calibrate->add_flag("--study", study,
-                      "also run the image-count study: calibrate on random subsets of 3..N images,\n"
-                      "report the spread of the intrinsics against the count and how many suffice\n"
-                      "(slow: ~150 solves; writes out/calibration/study.svg)");
+  calibrate->add_flag(
+      "--study", study,
+      "also run the image-count study: calibrate on random subsets of 3..N images,\n"
+      "report the spread of the intrinsics against the count and how many suffice\n"
+      "(slow: ~150 solves; writes out/calibration/study.svg)");
   CLI::App* mosaic =
       AddStageCommand(app, omm::Stage::kMosaic,
                       "Register the tiles and write the orthorectified mosaic.\n"
@@ -135,13 +138,20 @@ int main(int argc, char** argv) {
   bool force = false;
   CLI::App* batch = app.add_subcommand(
       "batch",
-      "Run many projects, one after another, and print a summary table.\n"
+      "Run many projects, each as its own `omm run`, several at once, and print a summary table.\n"
       "Each DIR is a project directory or a directory of project directories.\n"
       "Projects whose out/report.json is current (same inputs, same omm) are skipped.\n"
       "Writes each project's out/ as `omm run` does; a failing project does not stop the batch;\n"
       "with --csv, one table of every measurement of every project.");
   batch->add_option("DIR", batch_dirs, "project directories or folders of projects")->required();
   batch->add_flag("--force", force, "rerun projects whose report is current");
+  // A run keeps about 1.7 cores busy (`omm_run_benchmark`: CPU / wall time).
+  int jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency() / 2));
+  batch
+      ->add_option("-j,--jobs", jobs,
+                   "projects run at once (default: half the machine's hardware threads)")
+      ->check(CLI::Range(1, 256))
+      ->capture_default_str();
   std::optional<fs::path> batch_csv;
   batch->add_option("--csv", batch_csv,
                     "also write every project's measurements (value, sigma, CMM deviation) to "
@@ -211,7 +221,7 @@ int main(int argc, char** argv) {
   const omm::FeatureSource mosaic_features = feature_sources.at(features);
   if (run->parsed()) return omm::RunCommand(project, omm::AllStages(), false, mosaic_features);
   if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features);
-  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force, batch_csv);
+  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force, batch_csv, jobs);
   if (simulate->parsed()) return omm::SimulateCommand(simulate_out, simulation, truth);
   if (report->parsed()) return omm::ReportCommand(project, json);
   return omm::kExitBadInput;

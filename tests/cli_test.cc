@@ -125,7 +125,8 @@ TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
   testing::WriteTinyProject(bad);
   testing::ReplaceInFile(bad.dir / "table.csv", "image,x_mm,y_mm", "image,x,y");
   const fs::path csv = dir_.path() / "summary.csv";
-  const auto result = testing::RunOmm("batch " + Quoted(dir_.path()) +  // a folder of projects
+  // Both projects at once, each its own `omm run`.
+  const auto result = testing::RunOmm("batch --jobs 2 " + Quoted(dir_.path()) +  // a folder
                                       " --csv " + Quoted(csv));
   EXPECT_EQ(result.exit_code, 1) << result.output;
   EXPECT_THAT(result.output, HasSubstr("2 projects, 2 failed"));
@@ -142,6 +143,21 @@ TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
   EXPECT_EQ(std::count(table.begin(), table.end(), '\n'), 3) << table;
   EXPECT_THAT(table, HasSubstr((bad.dir.string() + ",,,,,,,,")));
   EXPECT_THAT(table, HasSubstr("table.csv:1"));
+}
+
+TEST_F(CliTest, BatchRunsProjectsAsTheirOwnRunsAndRefusesZeroJobs) {
+  // The child's failure message reaches the batch whole, as `omm run` gives
+  // it (PlainImagesFailCalibrationWithTheirReasons).
+  const auto batch = testing::RunOmm("batch -j 1 " + Quoted(project_.dir));
+  EXPECT_EQ(batch.exit_code, 1) << batch.output;
+  EXPECT_THAT(batch.output, HasSubstr("1 projects, 1 failed"));
+  EXPECT_THAT(batch.output, HasSubstr("FAILED (1): stage 'calibrate' failed"));
+  EXPECT_THAT(batch.output, HasSubstr("; plate not found: calib_01.png, calib_02.png"));
+  EXPECT_FALSE(fs::exists(project_.OutDir()));
+
+  const auto zero = testing::RunOmm("batch --jobs 0 " + Quoted(project_.dir));
+  EXPECT_EQ(zero.exit_code, 2);
+  EXPECT_THAT(zero.output, HasSubstr("--jobs"));
 }
 
 TEST_F(CliTest, ReportPrintsTheMeasurements) {
