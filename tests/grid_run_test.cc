@@ -52,16 +52,7 @@ void ExpectAGridRuns(const std::string& preset, testing::TileGrid grid,
   EXPECT_LT(std::sqrt(sum2 / errors.size()) / raw_px_mm, 0.05);
 
   ASSERT_EQ(report.measurements->size(), project.measurements.size());
-  for (const MeasurementReport& m : *report.measurements) {
-    ASSERT_TRUE(m.value_mm && m.sigma_mm) << m.name << ": " << m.error;
-    for (const MeasurementTruth& t : sim.truth.measurements) {
-      if (t.name != m.name) continue;
-      const double error_mm = *m.value_mm - t.value_mm;
-      std::printf("%s %+.4f raw px, %+.2f sigma\n", m.name.c_str(), error_mm / raw_px_mm,
-                  error_mm / *m.sigma_mm);
-      EXPECT_LT(std::abs(error_mm), 3.0 * *m.sigma_mm) << m.name;
-    }
-  }
+  testing::ExpectMeasurementsWithinSigmas(report, sim.truth, 3.0);
 }
 
 TEST(GridRun, OneRowOfFourTiles) { ExpectAGridRuns("exposure", {4, 1}); }

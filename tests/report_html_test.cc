@@ -118,6 +118,12 @@ Report FullReport() {
                            {"exposure_gain", 0.9553}}}},
              {"tiles_held_by_prior",
               ReportValue::Array{ReportObject{{"image", "t<3>.png"}, {"why", "no good matches"}}}},
+             {"table_priors_left_out",
+              ReportValue::Array{ReportObject{
+                  {"image", "t2.png"},
+                  {"adjusted_minus_commanded_mm", ReportValue::Array{-0.3012, 0.0046}},
+                  {"w2", 182.31},
+                  {"bound", 18.2}}}},
              {"hole_ties",
               ReportObject{{"brief", "1 hole seen whole by two tiles or more tie them; 1 dropped"},
                            {"ties", ReportValue::Array{ReportObject{
@@ -241,7 +247,8 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   const std::string html = ReportHtml(FullReport(), FullInputs());
   for (const char* id :
        {"measurements-table", "features-table", "rejected-table", "per-image-table", "pairs-table",
-        "hole-ties-table", "overlap-ties-table", "tiles-table", "held-table"}) {
+        "hole-ties-table", "overlap-ties-table", "tiles-table", "held-table",
+        "priors-left-out-table"}) {
     EXPECT_THAT(html, HasSubstr(std::string("<table id=\"") + id + "\">")) << id;
   }
   EXPECT_THAT(html, HasSubstr("<th>run_date</th><td>2026-11-22T01:00:00Z</td>"));
@@ -252,7 +259,9 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
                               "at 406 mm"));
   EXPECT_THAT(html, HasSubstr("<text>resid</text>"));
   EXPECT_THAT(html, HasSubstr("<text>unc</text>"));
-  // adjusted - commanded in micrometres.
+  // adjusted - commanded in micrometres; a table position left out.
+  EXPECT_THAT(html, HasSubstr("<tr><td>t2.png</td><td class=\"r\">-301.2</td><td "
+                              "class=\"r\">4.6</td><td class=\"r\">182.3</td>"));
   EXPECT_THAT(html, HasSubstr("<td class=\"r\">-14.83</td><td class=\"r\">1.23</td>"));
   EXPECT_THAT(html, HasSubstr("<tr class=\"failed\"><td>t1.png</td><td>t&lt;3&gt;.png</td>"));
   EXPECT_THAT(html, HasSubstr("<td>yes (matched on the adjusted scene's prediction)</td>"));

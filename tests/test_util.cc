@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -146,6 +147,22 @@ std::vector<std::pair<std::string, double>> HoleCentreErrorsAfterSimilarity(
   for (size_t i = 0; i < errors.size(); ++i)
     errors[i].second = residual.col(static_cast<Eigen::Index>(i)).norm();
   return errors;
+}
+
+void ExpectMeasurementsWithinSigmas(const Report& report, const SimulationTruth& truth,
+                                    double max_sigmas) {
+  ASSERT_TRUE(report.measurements.has_value());
+  const double raw_px_mm = RawPxMm(truth);
+  for (const MeasurementReport& m : *report.measurements) {
+    ASSERT_TRUE(m.value_mm && m.sigma_mm) << m.name << ": " << m.error;
+    for (const MeasurementTruth& t : truth.measurements) {
+      if (t.name != m.name) continue;
+      const double error_mm = *m.value_mm - t.value_mm;
+      std::printf("%s %+.4f raw px, %+.2f sigma\n", m.name.c_str(), error_mm / raw_px_mm,
+                  error_mm / *m.sigma_mm);
+      EXPECT_LT(std::abs(error_mm), max_sigmas * *m.sigma_mm) << m.name;
+    }
+  }
 }
 
 }  // namespace omm::testing

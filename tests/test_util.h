@@ -76,4 +76,9 @@ std::vector<std::pair<std::string, double>> HoleCentreErrorsAfterSimilarity(
 // A raw pixel's size on the part: pitch * distance / focal length, mm.
 double RawPxMm(const SimulationTruth& truth);
 
+// Every measurement made, each printed with its error against the truth (raw
+// px and sigmas), and within max_sigmas of its sigma (a gtest failure each).
+void ExpectMeasurementsWithinSigmas(const Report& report, const SimulationTruth& truth,
+                                    double max_sigmas);
+
 }  // namespace omm::testing

@@ -1,5 +1,6 @@
 #include "adapters/ceres/plane_bundle.h"
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
@@ -7,6 +8,7 @@
 #include <limits>
 #include <memory>
 #include <sstream>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -333,6 +335,12 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   }
   for (int i = 0; i < num_tiles; ++i)
     if (tile_observations[i] == 0) summary.tiles_without_observations.push_back(i);
+  for (const int i : input.tiles_without_table_prior) {
+    if (tile_observations[i] > 0) continue;
+    summary.brief = "plane bundle adjustment not run: tile " + std::to_string(i) +
+                    " has neither a table prior nor an observation";
+    return summary;
+  }
   const bool has_observations = summary.num_observations > 0;
 
   // Refined intrinsics in the lens's blocks (IntrinsicsBlockStarts): each
@@ -410,9 +418,14 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
                                 loss.get(), parameters);
     }
     for (int i = 0; i < num_tiles; ++i) {
-      problem->AddResidualBlock(
-          new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
-          b.table_pos[i].data());
+      if (std::binary_search(input.tiles_without_table_prior.begin(),
+                             input.tiles_without_table_prior.end(), i)) {
+        problem->AddParameterBlock(b.table_pos[i].data(), 2);
+      } else {
+        problem->AddResidualBlock(
+            new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
+            b.table_pos[i].data());
+      }
       if (!config.refine_table_positions) problem->SetParameterBlockConstant(b.table_pos[i].data());
     }
     if (has_observations) {

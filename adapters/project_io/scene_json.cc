@@ -44,16 +44,21 @@ std::string SceneToJson(const SavedScene& saved) {
   const PlaneScene& scene = saved.scene;
   json root;
   root["format"] = kSceneFormat;
-  root["cam_from_part"] = {{"r", JsonArray(scene.cam_from_part_r)}, {"t", JsonArray(scene.cam_from_part_t_mm)}};
+  root["cam_from_part"] = {{"r", JsonArray(scene.cam_from_part_r)},
+                           {"t", JsonArray(scene.cam_from_part_t_mm)}};
   root["table_sigma_mm"] = saved.table_sigma_mm;
   json tiles = json::array();
   for (size_t i = 0; i < scene.table_pos_mm.size(); ++i) {
     const bool held = std::find(saved.tiles_held_by_prior.begin(), saved.tiles_held_by_prior.end(),
                                 static_cast<int>(i)) != saved.tiles_held_by_prior.end();
-    tiles.push_back({{"image", saved.tile_images.at(i)},
-                     {"commanded_mm", JsonArray(saved.commanded_table_pos_mm.at(i))},
-                     {"adjusted_mm", JsonArray(scene.table_pos_mm[i])},
-                     {"held_by_prior", held}});
+    tiles.push_back(
+        {{"image", saved.tile_images.at(i)},
+         {"commanded_mm", JsonArray(saved.commanded_table_pos_mm.at(i))},
+         {"adjusted_mm", JsonArray(scene.table_pos_mm[i])},
+         {"held_by_prior", held},
+         {"table_prior_used",
+          !std::binary_search(saved.tiles_without_table_prior.begin(),
+                              saved.tiles_without_table_prior.end(), static_cast<int>(i))}});
   }
   root["tiles"] = tiles;
   json plates = json::array();
@@ -104,6 +109,12 @@ SavedScene SceneFromJson(const std::string& text, const std::string& where) {
     const json& held = in.At(tiles[i], "held_by_prior", path);
     if (!held.is_boolean()) in.Fail(path + ".held_by_prior", "expected true or false");
     if (held.get<bool>()) saved.tiles_held_by_prior.push_back(static_cast<int>(i));
+    // Optional: files written before it existed used every prior.
+    if (tiles[i].contains("table_prior_used")) {
+      const json& used = tiles[i].at("table_prior_used");
+      if (!used.is_boolean()) in.Fail(path + ".table_prior_used", "expected true or false");
+      if (!used.get<bool>()) saved.tiles_without_table_prior.push_back(static_cast<int>(i));
+    }
   }
   const json& plates = in.Array(root, "plates", "");
   for (size_t k = 0; k < plates.size(); ++k) {

@@ -21,6 +21,7 @@ SavedScene Example() {
   saved.tile_images = {"a.png", "b.png"};
   saved.commanded_table_pos_mm = {{0.0, 0.0}, {33.3, 0.0}};
   saved.tiles_held_by_prior = {1};
+  saved.tiles_without_table_prior = {0};
   saved.table_sigma_mm = 0.02;
   saved.rms_px = 0.031;
   saved.lens_model = "LENSMODEL_OPENCV4";
@@ -44,6 +45,7 @@ TEST(SceneJson, RoundTripIsExact) {
   EXPECT_EQ(back.tile_images, saved.tile_images);
   EXPECT_EQ(back.commanded_table_pos_mm, saved.commanded_table_pos_mm);
   EXPECT_EQ(back.tiles_held_by_prior, saved.tiles_held_by_prior);
+  EXPECT_EQ(back.tiles_without_table_prior, saved.tiles_without_table_prior);
   EXPECT_EQ(back.table_sigma_mm, saved.table_sigma_mm);
   EXPECT_EQ(back.rms_px, saved.rms_px);
   EXPECT_EQ(back.lens_model, saved.lens_model);
@@ -51,11 +53,13 @@ TEST(SceneJson, RoundTripIsExact) {
   EXPECT_EQ(back.intrinsics_information, saved.intrinsics_information);
 }
 
-// A file from before lens_model and intrinsics_refined: the intrinsics were held.
-TEST(SceneJson, OlderFilesHeldTheIntrinsics) {
+// A file from before lens_model, intrinsics_refined and table_prior_used:
+// the intrinsics were held, every table prior used.
+TEST(SceneJson, OlderFilesHeldTheIntrinsicsAndUsedEveryTablePrior) {
   std::string text = SceneToJson(Example());
   for (const std::string key :
-       {"\"lens_model\": \"LENSMODEL_OPENCV4\",", "\"intrinsics_refined\": true,"}) {
+       {"\"lens_model\": \"LENSMODEL_OPENCV4\",", "\"intrinsics_refined\": true,",
+        ",\n      \"table_prior_used\": false", ",\n      \"table_prior_used\": true"}) {
     const size_t at = text.find(key);
     ASSERT_NE(at, std::string::npos) << key;
     text.erase(at, key.size());
@@ -63,6 +67,7 @@ TEST(SceneJson, OlderFilesHeldTheIntrinsics) {
   const SavedScene back = SceneFromJson(text, "test");
   EXPECT_EQ(back.lens_model, "");
   EXPECT_FALSE(back.intrinsics_refined);
+  EXPECT_TRUE(back.tiles_without_table_prior.empty());
 }
 
 TEST(SceneJson, NoCovarianceIsNull) {

@@ -504,9 +504,10 @@ std::string MosaicSection(const Report& report) {
   }
   if (const ReportValue::Array* tiles = AsArray(Member(extra, "tiles"))) {
     out += "<h3>Tiles: adjusted minus commanded table position</h3>\n";
-    Table table({"tile", "commanded x mm", "commanded y mm", "adjusted - commanded x &#181;m",
-                 "adjusted - commanded y &#181;m", "held by prior", "exposure gain"},
-                "lrrrrlr");
+    Table table(
+        {"tile", "commanded x mm", "commanded y mm", "adjusted - commanded x &#181;m",
+         "adjusted - commanded y &#181;m", "held by prior", "table prior used", "exposure gain"},
+        "lrrrrllr");
     for (const ReportValue& row : *tiles) {
       const ReportObject* t = AsObject(&row);
       if (t == nullptr) continue;
@@ -520,9 +521,32 @@ std::string MosaicSection(const Report& report) {
                  component("commanded_mm", 1, 1.0, 3),
                  component("adjusted_minus_commanded_mm", 0, 1000.0, 2),
                  component("adjusted_minus_commanded_mm", 1, 1000.0, 2),
-                 Text(Member(*t, "held_by_prior")), NumberOf(*t, "exposure_gain", 4)});
+                 Text(Member(*t, "held_by_prior")), Text(Member(*t, "table_prior_used")),
+                 NumberOf(*t, "exposure_gain", 4)});
     }
     out += table.Html("tiles-table");
+  }
+  const ReportValue::Array* left_out = AsArray(Member(extra, "table_priors_left_out"));
+  if (left_out != nullptr && !left_out->empty()) {
+    out +=
+        "<h3>Table positions left out</h3>\n<p>The features put these tiles far from their "
+        "table.csv positions (w&#178; beyond its bound: chi-square, 2 dof); the adjustment left "
+        "those positions out. Check table.csv and the machine.</p>\n";
+    Table table({"tile", "adjusted - commanded x &#181;m", "adjusted - commanded y &#181;m",
+                 "w&#178;", "bound"},
+                "lrrrr");
+    for (const ReportValue& row : *left_out) {
+      const ReportObject* t = AsObject(&row);
+      if (t == nullptr) continue;
+      const ReportValue::Array* v = AsArray(Member(*t, "adjusted_minus_commanded_mm"));
+      const auto micrometres = [&](int axis) {
+        const auto x = v && v->size() == 2 ? AsNumber(&(*v)[axis]) : std::nullopt;
+        return Number(x ? std::optional<double>(*x * 1000.0) : std::nullopt, 1);
+      };
+      table.Row({Text(Member(*t, "image")), micrometres(0), micrometres(1), NumberOf(*t, "w2", 1),
+                 NumberOf(*t, "bound", 1)});
+    }
+    out += table.Html("priors-left-out-table");
   }
   if (const ReportValue::Array* held = AsArray(Member(extra, "tiles_held_by_prior"))) {
     out += "<h3>Tiles held by the table prior alone</h3>\n";

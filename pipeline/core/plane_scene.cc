@@ -61,6 +61,13 @@ std::string CheckPlaneBundleInput(const PlaneBundleInput& input,
   if (!(input.table_sigma_mm > 0.0)) return "table_sigma_mm must be > 0";
   if (!(input.observation_sigma_px > 0.0)) return "observation_sigma_px must be > 0";
   if (input.num_tracks < 0) return "num_tracks must be >= 0";
+  const std::vector<int>& unprior = input.tiles_without_table_prior;
+  for (size_t k = 0; k < unprior.size(); ++k) {
+    if (unprior[k] < 0 || unprior[k] >= num_tiles || (k > 0 && unprior[k] <= unprior[k - 1]))
+      return "tiles_without_table_prior must be ascending tile indices";
+  }
+  if (static_cast<int>(unprior.size()) > num_tiles - 2)
+    return "at least 2 tiles need their table prior (the scale and the axes' rotation)";
   std::vector<int> seen(input.num_tracks, 0);
   for (const TrackObservation& obs : input.observations) {
     if (obs.tile < 0 || obs.tile >= num_tiles) return "an observation's tile is out of range";

@@ -89,6 +89,10 @@ struct PlateMarkObservation {
 struct PlaneBundleInput {
   std::vector<Eigen::Vector2d> commanded_table_pos_mm;  // per tile (table.csv)
   double table_sigma_mm = 0.01;  // 1-sigma of each commanded coordinate
+  // Tiles whose commanded position is not a prior (ascending): the features
+  // contradicted it (pipeline/mosaic/table_prior_check.h). Each must be
+  // placed by observations.
+  std::vector<int> tiles_without_table_prior;
   int num_tracks = 0;
   std::vector<TrackObservation> observations;
   double observation_sigma_px = 0.1;  // 1-sigma of a weight-1 observation, px

@@ -1,5 +1,6 @@
 #include "pipeline/measure/measurement_uncertainty.h"
 
+#include <algorithm>
 #include <cassert>
 #include <cmath>
 #include <numbers>
@@ -196,10 +197,13 @@ SigmaBreakdown MeasurementPropagation::Propagate(const std::vector<FeatureGradie
   const Eigen::VectorXd b = scene_covariance_ * a.transpose();
   const double scene = a.dot(b);
   const int table_index = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
-  const double table = priors_.num_tiles > 0
-                           ? b.segment(table_index, 2 * priors_.num_tiles).squaredNorm() /
-                                 (priors_.table_sigma_mm * priors_.table_sigma_mm)
-                           : 0.0;
+  double table = 0.0;
+  for (int i = 0; i < priors_.num_tiles; ++i) {
+    const std::vector<int>& unprior = priors_.tiles_without_table_prior;
+    if (std::find(unprior.begin(), unprior.end(), i) != unprior.end()) continue;
+    table += b.segment<2>(table_index + 2 * i).squaredNorm() /
+             (priors_.table_sigma_mm * priors_.table_sigma_mm);
+  }
   double calibration = 0.0;
   if (priors_.intrinsics_information.size() > 0) {
     const auto b_intrinsics = b.tail(n - priors_.intrinsics_index);

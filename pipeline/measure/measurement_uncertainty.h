@@ -118,6 +118,7 @@ struct SigmaBreakdown {
 struct ScenePriors {
   int num_tiles = 0;            // T_i in the scene vector
   double table_sigma_mm = 0.0;  // of each commanded coordinate
+  std::vector<int> tiles_without_table_prior;  // whose prior the adjustment left out
   // The intrinsics' first index in the scene vector
   // (PlaneSceneCovarianceIntrinsicsIndex) and the calibration prior's
   // information over them (N x N; empty if they were held).

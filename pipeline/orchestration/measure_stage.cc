@@ -421,6 +421,7 @@ void RunMeasureStage(StageContext& context) {
   ScenePriors priors;
   priors.num_tiles = num_tiles;
   priors.table_sigma_mm = saved.table_sigma_mm;
+  priors.tiles_without_table_prior = saved.tiles_without_table_prior;
   priors.intrinsics_index = PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates);
   priors.intrinsics_information = saved.intrinsics_information;
   const MeasurementPropagation propagation(values, scene_covariance, std::move(priors));

@@ -40,6 +40,7 @@
 #include "pipeline/mosaic/pair_scatter.h"
 #include "pipeline/mosaic/plate_on_part.h"
 #include "pipeline/mosaic/register_tiles.h"
+#include "pipeline/mosaic/table_prior_check.h"
 #include "pipeline/orchestration/stage.h"
 
 namespace omm {
@@ -197,10 +198,13 @@ ReportValue TilesReport(const Project& project, const TileRegistration& registra
     const bool held =
         std::find(registration.tiles_held_by_prior.begin(), registration.tiles_held_by_prior.end(),
                   static_cast<int>(i)) != registration.tiles_held_by_prior.end();
+    const std::vector<int>& unprior = registration.input.tiles_without_table_prior;
     ReportObject row{{"image", project.tiles[i].image},
                      {"commanded_mm", Pair(project.tiles[i].table_pos_mm)},
                      {"adjusted_minus_commanded_mm", Pair(registration.table_adjustment_mm[i])},
-                     {"held_by_prior", held}};
+                     {"held_by_prior", held},
+                     {"table_prior_used",
+                      !std::binary_search(unprior.begin(), unprior.end(), static_cast<int>(i))}};
     if (i < ortho.exposure.tiles.size()) {
       row.emplace_back("exposure_gain", ortho.exposure.tiles[i].gain);
       row.emplace_back("vignetting", ortho.exposure.tiles[i].vignetting);
@@ -333,7 +337,10 @@ struct FinalOutcome {
   std::string ties_brief;
   ReportValue ties_report;  // report.mosaic's hole_ties
   std::string overlap_brief;
-  ReportValue overlap_report;    // report.mosaic's overlap_ties
+  ReportValue overlap_report;  // report.mosaic's overlap_ties
+  // Table priors left out (registration->input.tiles_without_table_prior),
+  // each as it was found, and the bound it exceeded.
+  std::vector<std::pair<TablePriorTest, double>> table_priors_left_out;
   double fit_seconds = 0.0;      // the ties' hole fits
   double overlap_seconds = 0.0;  // the held tiles' overlap alignments
   double solve_seconds = 0.0;    // the final adjustment's solves
@@ -389,16 +396,42 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
       }
     }
   }
-  const std::vector<OverlapTie> overlap_ties = FindOverlapTies(
-      views_geometry, tiles,
-      OverlapsToAlign(views_geometry, registration->tiles_held_by_prior, links), holes,
-      registration->input.table_sigma_mm, OverlapTieOptions());
+  const std::vector<OverlapTie> overlap_ties =
+      FindOverlapTies(views_geometry, tiles,
+                      OverlapsToAlign(views_geometry, registration->tiles_held_by_prior, links),
+                      holes, registration->input.table_sigma_mm, OverlapTieOptions());
   const int first_overlap_observation = static_cast<int>(registration->input.observations.size());
   AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
   result.overlap_seconds = SecondsSince(overlap_start);
 
   TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
                                            options, ties, tie_options);
+  // Table positions the features contradict: the worst one's prior is left
+  // out and the solve run again, while one is found (table_prior_check.h),
+  // for a third of the tiles at most.
+  const TablePriorCheckOptions check_options;
+  PlaneBundleInput& input = registration->input;
+  const size_t max_left_out = input.commanded_table_pos_mm.size() / 3;
+  while (tied.adjusted.summary.usable && input.tiles_without_table_prior.size() < max_left_out) {
+    const std::vector<TablePriorTest> tests =
+        TestTablePriors(input.commanded_table_pos_mm, tied.adjusted.scene.table_pos_mm,
+                        tied.adjusted.scene.covariance, input.table_sigma_mm,
+                        input.tiles_without_table_prior, check_options);
+    const std::optional<TablePriorTest> worst = WorstTablePriorOutlier(tests, check_options);
+    if (!worst) break;
+    PlaneBundleInput without = input;
+    without.tiles_without_table_prior.insert(
+        std::upper_bound(without.tiles_without_table_prior.begin(),
+                         without.tiles_without_table_prior.end(), worst->tile),
+        worst->tile);
+    TiedAdjustment retried =
+        AdjustWithHoleTies(camera, without, registered, plate, prior, options, ties, tie_options);
+    if (!retried.adjusted.summary.usable) break;
+    input.tiles_without_table_prior = without.tiles_without_table_prior;
+    result.table_priors_left_out.emplace_back(
+        *worst, TablePriorBound(static_cast<int>(tests.size()), check_options));
+    tied = std::move(retried);
+  }
   result.adjusted = std::move(tied.adjusted);
   result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
   result.overlap_report =
@@ -526,6 +559,20 @@ void RunMosaicStage(StageContext& context) {
   registration.bundle = adjusted.summary;
   registration.rms_px = adjusted.summary.final_rms_px;
   registration.table_adjustment_mm = adjusted.summary.table_adjustment_mm;
+  ReportValue::Array priors_left_out;
+  for (const auto& [test, bound] : final_outcome.table_priors_left_out) {
+    const Eigen::Vector2d off = registration.table_adjustment_mm[test.tile];
+    spdlog::warn(
+        "mosaic: {}: the features place it {:.3f} mm ({:+.3f}, {:+.3f}) from its table.csv "
+        "position, beyond table.sigma_mm {} (w^2 {:.1f}, bound {:.1f}): that position is left out "
+        "of the adjustment; check table.csv",
+        project.tiles[test.tile].image, off.norm(), off.x(), off.y(), project.table_sigma_mm,
+        test.w2, bound);
+    priors_left_out.emplace_back(ReportObject{{"image", project.tiles[test.tile].image},
+                                              {"adjusted_minus_commanded_mm", Pair(off)},
+                                              {"w2", test.w2},
+                                              {"bound", bound}});
+  }
   registration.plane_tilt_deg = adjusted.summary.plane_tilt_deg;
   // The camera of the adjusted scene: its (refined or held) intrinsics.
   CameraModel scene_camera = camera;
@@ -576,6 +623,7 @@ void RunMosaicStage(StageContext& context) {
   saved.tile_images = image_names;
   saved.commanded_table_pos_mm = commanded_mm;
   saved.tiles_held_by_prior = registration.tiles_held_by_prior;
+  saved.tiles_without_table_prior = registration.input.tiles_without_table_prior;
   saved.table_sigma_mm = project.table_sigma_mm;
   saved.rms_px = registration.rms_px;
   saved.lens_model = camera.lens_model;
@@ -620,6 +668,7 @@ void RunMosaicStage(StageContext& context) {
       {"pairs", PairsReport(project, registration, pair_scatter)},
       {"tiles", TilesReport(project, registration, ortho.summary)},
       {"tiles_held_by_prior", held},
+      {"table_priors_left_out", std::move(priors_left_out)},
       {"exposure",
        ReportObject{{"brief", ortho.summary.exposure.brief},
                     {"converged", ortho.summary.exposure.converged},

@@ -1,0 +1,63 @@
+#include "pipeline/mosaic/table_prior_check.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+
+#include <Eigen/Eigenvalues>
+
+#include "pipeline/core/plane_scene.h"
+
+namespace omm {
+
+std::string TablePriorCheckOptions::Check() const {
+  if (!(false_alarm_probability > 0.0 && false_alarm_probability < 1.0))
+    return "false_alarm_probability must be in (0, 1)";
+  if (!(min_redundancy > 0.0 && min_redundancy <= 1.0)) return "min_redundancy must be in (0, 1]";
+  return "";
+}
+
+std::vector<TablePriorTest> TestTablePriors(const std::vector<Eigen::Vector2d>& commanded_mm,
+                                            const std::vector<Eigen::Vector2d>& adjusted_mm,
+                                            const Eigen::MatrixXd& covariance, double sigma_mm,
+                                            const std::vector<int>& without_prior,
+                                            const TablePriorCheckOptions& options) {
+  assert(options.Check().empty());
+  assert(adjusted_mm.size() == commanded_mm.size());
+  const int num_tiles = static_cast<int>(commanded_mm.size());
+  const int first = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
+  std::vector<TablePriorTest> tests;
+  if (covariance.rows() < first + 2 * num_tiles || !(sigma_mm > 0.0)) return tests;
+  const double variance = sigma_mm * sigma_mm;
+  for (int i = 0; i < num_tiles; ++i) {
+    if (std::find(without_prior.begin(), without_prior.end(), i) != without_prior.end()) continue;
+    const Eigen::Matrix2d block = covariance.block<2, 2>(first + 2 * i, first + 2 * i);
+    const Eigen::Matrix2d residual_covariance =
+        variance * Eigen::Matrix2d::Identity() - 0.5 * (block + block.transpose());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(residual_covariance);
+    if (!(eigen.eigenvalues()(0) >= options.min_redundancy * variance)) continue;
+    TablePriorTest test;
+    test.tile = i;
+    test.residual_mm = adjusted_mm[i] - commanded_mm[i];
+    test.w2 = test.residual_mm.dot(residual_covariance.ldlt().solve(test.residual_mm));
+    tests.push_back(test);
+  }
+  return tests;
+}
+
+double TablePriorBound(int num_tested, const TablePriorCheckOptions& options) {
+  // chi-square(2)'s (1 - a) quantile in closed form: -2 ln(a).
+  return -2.0 * std::log(options.false_alarm_probability / std::max(1, num_tested));
+}
+
+std::optional<TablePriorTest> WorstTablePriorOutlier(const std::vector<TablePriorTest>& tests,
+                                                     const TablePriorCheckOptions& options) {
+  if (tests.empty()) return std::nullopt;
+  const auto worst = std::max_element(
+      tests.begin(), tests.end(),
+      [](const TablePriorTest& a, const TablePriorTest& b) { return a.w2 < b.w2; });
+  if (!(worst->w2 > TablePriorBound(static_cast<int>(tests.size()), options))) return std::nullopt;
+  return *worst;
+}
+
+}  // namespace omm

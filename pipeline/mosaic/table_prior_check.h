@@ -1,0 +1,64 @@
+// Which table positions the features contradict: a tile whose table.csv
+// position is off by much more than table.sigma_mm (a typing error, a
+// position logged for the wrong tile, a table that did not reach its
+// target) pulls the adjustment's scale and rotation with it, and so every
+// distance, silently. Baarda's data snooping on the table priors finds it.
+//
+// The prior of tile i is the observation T_i,commanded = T_i + e_i, e_i ~
+// N(0, sigma^2 I). After the adjustment its residual r_i = T_i,adjusted -
+// T_i,commanded has covariance sigma^2 I - C_i, C_i the adjusted T_i's
+// 2 x 2 block of the scene covariance (the residual of an observation in a
+// least-squares fit: its own covariance minus that of the fitted value).
+// Then w_i^2 = r_i' (sigma^2 I - C_i)^-1 r_i is chi-square with 2 dof when
+// the priors are right. The features fix the tiles' relative positions, so
+// the priors only have the similarity's 4 dof to carry: with 9 tiles, 14 of
+// their 18 dof are redundant and a corner tile 0.1 mm off at sigma 0.02 mm
+// is found. A tile that the features do not tie (held by its prior) has
+// sigma^2 I - C_i ~ 0: it cannot be checked and is not.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace omm {
+
+struct TablePriorCheckOptions {
+  // Probability that a project whose priors are all right has one flagged:
+  // the bound on w^2 is chi-square(2)'s (1 - p / m) quantile, m the tiles
+  // tested (Bonferroni): 18.2 for 9 tiles at 1e-3.
+  double false_alarm_probability = 1e-3;
+  // A tile is tested when the smallest eigenvalue of (sigma^2 I - C_i) /
+  // sigma^2 (its redundancy: how much of the prior the features check)
+  // reaches this.
+  double min_redundancy = 0.1;
+
+  std::string Check() const;  // empty if valid, else what is wrong
+};
+
+struct TablePriorTest {
+  int tile = -1;
+  Eigen::Vector2d residual_mm = Eigen::Vector2d::Zero();  // adjusted minus commanded
+  double w2 = 0.0;                                        // r' (sigma^2 I - C)^-1 r
+};
+
+// Each tile that can be tested, in order. `covariance`: the scene
+// covariance (PlaneScene::covariance, T_i at rows 6 + 2i); tiles in
+// `without_prior` (their prior already left out) are not tested. Empty
+// without a covariance.
+std::vector<TablePriorTest> TestTablePriors(const std::vector<Eigen::Vector2d>& commanded_mm,
+                                            const std::vector<Eigen::Vector2d>& adjusted_mm,
+                                            const Eigen::MatrixXd& covariance, double sigma_mm,
+                                            const std::vector<int>& without_prior,
+                                            const TablePriorCheckOptions& options);
+
+// The bound on w^2 when `num_tested` tiles are tested (options' comment).
+double TablePriorBound(int num_tested, const TablePriorCheckOptions& options);
+
+// The test with the largest w^2 if it exceeds the bound for tests.size().
+std::optional<TablePriorTest> WorstTablePriorOutlier(const std::vector<TablePriorTest>& tests,
+                                                     const TablePriorCheckOptions& options);
+
+}  // namespace omm

@@ -1,0 +1,98 @@
+// A table.csv position that is wrong by much more than table.sigma_mm (here
+// tile r0c0's x by 0.3 mm, 15 sigma: a typing error, a table that did not
+// reach its target). Before, its prior pulled the adjustment's scale: on
+// markers seed 282 the scale came out 137 ppm off, distances up to 0.18 raw
+// px and 3.3 sigma off the truth, and nothing said so. Now the features
+// contradict it (pipeline/mosaic/table_prior_check.h): its prior is left out,
+// the report names it, and every measurement is as good as without the
+// error. The untouched project leaves every prior in.
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "adapters/project_io/project_reader.h"
+#include "adapters/project_io/report_json.h"
+#include "pipeline/orchestration/run_project.h"
+#include "tests/sim_cache.h"
+#include "tests/test_util.h"
+
+namespace fs = std::filesystem;
+
+namespace omm {
+namespace {
+
+constexpr const char* kTile = "tile_r0c0.png";
+
+// `omm run` on a copy of markers seed 101 with `dx_mm` added to kTile's x.
+Report RunWithTableError(const testing::CachedProject& sim, double dx_mm) {
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "job";
+  testing::CopyProject(sim.project_dir, project_dir);
+  std::istringstream in(testing::ReadTextFile(project_dir / "table.csv"));
+  std::string table, line;
+  while (std::getline(in, line)) {
+    if (line.rfind(std::string(kTile) + ",", 0) == 0) {
+      double x = 0.0, y = 0.0;
+      EXPECT_EQ(std::sscanf(line.c_str() + std::string(kTile).size() + 1, "%lf,%lf", &x, &y), 2);
+      line = std::string(kTile) + "," + std::to_string(x + dx_mm) + "," + std::to_string(y);
+    }
+    table += line + "\n";
+  }
+  testing::WriteTextFile(project_dir / "table.csv", table);
+  RunProject(LoadProject(project_dir), RunOptions{});
+  return ReadReportJson(project_dir / "out" / "report.json");
+}
+
+// Every hole within 0.05 raw px of the truth after a similarity fit, and
+// every measurement within 3 of its sigma.
+void ExpectTrueMeasurements(const Report& report, const testing::CachedProject& sim) {
+  const double raw_px_mm = testing::RawPxMm(sim.truth);
+  double sum2 = 0.0;
+  const auto errors = testing::HoleCentreErrorsAfterSimilarity(report, sim.truth);
+  ASSERT_FALSE(errors.empty());
+  for (const auto& [name, error_mm] : errors) sum2 += error_mm * error_mm;
+  EXPECT_LT(std::sqrt(sum2 / errors.size()) / raw_px_mm, 0.05);
+  testing::ExpectMeasurementsWithinSigmas(report, sim.truth, 3.0);
+}
+
+const ReportValue::Array& PriorsLeftOut(const Report& report) {
+  static const ReportValue::Array kNone;
+  if (!report.mosaic) return kNone;
+  const ReportValue::Array* left_out =
+      AsArray(Member(report.mosaic->extra, "table_priors_left_out"));
+  return left_out ? *left_out : kNone;
+}
+
+TEST(TableBlunder, APositionTheFeaturesContradictIsLeftOutAndNamed) {
+  const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
+
+  const Report right = RunWithTableError(sim, 0.0);
+  ASSERT_TRUE(right.mosaic.has_value());
+  EXPECT_TRUE(AsArray(Member(right.mosaic->extra, "table_priors_left_out")) != nullptr);
+  EXPECT_TRUE(PriorsLeftOut(right).empty());
+
+  const Report wrong = RunWithTableError(sim, 0.3);
+  const ReportValue::Array& left_out = PriorsLeftOut(wrong);
+  ASSERT_EQ(left_out.size(), 1u);
+  const ReportObject* row = AsObject(&left_out[0]);
+  ASSERT_NE(row, nullptr);
+  const std::string* image = AsString(Member(*row, "image"));
+  ASSERT_NE(image, nullptr);
+  EXPECT_EQ(*image, kTile);
+  EXPECT_GT(AsNumber(Member(*row, "w2")).value_or(0.0),
+            AsNumber(Member(*row, "bound")).value_or(1e9));
+  // The tile is where the features put it: 0.3 mm short of table.csv, to
+  // the table's own error (sigma 0.02 mm) and the gauge.
+  const ReportValue::Array* position = AsArray(Member(*row, "adjusted_minus_commanded_mm"));
+  ASSERT_TRUE(position != nullptr && position->size() == 2u);
+  EXPECT_NEAR(AsNumber(&(*position)[0]).value_or(0.0), -0.3, 0.1);
+  ExpectTrueMeasurements(wrong, sim);
+  ExpectTrueMeasurements(right, sim);
+}
+
+}  // namespace
+}  // namespace omm
