@@ -276,7 +276,7 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
   }
   const auto failed = std::count_if(
       rows.begin(), rows.end(), [](const BatchRow& r) { return r.result.rfind("FAILED", 0) == 0; });
-  fmt::print("{} projects, {} failed\n", rows.size(), failed);
+  fmt::print("{} project{}, {} failed\n", rows.size(), rows.size() == 1 ? "" : "s", failed);
   fmt::print("{}\n", CmmAgreement(measurements));
   if (csv) {
     const Outcome written =

@@ -150,7 +150,7 @@ TEST_F(CliTest, BatchRunsProjectsAsTheirOwnRunsAndRefusesZeroJobs) {
   // it (PlainImagesFailCalibrationWithTheirReasons).
   const auto batch = testing::RunOmm("batch -j 1 " + Quoted(project_.dir));
   EXPECT_EQ(batch.exit_code, 1) << batch.output;
-  EXPECT_THAT(batch.output, HasSubstr("1 projects, 1 failed"));
+  EXPECT_THAT(batch.output, HasSubstr("1 project, 1 failed"));
   EXPECT_THAT(batch.output, HasSubstr("FAILED (1): stage 'calibrate' failed"));
   EXPECT_THAT(batch.output, HasSubstr("; plate not found: calib_01.png, calib_02.png"));
   EXPECT_FALSE(fs::exists(project_.OutDir()));

@@ -118,6 +118,10 @@ Report FullReport() {
                            {"exposure_gain", 0.9553}}}},
              {"tiles_held_by_prior",
               ReportValue::Array{ReportObject{{"image", "t<3>.png"}, {"why", "no good matches"}}}},
+             {"table_sigma_check", ReportObject{{"stated_mm", 0.005},
+                                                {"estimated_mm", 0.0169},
+                                                {"redundancy", 13.9},
+                                                {"consistent", false}}},
              {"table_priors_left_out",
               ReportValue::Array{ReportObject{
                   {"image", "t2.png"},
@@ -259,6 +263,8 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
                               "at 406 mm"));
   EXPECT_THAT(html, HasSubstr("<text>resid</text>"));
   EXPECT_THAT(html, HasSubstr("<text>unc</text>"));
+  EXPECT_THAT(html, HasSubstr("0.0169 mm against table.sigma_mm 0.0050 mm (13.9 dof): <b>too "
+                              "large"));
   // adjusted - commanded in micrometres; a table position left out.
   EXPECT_THAT(html, HasSubstr("<tr><td>t2.png</td><td class=\"r\">-301.2</td><td "
                               "class=\"r\">4.6</td><td class=\"r\">182.3</td>"));

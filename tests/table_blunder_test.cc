@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 #include <string>
 
@@ -27,11 +28,17 @@ namespace {
 
 constexpr const char* kTile = "tile_r0c0.png";
 
-// `omm run` on a copy of markers seed 101 with `dx_mm` added to kTile's x.
-Report RunWithTableError(const testing::CachedProject& sim, double dx_mm) {
+// `omm run` on a copy of markers seed 101 with `dx_mm` added to kTile's x
+// and, if given, another table.sigma_mm stated (the table's is 0.02).
+Report RunWithTableError(const testing::CachedProject& sim, double dx_mm,
+                         const std::string& stated_sigma_mm = "") {
   testing::TempDir dir;
   const fs::path project_dir = dir.path() / "job";
   testing::CopyProject(sim.project_dir, project_dir);
+  if (!stated_sigma_mm.empty()) {
+    testing::ReplaceInFile(project_dir / "project.yaml", "sigma_mm: 0.02",
+                           "sigma_mm: " + stated_sigma_mm);
+  }
   std::istringstream in(testing::ReadTextFile(project_dir / "table.csv"));
   std::string table, line;
   while (std::getline(in, line)) {
@@ -59,6 +66,12 @@ void ExpectTrueMeasurements(const Report& report, const testing::CachedProject& 
   testing::ExpectMeasurementsWithinSigmas(report, sim.truth, 3.0);
 }
 
+std::optional<bool> TableSigmaConsistent(const Report& report) {
+  if (!report.mosaic) return std::nullopt;
+  const ReportObject* check = AsObject(Member(report.mosaic->extra, "table_sigma_check"));
+  return check ? AsBool(Member(*check, "consistent")) : std::nullopt;
+}
+
 const ReportValue::Array& PriorsLeftOut(const Report& report) {
   static const ReportValue::Array kNone;
   if (!report.mosaic) return kNone;
@@ -74,6 +87,7 @@ TEST(TableBlunder, APositionTheFeaturesContradictIsLeftOutAndNamed) {
   ASSERT_TRUE(right.mosaic.has_value());
   EXPECT_TRUE(AsArray(Member(right.mosaic->extra, "table_priors_left_out")) != nullptr);
   EXPECT_TRUE(PriorsLeftOut(right).empty());
+  EXPECT_EQ(TableSigmaConsistent(right), true);
 
   const Report wrong = RunWithTableError(sim, 0.3);
   const ReportValue::Array& left_out = PriorsLeftOut(wrong);
@@ -90,8 +104,20 @@ TEST(TableBlunder, APositionTheFeaturesContradictIsLeftOutAndNamed) {
   const ReportValue::Array* position = AsArray(Member(*row, "adjusted_minus_commanded_mm"));
   ASSERT_TRUE(position != nullptr && position->size() == 2u);
   EXPECT_NEAR(AsNumber(&(*position)[0]).value_or(0.0), -0.3, 0.1);
+  EXPECT_EQ(TableSigmaConsistent(wrong), true);  // the other eight
   ExpectTrueMeasurements(wrong, sim);
   ExpectTrueMeasurements(right, sim);
+}
+
+// table.sigma_mm stated four times too small: every position scatters
+// beyond it, which no single wrong one explains. No prior is left out (on
+// markers seed 282 three were before the check on the others); the report
+// says the stated sigma is contradicted.
+TEST(TableBlunder, ASigmaStatedTooSmallIsReportedNotTakenForWrongPositions) {
+  const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
+  const Report report = RunWithTableError(sim, 0.0, "0.005");
+  EXPECT_TRUE(PriorsLeftOut(report).empty());
+  EXPECT_EQ(TableSigmaConsistent(report), false);
 }
 
 }  // namespace

@@ -424,6 +424,16 @@ std::string MosaicSection(const Report& report) {
   }
   if (Member(extra, "scale_sigma_ppm") != nullptr)
     facts.Add("scale 1-sigma", NumberOf(extra, "scale_sigma_ppm", 1) + " ppm");
+  if (const ReportObject* table = AsObject(Member(extra, "table_sigma_check"))) {
+    const bool consistent = AsBool(Member(*table, "consistent")).value_or(true);
+    facts.Add("table positions' scatter about the features",
+              NumberOf(*table, "estimated_mm", 4) + " mm against table.sigma_mm " +
+                  NumberOf(*table, "stated_mm", 4) + " mm (" + NumberOf(*table, "redundancy", 1) +
+                  " dof): " +
+                  (consistent ? "consistent"
+                              : "<b>too large: the sigmas' table parts assume table.sigma_mm; "
+                                "check it and table.csv</b>"));
+  }
   if (const ReportObject* exposure = AsObject(Member(extra, "exposure")))
     facts.Add("exposure", Text(Member(*exposure, "brief")));
   out += facts.Html();

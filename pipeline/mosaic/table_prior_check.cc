@@ -60,4 +60,27 @@ std::optional<TablePriorTest> WorstTablePriorOutlier(const std::vector<TablePrio
   return *worst;
 }
 
+TableSigmaEstimate EstimateTableSigma(const std::vector<Eigen::Vector2d>& commanded_mm,
+                                      const std::vector<Eigen::Vector2d>& adjusted_mm,
+                                      const Eigen::MatrixXd& covariance, double sigma_mm,
+                                      const std::vector<int>& without_prior) {
+  assert(adjusted_mm.size() == commanded_mm.size());
+  const int num_tiles = static_cast<int>(commanded_mm.size());
+  const int first = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
+  TableSigmaEstimate estimate;
+  if (covariance.rows() < first + 2 * num_tiles || !(sigma_mm > 0.0)) return estimate;
+  const double variance = sigma_mm * sigma_mm;
+  double sum_squares = 0.0;
+  for (int i = 0; i < num_tiles; ++i) {
+    if (std::find(without_prior.begin(), without_prior.end(), i) != without_prior.end()) continue;
+    sum_squares += (adjusted_mm[i] - commanded_mm[i]).squaredNorm();
+    estimate.redundancy +=
+        2.0 - covariance.block<2, 2>(first + 2 * i, first + 2 * i).trace() / variance;
+  }
+  if (!(estimate.redundancy >= 1.0)) return estimate;
+  estimate.ok = true;
+  estimate.sigma_mm = std::sqrt(sum_squares / estimate.redundancy);
+  return estimate;
+}
+
 }  // namespace omm

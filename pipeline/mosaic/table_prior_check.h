@@ -61,4 +61,21 @@ double TablePriorBound(int num_tested, const TablePriorCheckOptions& options);
 std::optional<TablePriorTest> WorstTablePriorOutlier(const std::vector<TablePriorTest>& tests,
                                                      const TablePriorCheckOptions& options);
 
+// How far the table positions scatter about where the features put them,
+// against table.sigma_mm: the variance component of the priors (Förstner),
+// sigma_hat^2 = sum |r_i|^2 / redundancy, the redundancy sum_i tr(I - C_i /
+// sigma^2) over the priors used (about 14 of 18 for 9 tiles). When the
+// stated sigma is right, redundancy (sigma_hat / sigma)^2 is chi-square with
+// that many dof. Every measurement's table part scales with the stated
+// sigma, so one the data contradict is worth saying.
+struct TableSigmaEstimate {
+  bool ok = false;  // a covariance and a redundancy of 1 or more
+  double sigma_mm = 0.0;
+  double redundancy = 0.0;
+};
+TableSigmaEstimate EstimateTableSigma(const std::vector<Eigen::Vector2d>& commanded_mm,
+                                      const std::vector<Eigen::Vector2d>& adjusted_mm,
+                                      const Eigen::MatrixXd& covariance, double sigma_mm,
+                                      const std::vector<int>& without_prior);
+
 }  // namespace omm

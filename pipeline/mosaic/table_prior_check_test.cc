@@ -5,6 +5,7 @@
 // adjusted positions and their covariance as the Ceres adjustment does.
 #include "pipeline/mosaic/table_prior_check.h"
 
+#include <cmath>
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -26,9 +27,10 @@ struct Adjusted {
 };
 
 // 3 x 3 tiles 100 mm apart; `blunder` added to tile `blunder_tile`'s
-// commanded position; tiles in `unseen` have no feature.
+// commanded position; tiles in `unseen` have no feature. The table
+// scatters by `scatter_mm`; the solve weighs its priors by kSigma.
 Adjusted Solve(std::mt19937& random, int blunder_tile, const Eigen::Vector2d& blunder,
-               const std::vector<int>& unseen = {}) {
+               const std::vector<int>& unseen = {}, double scatter_mm = kSigma) {
   std::normal_distribution<double> normal;
   const int n = 9;
   std::vector<Eigen::Vector2d> truth;
@@ -41,7 +43,8 @@ Adjusted Solve(std::mt19937& random, int blunder_tile, const Eigen::Vector2d& bl
   std::vector<double> values;
   Adjusted out;
   for (int i = 0; i < n; ++i) {
-    Eigen::Vector2d commanded = truth[i] + kSigma * Eigen::Vector2d(normal(random), normal(random));
+    Eigen::Vector2d commanded =
+        truth[i] + scatter_mm * Eigen::Vector2d(normal(random), normal(random));
     if (i == blunder_tile) commanded += blunder;
     out.commanded.push_back(commanded);
     for (int k = 0; k < 2; ++k) {
@@ -128,6 +131,37 @@ TEST(TablePriorCheck, ATileNoFeatureTiesIsNotTestedAndSkippedTilesAreLeftOut) {
   EXPECT_TRUE(TestTablePriors(a.commanded, a.adjusted, Eigen::MatrixXd(), kSigma, {},
                               TablePriorCheckOptions{})
                   .empty());
+}
+
+// Right sigma: (sigma_hat / sigma)^2 averages 1, with a redundancy of ~14
+// for 9 tiles (18 priors less the similarity's 4); a table scattering twice
+// its stated sigma shows as twice.
+TEST(TablePriorCheck, TheTablesScatterIsEstimated) {
+  std::mt19937 random(17);
+  double sum_ratio2 = 0.0;
+  for (int draw = 0; draw < 200; ++draw) {
+    const Adjusted a = Solve(random, -1, Eigen::Vector2d::Zero());
+    const TableSigmaEstimate e =
+        EstimateTableSigma(a.commanded, a.adjusted, a.covariance, kSigma, {});
+    ASSERT_TRUE(e.ok);
+    // 14 if the features fixed the relative positions exactly; their own
+    // noise takes at most (tau / sigma)^2 of each of the 18 priors' dof.
+    EXPECT_LT(e.redundancy, 14.0);
+    EXPECT_GT(e.redundancy, 14.0 - 18.0 * (kTau / kSigma) * (kTau / kSigma));
+    sum_ratio2 += std::pow(e.sigma_mm / kSigma, 2);
+  }
+  EXPECT_NEAR(sum_ratio2 / 200, 1.0, 0.08);  // 3 sd of the mean (chi-square(14) / 14)
+  // A table that scatters twice what table.sigma_mm says.
+  double sum_twice = 0.0;
+  for (int draw = 0; draw < 200; ++draw) {
+    const Adjusted a = Solve(random, -1, Eigen::Vector2d::Zero(), {}, 2.0 * kSigma);
+    sum_twice += std::pow(
+        EstimateTableSigma(a.commanded, a.adjusted, a.covariance, kSigma, {}).sigma_mm / kSigma, 2);
+  }
+  EXPECT_NEAR(sum_twice / 200, 4.0, 0.32);  // 3 sd of the mean
+  // Without a covariance there is no estimate.
+  const Adjusted a = Solve(random, -1, Eigen::Vector2d::Zero());
+  EXPECT_FALSE(EstimateTableSigma(a.commanded, a.adjusted, Eigen::MatrixXd(), kSigma, {}).ok);
 }
 
 TEST(TablePriorCheck, OptionsAreChecked) {

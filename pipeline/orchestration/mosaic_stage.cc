@@ -9,6 +9,7 @@
 // model) and report.mosaic.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <future>
 #include <memory>
@@ -32,6 +33,7 @@
 #include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/measure/hole_ties.h"
+#include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/measure/overlap_ties.h"
 #include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/exposure_compensation.h"
@@ -324,6 +326,17 @@ ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapT
   return ReportObject{{"brief", *brief}, {"ties", std::move(rows)}};
 }
 
+// Whether the table's scatter about the features (EstimateTableSigma) is
+// what table.sigma_mm says: redundancy (estimate / stated)^2 within
+// chi-square's 99.9 % quantile. A scatter well above it (the stated sigma
+// too small) is not taken for one wrong position.
+bool TableSigmaConsistent(const TableSigmaEstimate& estimate, double stated_mm) {
+  if (!estimate.ok) return true;
+  const double ratio = estimate.sigma_mm / stated_mm;
+  const int dof = std::max(1, static_cast<int>(std::lround(estimate.redundancy)));
+  return estimate.redundancy * ratio * ratio <= ChiSquareQuantile(0.999, dof);
+}
+
 // The final adjustment (the plate on the part, the intrinsics prior) with
 // the holes of project.yaml's features that several tiles see whole as tie
 // points (pipeline/measure/hole_ties.h), fitted on the registered scene: a
@@ -427,6 +440,12 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
     TiedAdjustment retried =
         AdjustWithHoleTies(camera, without, registered, plate, prior, options, ties, tie_options);
     if (!retried.adjusted.summary.usable) break;
+    // One wrong position leaves the others consistent with table.sigma_mm;
+    // if they are not, the stated sigma is what is wrong (reported).
+    const TableSigmaEstimate others = EstimateTableSigma(
+        input.commanded_table_pos_mm, retried.adjusted.scene.table_pos_mm,
+        retried.adjusted.scene.covariance, input.table_sigma_mm, without.tiles_without_table_prior);
+    if (!TableSigmaConsistent(others, input.table_sigma_mm)) break;
     input.tiles_without_table_prior = without.tiles_without_table_prior;
     result.table_priors_left_out.emplace_back(
         *worst, TablePriorBound(static_cast<int>(tests.size()), check_options));
@@ -559,6 +578,27 @@ void RunMosaicStage(StageContext& context) {
   registration.bundle = adjusted.summary;
   registration.rms_px = adjusted.summary.final_rms_px;
   registration.table_adjustment_mm = adjusted.summary.table_adjustment_mm;
+  // The table's scatter about the features against table.sigma_mm (a check).
+  const TableSigmaEstimate table_sigma =
+      EstimateTableSigma(registration.input.commanded_table_pos_mm, adjusted.scene.table_pos_mm,
+                         adjusted.scene.covariance, project.table_sigma_mm,
+                         registration.input.tiles_without_table_prior);
+  ReportValue table_sigma_check = "no estimate: no covariance or too few table positions checked";
+  if (table_sigma.ok) {
+    const bool consistent = TableSigmaConsistent(table_sigma, project.table_sigma_mm);
+    if (!consistent) {
+      spdlog::warn(
+          "mosaic: the table positions scatter {:.4f} mm about where the features put the tiles, "
+          "{:.1f} times table.sigma_mm {} ({:.1f} dof), more than one wrong position explains: "
+          "every sigma's table part assumes {} mm; check table.sigma_mm and table.csv",
+          table_sigma.sigma_mm, table_sigma.sigma_mm / project.table_sigma_mm,
+          project.table_sigma_mm, table_sigma.redundancy, project.table_sigma_mm);
+    }
+    table_sigma_check = ReportObject{{"stated_mm", project.table_sigma_mm},
+                                     {"estimated_mm", table_sigma.sigma_mm},
+                                     {"redundancy", table_sigma.redundancy},
+                                     {"consistent", consistent}};
+  }
   ReportValue::Array priors_left_out;
   for (const auto& [test, bound] : final_outcome.table_priors_left_out) {
     const Eigen::Vector2d off = registration.table_adjustment_mm[test.tile];
@@ -669,6 +709,7 @@ void RunMosaicStage(StageContext& context) {
       {"tiles", TilesReport(project, registration, ortho.summary)},
       {"tiles_held_by_prior", held},
       {"table_priors_left_out", std::move(priors_left_out)},
+      {"table_sigma_check", std::move(table_sigma_check)},
       {"exposure",
        ReportObject{{"brief", ortho.summary.exposure.brief},
                     {"converged", ortho.summary.exposure.converged},
