@@ -260,7 +260,6 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
       running.erase(it);
       rows[child.index].seconds =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - child.start).count();
-      rows[child.index].result = "ok";
       conclude(child.index, ChildOutcome(end, ReadTextFile(child.log, "log not found"),
                                          rows[child.index].project));
     }
