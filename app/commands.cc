@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <functional>
 #include <map>
 #include <stdexcept>
@@ -11,6 +10,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "adapters/process/process.h"
 #include "adapters/project_io/measurements_csv.h"
 #include "adapters/project_io/project_reader.h"
 #include "adapters/project_io/report_json.h"
@@ -120,31 +120,9 @@ struct BatchRow {
   double seconds = 0.0;
 };
 
-// A temporary folder, removed with what it holds when this goes.
-class ScratchDir {
- public:
-  explicit ScratchDir(const std::string& prefix) {
-    std::string pattern = (fs::temp_directory_path() / (prefix + "-XXXXXX")).string();
-    if (mkdtemp(pattern.data()) == nullptr) {
-      throw std::runtime_error("cannot create a folder in " + fs::temp_directory_path().string());
-    }
-    path_ = pattern;
-  }
-  ~ScratchDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  ScratchDir(const ScratchDir&) = delete;
-  ScratchDir& operator=(const ScratchDir&) = delete;
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
 // The outcome of a child `omm run`; its warnings are relayed, naming the
 // project.
-Outcome ChildOutcome(const ChildEnd& end, const std::string& log, const std::string& project) {
+Outcome ChildOutcome(const ProcessEnd& end, const std::string& log, const std::string& project) {
   const ChildLog said = ParseChildLog(log);
   for (const std::string& warning : said.warnings) spdlog::warn("{}: {}", project, warning);
   const ChildVerdict verdict = Verdict(end, said);
@@ -237,23 +215,39 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
   const Outcome ran = Guarded([&] {
     if (to_run.empty()) return;
     const fs::path program = OwnExecutable();
-    ScratchDir logs("omm-batch");
+    ScratchDir logs("omm-batch-");
     struct Running {
       size_t index;
       fs::path log;
       std::chrono::steady_clock::time_point start;
     };
     std::map<pid_t, Running> running;
+    // If anything below throws, the children still running are killed and
+    // reaped before `logs` (declared earlier) is removed under them.
+    struct KillRunning {
+      const std::map<pid_t, Running>& children;
+      ~KillRunning() {
+        for (const auto& entry : children) KillProcess(entry.first);
+      }
+    } const kill_running{running};
     size_t next = 0;
     while (next < to_run.size() || !running.empty()) {
       while (next < to_run.size() && running.size() < static_cast<size_t>(jobs)) {
         const size_t i = to_run[next++];
-        const fs::path log = logs.path() / fmt::format("{}.log", i);
-        const pid_t pid = StartChild({program.string(), "-q", "run", projects[i].string()}, log);
-        running.emplace(pid, Running{i, log, std::chrono::steady_clock::now()});
-        spdlog::info("started {}", rows[i].project);
+        ProcessOptions options;
+        options.log_path = logs.path() / fmt::format("{}.log", i);
+        try {
+          const pid_t pid =
+              StartProcess({program.string(), "-q", "run", projects[i].string()}, options);
+          running.emplace(pid, Running{i, options.log_path, std::chrono::steady_clock::now()});
+          spdlog::info("started {}", rows[i].project);
+        } catch (const ProcessStartError& e) {
+          // That project's failure; the others still run.
+          conclude(i, {kExitInternal, "cannot start omm: " + e.code().message()});
+        }
       }
-      const ChildEnd end = WaitForAnyChild();
+      if (running.empty()) continue;
+      const ProcessEnd end = WaitForAnyProcess();
       const auto it = running.find(end.pid);
       if (it == running.end()) continue;
       const Running child = it->second;

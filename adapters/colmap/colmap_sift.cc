@@ -1,25 +1,18 @@
 #include "adapters/colmap/colmap_sift.h"
 
-#include <fcntl.h>
-#include <spawn.h>
 #include <sqlite3.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
-#include <csignal>
 #include <cstdint>
-#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <map>
 #include <memory>
 #include <sstream>
-#include <thread>
 #include <tuple>
 
+#include "adapters/process/process.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/timing.h"
 
@@ -95,63 +88,25 @@ struct RunOutcome {
 // Runs argv (argv[0] looked up in PATH) with QT_QPA_PLATFORM=offscreen in its
 // own process group, stdout and stderr appended to `log`; kills the group
 // after `timeout_seconds`.
-RunOutcome RunProcess(const std::vector<std::string>& argv, const fs::path& log,
-                      double timeout_seconds) {
-  std::vector<std::string> env_strings;
-  for (char** e = environ; *e != nullptr; ++e) {
-    if (std::strncmp(*e, "QT_QPA_PLATFORM=", 16) != 0) env_strings.emplace_back(*e);
-  }
-  env_strings.emplace_back("QT_QPA_PLATFORM=offscreen");
-  std::vector<char*> envp, args;
-  for (std::string& s : env_strings) envp.push_back(s.data());
-  envp.push_back(nullptr);
-  std::vector<std::string> argv_copy = argv;
-  for (std::string& s : argv_copy) args.push_back(s.data());
-  args.push_back(nullptr);
-
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log.c_str(),
-                                   O_WRONLY | O_CREAT | O_APPEND, 0644);
-  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
-  posix_spawnattr_setpgroup(&attr, 0);
-  pid_t pid = 0;
-  const int rc = posix_spawnp(&pid, args[0], &actions, &attr, args.data(), envp.data());
-  posix_spawn_file_actions_destroy(&actions);
-  posix_spawnattr_destroy(&attr);
+RunOutcome RunColmap(const std::vector<std::string>& argv, const fs::path& log,
+                     double timeout_seconds) {
+  ProcessOptions options;
+  options.log_path = log;
+  options.stdout_to_log = true;
+  options.append_to_log = true;
+  options.search_path = true;
+  options.own_process_group = true;
+  options.environment = {"QT_QPA_PLATFORM=offscreen"};
   RunOutcome outcome;
-  if (rc != 0) {
-    outcome.failure = "cannot run '" + argv[0] + "': " + std::strerror(rc) +
-                      (rc == ENOENT ? " (is the colmap package installed?)" : "");
-    return outcome;
-  }
-  const Clock::time_point start = Clock::now();
-  int status = 0;
-  while (true) {
-    const pid_t done = waitpid(pid, &status, WNOHANG);
-    if (done == pid) break;
-    if (done < 0 && errno != EINTR) {
-      outcome.failure = std::string("waitpid failed: ") + std::strerror(errno);
-      return outcome;
-    }
-    if (SecondsSince(start) > timeout_seconds) {
-      kill(-pid, SIGKILL);
-      waitpid(pid, &status, 0);
-      outcome.failure = "timed out after " + Fixed(timeout_seconds, 1) + " s";
-      return outcome;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  if (WIFEXITED(status) && WEXITSTATUS(status) == 0) {
-    outcome.ok = true;
-  } else if (WIFEXITED(status)) {
-    outcome.failure = "exit status " + std::to_string(WEXITSTATUS(status));
-  } else {
-    outcome.failure = "killed by signal " + std::to_string(WTERMSIG(status));
+  try {
+    const ProcessEnd end = WaitForProcess(StartProcess(argv, options), timeout_seconds);
+    outcome.ok = end.Succeeded();
+    if (!outcome.ok) outcome.failure = DescribeProcessEnd(end);
+  } catch (const ProcessStartError& e) {
+    outcome.failure =
+        "cannot run '" + argv[0] + "': " + e.code().message() +
+        (e.code() == std::errc::no_such_file_or_directory ? " (is the colmap package installed?)"
+                                                          : "");
   }
   return outcome;
 }
@@ -169,15 +124,6 @@ std::vector<std::string> ReadLines(const fs::path& path) {
 std::string LastLine(const fs::path& path) {
   const std::vector<std::string> lines = ReadLines(path);
   return lines.empty() ? "(no output)" : lines.back();
-}
-
-// A fresh private directory under the system's temporary directory.
-fs::path MakeWorkDir() {
-  std::string pattern = (fs::temp_directory_path() / "omm_colmap_sift_XXXXXX").string();
-  if (mkdtemp(pattern.data()) == nullptr)
-    throw InputError(fs::temp_directory_path().string(),
-                     std::string("cannot create a temporary directory: ") + std::strerror(errno));
-  return pattern;
 }
 
 }  // namespace
@@ -295,14 +241,12 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
   }
 
   ColmapSiftResult result;
-  const fs::path work_dir = MakeWorkDir();
-  // Removes the work directory on every way out unless it is to be kept.
-  const std::unique_ptr<const fs::path, void (*)(const fs::path*)> cleanup(
-      options.keep_work_dir ? nullptr : &work_dir, [](const fs::path* dir) {
-        std::error_code ignored;
-        fs::remove_all(*dir, ignored);
-      });
-  if (options.keep_work_dir) result.work_dir = work_dir;
+  ScratchDir scratch("omm_colmap_sift_");
+  if (options.keep_work_dir) {
+    scratch.Keep();
+    result.work_dir = scratch.path();
+  }
+  const fs::path& work_dir = scratch.path();
   const fs::path image_dir = work_dir / "images", database = work_dir / "database.db",
                  log = work_dir / "colmap.log";
   fs::create_directory(image_dir);
@@ -321,7 +265,7 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
   // The banner's first line, e.g. "COLMAP 3.8 -- Structure-from-Motion and Multi-View Stereo".
   const fs::path version_log = work_dir / "version.log";
   const RunOutcome version =
-      RunProcess({options.binary, "-h"}, version_log, options.timeout_seconds);
+      RunColmap({options.binary, "-h"}, version_log, options.timeout_seconds);
   if (!version.ok) return fail("'" + options.binary + " -h'", version);
   const std::vector<std::string> banner = ReadLines(version_log);
   result.colmap_version =
@@ -330,21 +274,21 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
   const std::string threads = std::to_string(options.num_threads);
   Clock::time_point start = Clock::now();
   const RunOutcome extraction =
-      RunProcess({options.binary, "feature_extractor", "--database_path", database.string(),
-                  "--image_path", image_dir.string(), "--ImageReader.single_camera", "1",
-                  "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", threads,
-                  "--SiftExtraction.max_num_features", std::to_string(options.max_num_features)},
-                 log, options.timeout_seconds);
+      RunColmap({options.binary, "feature_extractor", "--database_path", database.string(),
+                 "--image_path", image_dir.string(), "--ImageReader.single_camera", "1",
+                 "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", threads,
+                 "--SiftExtraction.max_num_features", std::to_string(options.max_num_features)},
+                log, options.timeout_seconds);
   result.extraction_seconds = SecondsSince(start);
   if (!extraction.ok) return fail("feature_extractor", extraction);
 
   start = Clock::now();
   const RunOutcome matching =
-      RunProcess({options.binary, "exhaustive_matcher", "--database_path", database.string(),
-                  "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads,
-                  "--SiftMatching.max_error", std::to_string(options.max_error_px),
-                  "--SiftMatching.min_num_inliers", std::to_string(options.min_num_inliers)},
-                 log, options.timeout_seconds);
+      RunColmap({options.binary, "exhaustive_matcher", "--database_path", database.string(),
+                 "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads,
+                 "--SiftMatching.max_error", std::to_string(options.max_error_px),
+                 "--SiftMatching.min_num_inliers", std::to_string(options.min_num_inliers)},
+                log, options.timeout_seconds);
   result.matching_seconds = SecondsSince(start);
   if (!matching.ok) return fail("exhaustive_matcher", matching);
 

@@ -259,7 +259,7 @@ TEST(ColmapSiftMatches, FailingOrHangingColmapIsAReportedFailure) {
   ColmapSiftResult r = ColmapSiftMatches(tiles, options);
   EXPECT_FALSE(r.usable);
   EXPECT_EQ(r.colmap_version, "COLMAP 9.9");
-  EXPECT_NE(r.brief.find("feature_extractor failed: exit status 3; log: E: image unreadable"),
+  EXPECT_NE(r.brief.find("feature_extractor failed: exit code 3; log: E: image unreadable"),
             std::string::npos)
       << r.brief;
 
