@@ -10,6 +10,7 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "pipeline/core/statistics.h"
 #include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/mosaic/plane_adjustment.h"
 #include "pipeline/mosaic/synthetic_plane.h"

@@ -10,6 +10,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
+#include "pipeline/core/statistics.h"
 #include "pipeline/measure/scene_sensitivity.h"
 
 namespace omm {
@@ -38,23 +39,6 @@ std::optional<Eigen::MatrixXd> CircleSensitivity(const PointSensitivity& point_s
   return g;
 }
 
-// The normal distribution's p-quantile for p > 0.97575: Acklam's rational
-// approximation of its upper tail (relative error < 1.2e-9).
-double NormalUpperQuantile(double p) {
-  const double t = std::sqrt(-2.0 * std::log(1.0 - p));
-  return -(((((-7.784894002430293e-03 * t - 3.223964580411365e-01) * t - 2.400758277161838e+00) *
-                 t -
-             2.549732539343734e+00) *
-                t +
-            4.374664141464968e+00) *
-               t +
-           2.938163982698783e+00) /
-         ((((7.784695709041462e-03 * t + 3.224671290700398e-01) * t + 2.445134137142996e+00) * t +
-           3.754408661907416e+00) *
-              t +
-          1.0);
-}
-
 }  // namespace
 
 std::optional<Eigen::MatrixXd> CircleSceneSensitivity(
@@ -74,14 +58,6 @@ std::optional<Eigen::MatrixXd> TileCircleSceneSensitivity(const LensProjection& 
   return CircleSensitivity(
       [&](const Eigen::Vector2d& p) { return SceneSensitivity(lens, scene, tile, p); }, centre_mm,
       diameter_mm, num_rim_points);
-}
-
-double ChiSquareQuantile(double p, int dof) {
-  assert(p > 0.97575 && p < 1.0 && dof >= 1);
-  if (dof == 1) return std::pow(NormalUpperQuantile(0.5 * (1.0 + p)), 2);
-  if (dof == 2) return -2.0 * std::log(1.0 - p);
-  const double a = 2.0 / (9.0 * dof);
-  return dof * std::pow(1.0 - a + NormalUpperQuantile(p) * std::sqrt(a), 3);
 }
 
 CombinedCircle CombineCircleViews(const std::vector<CircleFeatureValue>& views,

@@ -97,14 +97,6 @@ CombinedCircle CombineCircleViews(const std::vector<CircleFeatureValue>& views,
                                   const Eigen::MatrixXd& scene_covariance,
                                   double shared_edge_fraction, double consistency_probability);
 
-// The p-quantile of the chi-square distribution with `dof` degrees of
-// freedom: exact in closed form for 1 and 2 dof (through the normal
-// quantile, Acklam's approximation, relative error < 1.2e-9), the
-// Wilson-Hilferty cube-root normal approximation above (at p = 0.999 within
-// 2 %, high: 16.55 vs 16.27 for 3 dof, 22.68 vs 22.46 for 6). p in
-// (0.97575, 1).
-double ChiSquareQuantile(double p, int dof);
-
 // total^2 = calibration^2 + registration^2 + table^2 + edges^2.
 struct SigmaBreakdown {
   double total_mm = 0.0;

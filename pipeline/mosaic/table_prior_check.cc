@@ -7,6 +7,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "pipeline/core/plane_scene.h"
+#include "pipeline/core/statistics.h"
 
 namespace omm {
 
@@ -60,6 +61,39 @@ std::optional<TablePriorTest> WorstTablePriorOutlier(const std::vector<TablePrio
   return *worst;
 }
 
+bool LeftOutPriorsStandOut(const std::vector<Eigen::Vector2d>& commanded_mm,
+                           const std::vector<Eigen::Vector2d>& adjusted_mm,
+                           const Eigen::MatrixXd& covariance, double sigma_mm,
+                           const std::vector<int>& without_prior,
+                           const TablePriorCheckOptions& options) {
+  assert(adjusted_mm.size() == commanded_mm.size());
+  const int num_tiles = static_cast<int>(commanded_mm.size());
+  const int first = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
+  if (covariance.rows() < first + 2 * num_tiles || !(sigma_mm > 0.0)) return false;
+  const double variance = sigma_mm * sigma_mm;
+  std::vector<double> all_w2, left_out_w2;
+  for (int i = 0; i < num_tiles; ++i) {
+    const bool left_out =
+        std::find(without_prior.begin(), without_prior.end(), i) != without_prior.end();
+    const Eigen::Matrix2d block = covariance.block<2, 2>(first + 2 * i, first + 2 * i);
+    const Eigen::Matrix2d residual_covariance =
+        variance * Eigen::Matrix2d::Identity() +
+        (left_out ? 0.5 : -0.5) * (block + block.transpose());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(residual_covariance);
+    if (!(eigen.eigenvalues()(0) >= options.min_redundancy * variance)) continue;
+    const Eigen::Vector2d residual = adjusted_mm[i] - commanded_mm[i];
+    all_w2.push_back(residual.dot(residual_covariance.ldlt().solve(residual)));
+    if (left_out) left_out_w2.push_back(all_w2.back());
+  }
+  if (left_out_w2.empty()) return false;
+  const double scatter2 = std::max(1.0, Median(all_w2) / (2.0 * std::log(2.0)));
+  // Each left-out position was found by the Bonferroni bound already: its
+  // confirmation is one test at the false-alarm probability.
+  const double bound = TablePriorBound(1, options);
+  return std::all_of(left_out_w2.begin(), left_out_w2.end(),
+                     [&](double w2) { return w2 / scatter2 > bound; });
+}
+
 TableSigmaEstimate EstimateTableSigma(const std::vector<Eigen::Vector2d>& commanded_mm,
                                       const std::vector<Eigen::Vector2d>& adjusted_mm,
                                       const Eigen::MatrixXd& covariance, double sigma_mm,
@@ -81,6 +115,42 @@ TableSigmaEstimate EstimateTableSigma(const std::vector<Eigen::Vector2d>& comman
   estimate.ok = true;
   estimate.sigma_mm = std::sqrt(sum_squares / estimate.redundancy);
   return estimate;
+}
+
+bool TableSigmaConsistent(const TableSigmaEstimate& estimate, double stated_mm) {
+  if (!estimate.ok) return true;
+  const double ratio = estimate.sigma_mm / stated_mm;
+  const int dof = std::max(1, static_cast<int>(std::lround(estimate.redundancy)));
+  return estimate.redundancy * ratio * ratio <= ChiSquareQuantile(0.999, dof);
+}
+
+WrongTablePriors FindWrongTablePriors(
+    const std::vector<Eigen::Vector2d>& commanded_mm, double sigma_mm, const TablePriorSolve& first,
+    const std::function<TablePriorSolve(const std::vector<int>&)>& solve_without,
+    const TablePriorCheckOptions& options) {
+  WrongTablePriors kept, trial;
+  const size_t max_left_out = commanded_mm.size() / 3;
+  TablePriorSolve latest = first;
+  while (latest.usable && trial.tiles.size() < max_left_out) {
+    const std::vector<TablePriorTest> tests = TestTablePriors(
+        commanded_mm, latest.adjusted_mm, latest.covariance, sigma_mm, trial.tiles, options);
+    const std::optional<TablePriorTest> worst = WorstTablePriorOutlier(tests, options);
+    if (!worst) break;
+    trial.tiles.insert(std::upper_bound(trial.tiles.begin(), trial.tiles.end(), worst->tile),
+                       worst->tile);
+    trial.found.emplace_back(*worst, TablePriorBound(static_cast<int>(tests.size()), options));
+    ++trial.solve;
+    latest = solve_without(trial.tiles);
+    if (latest.usable &&
+        TableSigmaConsistent(EstimateTableSigma(commanded_mm, latest.adjusted_mm,
+                                                latest.covariance, sigma_mm, trial.tiles),
+                             sigma_mm) &&
+        LeftOutPriorsStandOut(commanded_mm, latest.adjusted_mm, latest.covariance, sigma_mm,
+                              trial.tiles, options)) {
+      kept = trial;
+    }
+  }
+  return kept;
 }
 
 }  // namespace omm

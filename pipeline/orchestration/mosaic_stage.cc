@@ -326,17 +326,6 @@ ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapT
   return ReportObject{{"brief", *brief}, {"ties", std::move(rows)}};
 }
 
-// Whether the table's scatter about the features (EstimateTableSigma) is
-// what table.sigma_mm says: redundancy (estimate / stated)^2 within
-// chi-square's 99.9 % quantile. A scatter well above it (the stated sigma
-// too small) is not taken for one wrong position.
-bool TableSigmaConsistent(const TableSigmaEstimate& estimate, double stated_mm) {
-  if (!estimate.ok) return true;
-  const double ratio = estimate.sigma_mm / stated_mm;
-  const int dof = std::max(1, static_cast<int>(std::lround(estimate.redundancy)));
-  return estimate.redundancy * ratio * ratio <= ChiSquareQuantile(0.999, dof);
-}
-
 // The final adjustment (the plate on the part, the intrinsics prior) with
 // the holes of project.yaml's features that several tiles see whole as tie
 // points (pipeline/measure/hole_ties.h), fitted on the registered scene: a
@@ -419,38 +408,29 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
 
   TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
                                            options, ties, tie_options);
-  // Table positions the features contradict: the worst one's prior is left
-  // out and the solve run again, while one is found (table_prior_check.h),
-  // for a third of the tiles at most.
-  const TablePriorCheckOptions check_options;
+  // Table positions the features contradict (table_prior_check.h): every
+  // solve without some priors is kept for the one the search settles on.
   PlaneBundleInput& input = registration->input;
-  const size_t max_left_out = input.commanded_table_pos_mm.size() / 3;
-  while (tied.adjusted.summary.usable && input.tiles_without_table_prior.size() < max_left_out) {
-    const std::vector<TablePriorTest> tests =
-        TestTablePriors(input.commanded_table_pos_mm, tied.adjusted.scene.table_pos_mm,
-                        tied.adjusted.scene.covariance, input.table_sigma_mm,
-                        input.tiles_without_table_prior, check_options);
-    const std::optional<TablePriorTest> worst = WorstTablePriorOutlier(tests, check_options);
-    if (!worst) break;
-    PlaneBundleInput without = input;
-    without.tiles_without_table_prior.insert(
-        std::upper_bound(without.tiles_without_table_prior.begin(),
-                         without.tiles_without_table_prior.end(), worst->tile),
-        worst->tile);
-    TiedAdjustment retried =
-        AdjustWithHoleTies(camera, without, registered, plate, prior, options, ties, tie_options);
-    if (!retried.adjusted.summary.usable) break;
-    // One wrong position leaves the others consistent with table.sigma_mm;
-    // if they are not, the stated sigma is what is wrong (reported).
-    const TableSigmaEstimate others = EstimateTableSigma(
-        input.commanded_table_pos_mm, retried.adjusted.scene.table_pos_mm,
-        retried.adjusted.scene.covariance, input.table_sigma_mm, without.tiles_without_table_prior);
-    if (!TableSigmaConsistent(others, input.table_sigma_mm)) break;
-    input.tiles_without_table_prior = without.tiles_without_table_prior;
-    result.table_priors_left_out.emplace_back(
-        *worst, TablePriorBound(static_cast<int>(tests.size()), check_options));
-    tied = std::move(retried);
+  std::vector<TiedAdjustment> solves;
+  const auto as_solve = [](const TiedAdjustment& t) {
+    return TablePriorSolve{t.adjusted.summary.usable, t.adjusted.scene.table_pos_mm,
+                           t.adjusted.scene.covariance};
+  };
+  const WrongTablePriors wrong = FindWrongTablePriors(
+      input.commanded_table_pos_mm, input.table_sigma_mm, as_solve(tied),
+      [&](const std::vector<int>& without) {
+        PlaneBundleInput trial = input;
+        trial.tiles_without_table_prior = without;
+        solves.push_back(AdjustWithHoleTies(camera, trial, registered, plate, prior, options, ties,
+                                            tie_options));
+        return as_solve(solves.back());
+      },
+      TablePriorCheckOptions());
+  if (wrong.solve > 0) {
+    input.tiles_without_table_prior = wrong.tiles;
+    tied = std::move(solves[wrong.solve - 1]);
   }
+  result.table_priors_left_out = wrong.found;
   result.adjusted = std::move(tied.adjusted);
   result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
   result.overlap_report =
@@ -589,7 +569,7 @@ void RunMosaicStage(StageContext& context) {
     if (!consistent) {
       spdlog::warn(
           "mosaic: the table positions scatter {:.4f} mm about where the features put the tiles, "
-          "{:.1f} times table.sigma_mm {} ({:.1f} dof), more than one wrong position explains: "
+          "{:.1f} times table.sigma_mm {} ({:.1f} dof), which no wrong position explains: "
           "every sigma's table part assumes {} mm; check table.sigma_mm and table.csv",
           table_sigma.sigma_mm, table_sigma.sigma_mm / project.table_sigma_mm,
           project.table_sigma_mm, table_sigma.redundancy, project.table_sigma_mm);
