@@ -21,19 +21,6 @@ namespace fs = std::filesystem;
 
 namespace omm::testing {
 
-TempDir::TempDir() {
-  std::string pattern = (fs::temp_directory_path() / "omm_test_XXXXXX").string();
-  if (mkdtemp(pattern.data()) == nullptr) {
-    ADD_FAILURE() << "cannot create a temporary directory";
-  }
-  path_ = pattern;
-}
-
-TempDir::~TempDir() {
-  std::error_code ec;
-  fs::remove_all(path_, ec);
-}
-
 Project TinyProject(const fs::path& dir, int width_px, int height_px) {
   Project project;
   project.dir = dir;

@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "adapters/process/process.h"
 #include "pipeline/core/project.h"
 #include "pipeline/core/report.h"
 #include "pipeline/core/truth.h"
@@ -15,17 +16,9 @@ namespace omm::testing {
 
 // A fresh empty directory under the system temp dir, removed with everything
 // in it when the object goes out of scope.
-class TempDir {
+class TempDir : public ScratchDir {
  public:
-  TempDir();
-  ~TempDir();
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
+  TempDir() : ScratchDir("omm_test_") {}
 };
 
 // A small valid project in `dir`: a 7x7 caltab, two calibration images, a
