@@ -122,6 +122,11 @@ Report FullReport() {
                                                 {"estimated_mm", 0.0169},
                                                 {"redundancy", 13.9},
                                                 {"consistent", false}}},
+             {"working_distance_check", ReportObject{{"part_mm", 1181.4},
+                                                     {"calibration_min_mm", 340.2},
+                                                     {"calibration_max_mm", 471.8},
+                                                     {"max_ratio", 2.0},
+                                                     {"consistent", false}}},
              {"table_priors_left_out",
               ReportValue::Array{ReportObject{
                   {"image", "t2.png"},
@@ -265,6 +270,7 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   EXPECT_THAT(html, HasSubstr("<text>unc</text>"));
   EXPECT_THAT(html, HasSubstr("0.0169 mm against table.sigma_mm 0.0050 mm (13.9 dof): <b>too "
                               "large"));
+  EXPECT_THAT(html, HasSubstr("1181 mm; the calibration plate's 340-472 mm: <b>far from it"));
   // adjusted - commanded in micrometres; a table position left out.
   EXPECT_THAT(html, HasSubstr("<tr><td>t2.png</td><td class=\"r\">-301.2</td><td "
                               "class=\"r\">4.6</td><td class=\"r\">182.3</td>"));

@@ -6,7 +6,7 @@
 // contradict it (pipeline/mosaic/table_prior_check.h): its prior is left out,
 // the report names it, and every measurement is as good as without the
 // error. The untouched project leaves every prior in; two wrong positions
-// are both found.
+// are both found; positions in other units are reported.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -37,10 +37,10 @@ struct TableError {
 };
 
 // `omm run` on a copy of markers seed 101 with the errors added to their
-// tiles' positions and, if given, another table.sigma_mm stated (the
-// table's is 0.02).
+// tiles' positions, every position times `units` (a table.csv in other
+// units), and, if given, another table.sigma_mm stated (the table's is 0.02).
 Report RunWithTableErrors(const testing::CachedProject& sim, const std::vector<TableError>& errors,
-                          const std::string& stated_sigma_mm = "") {
+                          const std::string& stated_sigma_mm = "", double units = 1.0) {
   testing::TempDir dir;
   const fs::path project_dir = dir.path() / "job";
   testing::CopyProject(sim.project_dir, project_dir);
@@ -51,12 +51,17 @@ Report RunWithTableErrors(const testing::CachedProject& sim, const std::vector<T
   std::istringstream in(testing::ReadTextFile(project_dir / "table.csv"));
   std::string table, line;
   while (std::getline(in, line)) {
-    for (const TableError& error : errors) {
-      if (line.rfind(error.tile + ",", 0) != 0) continue;
-      double x = 0.0, y = 0.0;
-      EXPECT_EQ(std::sscanf(line.c_str() + error.tile.size() + 1, "%lf,%lf", &x, &y), 2);
-      line = error.tile + "," + std::to_string(x + error.dx_mm) + "," +
-             std::to_string(y + error.dy_mm);
+    const size_t comma = line.find(',');
+    const std::string tile = line.substr(0, comma);
+    double x = 0.0, y = 0.0;
+    if (comma != std::string::npos &&
+        std::sscanf(line.c_str() + comma + 1, "%lf,%lf", &x, &y) == 2) {
+      for (const TableError& error : errors) {
+        if (error.tile != tile) continue;
+        x += error.dx_mm;
+        y += error.dy_mm;
+      }
+      line = tile + "," + std::to_string(units * x) + "," + std::to_string(units * y);
     }
     table += line + "\n";
   }
@@ -83,6 +88,12 @@ std::optional<bool> TableSigmaConsistent(const Report& report) {
   return check ? AsBool(Member(*check, "consistent")) : std::nullopt;
 }
 
+std::optional<bool> WorkingDistanceConsistent(const Report& report) {
+  if (!report.mosaic) return std::nullopt;
+  const ReportObject* check = AsObject(Member(report.mosaic->extra, "working_distance_check"));
+  return check ? AsBool(Member(*check, "consistent")) : std::nullopt;
+}
+
 const ReportValue::Array& PriorsLeftOut(const Report& report) {
   static const ReportValue::Array kNone;
   if (!report.mosaic) return kNone;
@@ -99,6 +110,7 @@ TEST(TableBlunder, APositionTheFeaturesContradictIsLeftOutAndNamed) {
   EXPECT_TRUE(AsArray(Member(right.mosaic->extra, "table_priors_left_out")) != nullptr);
   EXPECT_TRUE(PriorsLeftOut(right).empty());
   EXPECT_EQ(TableSigmaConsistent(right), true);
+  EXPECT_EQ(WorkingDistanceConsistent(right), true);
 
   const Report wrong = RunWithTableErrors(sim, {{kTile, 0.3, 0.0}});
   const ReportValue::Array& left_out = PriorsLeftOut(wrong);
@@ -137,8 +149,7 @@ TEST(TableBlunder, ASigmaStatedTooSmallIsReportedNotTakenForWrongPositions) {
 // off, reported only as a table scattering 5 times its sigma).
 TEST(TableBlunder, TwoWrongPositionsAreBothLeftOut) {
   const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
-  const Report report =
-      RunWithTableErrors(sim, {{kTile, 0.3, 0.0}, {"tile_r2c2.png", 0.0, -0.3}});
+  const Report report = RunWithTableErrors(sim, {{kTile, 0.3, 0.0}, {"tile_r2c2.png", 0.0, -0.3}});
   std::vector<std::string> images;
   for (const ReportValue& row : PriorsLeftOut(report)) {
     const ReportObject* object = AsObject(&row);
@@ -149,6 +160,26 @@ TEST(TableBlunder, TwoWrongPositionsAreBothLeftOut) {
   EXPECT_EQ(images, (std::vector<std::string>{kTile, "tile_r2c2.png"}));
   EXPECT_EQ(TableSigmaConsistent(report), true);  // the other seven
   ExpectTrueMeasurements(report, sim);
+}
+
+// table.csv in centimetres: every position a tenth of what it should be.
+// Only T / d is observed, so the adjustment puts the part a tenth as far
+// from the camera, and every size on it comes out a tenth; the run says
+// where the part is against where the calibration saw its plate.
+TEST(TableBlunder, PositionsInOtherUnitsAreReported) {
+  const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
+  const Report report = RunWithTableErrors(sim, {}, "", 0.1);
+  ASSERT_TRUE(report.mosaic.has_value());
+  EXPECT_EQ(WorkingDistanceConsistent(report), false);
+  const ReportObject* check = AsObject(Member(report.mosaic->extra, "working_distance_check"));
+  ASSERT_NE(check, nullptr);
+  // A tenth of the true distance along the optical axis, within 0.1 % (the
+  // scale's sigma is ~50 ppm), and far from where the calibration saw its plate.
+  const Eigen::Isometry3d& truth = sim.truth.cam_from_part;
+  const double true_axis_mm = truth.linear().col(2).dot(truth.translation()) / truth.linear()(2, 2);
+  EXPECT_NEAR(AsNumber(Member(*check, "part_mm")).value_or(0.0), 0.1 * true_axis_mm,
+              1e-3 * true_axis_mm);
+  EXPECT_GT(AsNumber(Member(*check, "calibration_min_mm")).value_or(0.0), 0.2 * true_axis_mm);
 }
 
 }  // namespace

@@ -434,6 +434,14 @@ std::string MosaicSection(const Report& report) {
                               : "<b>too large: the sigmas' table parts assume table.sigma_mm; "
                                 "check it and table.csv</b>"));
   }
+  if (const ReportObject* distance = AsObject(Member(extra, "working_distance_check"))) {
+    const bool consistent = AsBool(Member(*distance, "consistent")).value_or(true);
+    facts.Add("part's distance from the camera",
+              NumberOf(*distance, "part_mm", 0) + " mm; the calibration plate's " +
+                  NumberOf(*distance, "calibration_min_mm", 0) + "-" +
+                  NumberOf(*distance, "calibration_max_mm", 0) + " mm" +
+                  (consistent ? "" : ": <b>far from it: are table.csv's positions in mm?</b>"));
+  }
   if (const ReportObject* exposure = AsObject(Member(extra, "exposure")))
     facts.Add("exposure", Text(Member(*exposure, "brief")));
   out += facts.Html();

@@ -142,8 +142,8 @@ WrongTablePriors FindWrongTablePriors(
     ++trial.solve;
     latest = solve_without(trial.tiles);
     if (latest.usable &&
-        TableSigmaConsistent(EstimateTableSigma(commanded_mm, latest.adjusted_mm,
-                                                latest.covariance, sigma_mm, trial.tiles),
+        TableSigmaConsistent(EstimateTableSigma(commanded_mm, latest.adjusted_mm, latest.covariance,
+                                                sigma_mm, trial.tiles),
                              sigma_mm) &&
         LeftOutPriorsStandOut(commanded_mm, latest.adjusted_mm, latest.covariance, sigma_mm,
                               trial.tiles, options)) {

@@ -43,6 +43,7 @@
 #include "pipeline/mosaic/plate_on_part.h"
 #include "pipeline/mosaic/register_tiles.h"
 #include "pipeline/mosaic/table_prior_check.h"
+#include "pipeline/mosaic/working_distance.h"
 #include "pipeline/orchestration/stage.h"
 
 namespace omm {
@@ -107,8 +108,10 @@ Eigen::Matrix2Xd MeasuredRegion(const CameraModel& camera) {
 // The calibration's intrinsics prior: from the calibrate stage's solve record
 // (this run's, out/'s, or calibration.from's project), if it belongs to
 // *camera; then *camera takes the record's exact intrinsics (mrcal writes the
-// .cameramodel with 6 decimals).
-IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camera) {
+// .cameramodel with 6 decimals), and *rt_cam_from_plates the record's plate
+// poses.
+IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camera,
+                                 std::vector<Vector6d>* rt_cam_from_plates) {
   const Project& project = context.project;
   IntrinsicsPrior prior;
   fs::path record_path = context.Input(kSolveRecordName);
@@ -134,6 +137,8 @@ IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camer
     prior.why_held = record_path.string() + " is not the solve of the camera used";
     return prior;
   }
+  for (const SolveImage& image : record.images)
+    rt_cam_from_plates->push_back(image.rt_cam_from_plate);
   const Eigen::Matrix2Xd region = MeasuredRegion(record);
   std::string why_not;
   const std::optional<CalibrationUncertainty> uncertainty =
@@ -147,6 +152,35 @@ IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camer
   prior = IntrinsicsPriorFromCovariance(uncertainty->IntrinsicsCovariance());
   prior.measured_region_px = region;
   return prior;
+}
+
+// The calibration plate on the part off by more than this from the table's
+// scale: beyond any height the plate may stand at (its unknown height moves
+// the scale by h / d: 5 mm at 400 mm is 12 500 ppm), a units error.
+constexpr double kPlateScaleUnitsPpm = 1e5;
+
+// report.mosaic.working_distance_check (working_distance.h), and a warning
+// when the part is far from where the calibration saw its plate.
+ReportValue WorkingDistanceReport(const PlaneScene& scene,
+                                  const std::vector<Vector6d>& rt_cam_from_plates,
+                                  const Project& project) {
+  const WorkingDistanceOptions options;
+  const WorkingDistanceCheck check = CheckWorkingDistance(
+      scene.cam_from_part_r, scene.cam_from_part_t_mm, rt_cam_from_plates, options);
+  if (!check.ok) return "not checked: no calibration plate poses (a .cameramodel)";
+  if (!check.consistent) {
+    spdlog::warn(
+        "mosaic: the table positions put the part {:.0f} mm from the camera, the calibration "
+        "saw its plate at {:.0f}-{:.0f} mm: every size on the part scales with that distance; "
+        "are {}'s positions in mm?",
+        check.part_mm, check.calibration_min_mm, check.calibration_max_mm,
+        (project.dir / "table.csv").string());
+  }
+  return ReportObject{{"part_mm", check.part_mm},
+                      {"calibration_min_mm", check.calibration_min_mm},
+                      {"calibration_max_mm", check.calibration_max_mm},
+                      {"max_ratio", options.max_ratio},
+                      {"consistent", check.consistent}};
 }
 
 // Why a tile kept no feature: its pairs' fates.
@@ -490,7 +524,8 @@ void RunMosaicStage(StageContext& context) {
   const fs::path camera_path = CameraModelPath(context);
   CameraModel camera = ReadCameraModel(camera_path);
   const auto prior_start = std::chrono::steady_clock::now();
-  const IntrinsicsPrior prior = CalibrationPrior(context, &camera);
+  std::vector<Vector6d> rt_cam_from_plates;
+  const IntrinsicsPrior prior = CalibrationPrior(context, &camera, &rt_cam_from_plates);
   const double prior_seconds = SecondsSince(prior_start);
   const auto tile_images = std::make_shared<const std::vector<ImageF>>(TileImages(project, camera));
   const std::vector<ImageF>& tiles = *tile_images;
@@ -594,6 +629,15 @@ void RunMosaicStage(StageContext& context) {
                                               {"bound", bound}});
   }
   registration.plane_tilt_deg = adjusted.summary.plane_tilt_deg;
+  const ReportValue working_distance =
+      WorkingDistanceReport(adjusted.scene, rt_cam_from_plates, project);
+  if (adjusted.scale_check.ok &&
+      std::abs(adjusted.scale_check.scale_minus_1_ppm) > kPlateScaleUnitsPpm) {
+    spdlog::warn(
+        "mosaic: the calibration plate on the part measures {:.4f} times its size at the scale "
+        "of table.csv's positions: are they in mm, and is project.yaml's board the plate used?",
+        1.0 + 1e-6 * adjusted.scale_check.scale_minus_1_ppm);
+  }
   // The camera of the adjusted scene: its (refined or held) intrinsics.
   CameraModel scene_camera = camera;
   scene_camera.intrinsics = adjusted.scene.intrinsics;
@@ -690,6 +734,7 @@ void RunMosaicStage(StageContext& context) {
       {"tiles_held_by_prior", held},
       {"table_priors_left_out", std::move(priors_left_out)},
       {"table_sigma_check", std::move(table_sigma_check)},
+      {"working_distance_check", working_distance},
       {"exposure",
        ReportObject{{"brief", ortho.summary.exposure.brief},
                     {"converged", ortho.summary.exposure.converged},
