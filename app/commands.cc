@@ -42,6 +42,9 @@ Outcome Guarded(const std::function<void()>& body) {
     return {kExitBadInput, e.what()};
   } catch (const StageFailedError& e) {
     return {kExitFailed, e.what()};
+  } catch (const std::system_error& e) {
+    // The system refused: disk full, no permission, no temporary directory.
+    return {kExitFailed, e.what()};
   } catch (const std::exception& e) {
     return {kExitInternal, std::string("internal error (a bug; please report it): ") + e.what()};
   }

@@ -26,7 +26,8 @@ namespace {
 
 constexpr const char* kExitCodes = R"(Exit codes:
   0  done
-  1  a stage failed on the data (e.g. no plate found); batch: some project failed
+  1  a stage failed on the data (e.g. no plate found), or the system refused
+     (a file not written: disk full, no permission); batch: some project failed
   2  bad input: command line, project files (the message names file and key or line)
   4  internal error (a bug; please report it)
 

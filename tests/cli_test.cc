@@ -11,6 +11,7 @@
 namespace fs = std::filesystem;
 using ::testing::ContainsRegex;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 namespace omm {
 namespace {
@@ -158,6 +159,17 @@ TEST_F(CliTest, BatchRunsProjectsAsTheirOwnRunsAndRefusesZeroJobs) {
   const auto zero = testing::RunOmm("batch --jobs 0 " + Quoted(project_.dir));
   EXPECT_EQ(zero.exit_code, 2);
   EXPECT_THAT(zero.output, HasSubstr("--jobs"));
+}
+
+// The system refusing (here: no temporary directory for the children's
+// logs) is said as such, exit 1, not taken for a bug.
+TEST_F(CliTest, BatchWithoutATemporaryDirectorySaysSo) {
+  const auto batch =
+      testing::RunCommand("TMPDIR=/nonexistent/omm " + testing::OmmProgram().string() +
+                          " batch -j 1 " + Quoted(project_.dir));
+  EXPECT_EQ(batch.exit_code, 1) << batch.output;
+  EXPECT_THAT(batch.output, HasSubstr("temp_directory_path: No such file or directory"));
+  EXPECT_THAT(batch.output, Not(HasSubstr("a bug")));
 }
 
 TEST_F(CliTest, ReportPrintsTheMeasurements) {

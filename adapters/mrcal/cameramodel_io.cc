@@ -81,7 +81,7 @@ void WriteRegion(const std::filesystem::path& path, const Eigen::Matrix2Xd& regi
   text.replace(last + 1, brace - last - 1, entry.str());
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out << text;
-  if (!out) throw InputError(path.string(), "cannot write the camera model's region");
+  if (!out) throw WriteError(path, "cannot write the camera model's region");
 }
 
 }  // namespace
@@ -107,7 +107,7 @@ void WriteCameraModel(const std::filesystem::path& path, const CameraModel& came
   model->lensmodel = lensmodel;
   for (int k = 0; k < n; ++k) model->intrinsics[k] = camera.intrinsics[k];
   if (!mrcal_write_cameramodel_file(path.c_str(), model)) {
-    throw InputError(path.string(), "mrcal could not write the camera model");
+    throw WriteError(path, "mrcal could not write the camera model");
   }
   if (camera.valid_region_px.cols() >= 3) WriteRegion(path, camera.valid_region_px);
 }

@@ -145,7 +145,7 @@ SolveRecord SolveRecordFromJson(const std::string& text, const std::string& wher
 void WriteSolveRecord(const std::filesystem::path& path, const SolveRecord& record) {
   std::ofstream out(path);
   out << SolveRecordToJson(record) << "\n";
-  if (!out) throw InputError(path.string(), "cannot write the solve record");
+  if (!out) throw WriteError(path, "cannot write the solve record");
 }
 
 SolveRecord ReadSolveRecord(const std::filesystem::path& path) {

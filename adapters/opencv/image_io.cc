@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -114,6 +115,7 @@ void WriteStoredImage(const std::filesystem::path& path, const StoredImage& imag
   std::filesystem::path tmp = path;
   tmp += ".tmp" + path.extension().string();
   bool ok = false;
+  errno = 0;  // a failed write's reason (WriteError), not an earlier call's
   std::string extension = path.extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
@@ -133,10 +135,15 @@ void WriteStoredImage(const std::filesystem::path& path, const StoredImage& imag
     }
   }
   std::error_code ec;
-  if (ok) std::filesystem::rename(tmp, path, ec);
-  if (!ok || ec) {
+  if (!ok) {
+    const std::system_error failed = WriteError(path, "cannot write image");
     std::filesystem::remove(tmp, ec);
-    throw InputError(path.string(), "cannot write image");
+    throw failed;
+  }
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw std::system_error(ec, path.string() + ": cannot write image");
   }
 }
 

@@ -86,6 +86,25 @@ TEST(ImageIo, MissingAndCorruptFilesNameTheFile) {
   EXPECT_THROW(ReadGrayImage(corrupt), InputError);
 }
 
+// A file the system will not write (here: its directory does not exist)
+// names itself and the system's reason, in either format.
+TEST(ImageIo, AnImageThatCannotBeWrittenSaysWhy) {
+  const ImageF pixels = ImageF::Constant(4, 6, 0.5f);
+  for (const char* name : {"x.png", "x.tif"}) {
+    const auto path = TempDir() / "no_such_dir" / name;
+    try {
+      WriteGrayImage(path, pixels, 16);
+      FAIL() << "no error for " << name;
+    } catch (const std::system_error& e) {
+      EXPECT_NE(std::string(e.what()).find(path.string() + ": cannot write image"),
+                std::string::npos)
+          << e.what();
+      EXPECT_NE(std::string(e.what()).find("No such file or directory"), std::string::npos)
+          << e.what();
+    }
+  }
+}
+
 // Decodes a PNG held in memory through the file reader.
 GrayImage DecodePng(const std::string& bytes, const std::string& name) {
   const auto path = TempDir() / name;

@@ -1,5 +1,6 @@
 #include "adapters/project_io/text_file.h"
 
+#include <cerrno>
 #include <fstream>
 #include <sstream>
 #include <system_error>
@@ -11,17 +12,18 @@ namespace omm {
 void WriteTextFileAtomically(const std::filesystem::path& path, const std::string& text) {
   std::filesystem::path tmp = path;
   tmp += ".tmp";
+  errno = 0;  // a failed write's reason (WriteError), not an earlier call's
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     out << text;
     out.flush();
-    if (!out) throw InputError(path.string(), "cannot write file");
+    if (!out) throw WriteError(path, "cannot write file");
   }
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
   if (ec) {
     std::filesystem::remove(tmp, ec);
-    throw InputError(path.string(), "cannot write file: " + ec.message());
+    throw std::system_error(ec, path.string() + ": cannot write file");
   }
 }
 

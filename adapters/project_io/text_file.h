@@ -8,7 +8,8 @@ namespace omm {
 
 // Writes `text` to a temporary file beside `path` and renames it into place,
 // so a reader sees the old file or the complete new one, never a part.
-// Throws InputError naming `path` if it cannot be written.
+// Throws std::system_error naming `path` and the system's reason (disk full,
+// no such directory, no permission) if it cannot be written.
 void WriteTextFileAtomically(const std::filesystem::path& path, const std::string& text);
 
 // The file's bytes. Throws InputError naming `path` (with `what_missing`, e.g.
