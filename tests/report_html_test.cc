@@ -121,7 +121,8 @@ Report FullReport() {
              {"table_sigma_check", ReportObject{{"stated_mm", 0.005},
                                                 {"estimated_mm", 0.0169},
                                                 {"redundancy", 13.9},
-                                                {"consistent", false}}},
+                                                {"consistent", false},
+                                                {"used_mm", 0.0169}}},
              {"working_distance_check", ReportObject{{"part_mm", 1181.4},
                                                      {"calibration_min_mm", 340.2},
                                                      {"calibration_max_mm", 471.8},
@@ -269,7 +270,8 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   EXPECT_THAT(html, HasSubstr("<text>resid</text>"));
   EXPECT_THAT(html, HasSubstr("<text>unc</text>"));
   EXPECT_THAT(html, HasSubstr("0.0169 mm against table.sigma_mm 0.0050 mm (13.9 dof): <b>too "
-                              "large"));
+                              "large: the priors are weighed by, and the sigmas' table parts "
+                              "assume, 0.0169 mm"));
   EXPECT_THAT(html, HasSubstr("1181 mm; the calibration plate's 340-472 mm: <b>far from it"));
   // adjusted - commanded in micrometres; a table position left out.
   EXPECT_THAT(html, HasSubstr("<tr><td>t2.png</td><td class=\"r\">-301.2</td><td "

@@ -133,14 +133,25 @@ TEST(TableBlunder, APositionTheFeaturesContradictIsLeftOutAndNamed) {
 }
 
 // table.sigma_mm stated four times too small: every position scatters
-// beyond it, which no single wrong one explains. No prior is left out (on
-// markers seed 282 three were before the check on the others); the report
-// says the stated sigma is contradicted.
+// beyond it, which no wrong one explains. No prior is left out (on markers
+// seed 282 three were before the check on the others); the report says the
+// stated sigma is contradicted, and the priors are weighed by the scatter
+// estimated, so that the sigmas are true to the table's 0.02 mm.
 TEST(TableBlunder, ASigmaStatedTooSmallIsReportedNotTakenForWrongPositions) {
   const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
   const Report report = RunWithTableErrors(sim, {}, "0.005");
   EXPECT_TRUE(PriorsLeftOut(report).empty());
   EXPECT_EQ(TableSigmaConsistent(report), false);
+  ASSERT_TRUE(report.mosaic.has_value());
+  const ReportObject* check = AsObject(Member(report.mosaic->extra, "table_sigma_check"));
+  ASSERT_NE(check, nullptr);
+  const double estimated = AsNumber(Member(*check, "estimated_mm")).value_or(0.0);
+  const double used = AsNumber(Member(*check, "used_mm")).value_or(0.0);
+  // The estimate from 14 dof has a relative sd of 19 %: within 2 of it of
+  // the table's 0.02 mm, and the weights are the estimate's.
+  EXPECT_NEAR(estimated, 0.02, 2 * 0.19 * 0.02);
+  EXPECT_NEAR(used, estimated, 0.02 * estimated);
+  ExpectTrueMeasurements(report, sim);
 }
 
 // Two wrong positions at opposite corners: leaving out the first leaves the

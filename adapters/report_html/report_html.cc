@@ -431,8 +431,14 @@ std::string MosaicSection(const Report& report) {
                   NumberOf(*table, "stated_mm", 4) + " mm (" + NumberOf(*table, "redundancy", 1) +
                   " dof): " +
                   (consistent ? "consistent"
-                              : "<b>too large: the sigmas' table parts assume table.sigma_mm; "
-                                "check it and table.csv</b>"));
+                   : Member(*table, "used_mm") != nullptr
+                       ? "<b>too large: the priors are weighed by, and the sigmas' table parts "
+                         "assume, " +
+                             NumberOf(*table, "used_mm", 4) +
+                             " mm; check table.sigma_mm and table.csv</b>"
+                       // reports before used_mm: the stated sigma was kept
+                       : "<b>too large: the sigmas' table parts assume table.sigma_mm; check "
+                         "it and table.csv</b>"));
   }
   if (const ReportObject* distance = AsObject(Member(extra, "working_distance_check"))) {
     const bool consistent = AsBool(Member(*distance, "consistent")).value_or(true);

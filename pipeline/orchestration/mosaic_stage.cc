@@ -465,6 +465,25 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
     tied = std::move(solves[wrong.solve - 1]);
   }
   result.table_priors_left_out = wrong.found;
+  // A table that scatters more than table.sigma_mm says, and no wrong
+  // position explains it: its priors are weighed by the scatter estimated
+  // (their variance component) and the solve run again, so that the
+  // covariance, and so every sigma's table part, rests on what the data
+  // show. Never narrower than stated.
+  const TableSigmaEstimate scatter = EstimateTableSigma(
+      input.commanded_table_pos_mm, tied.adjusted.scene.table_pos_mm,
+      tied.adjusted.scene.covariance, input.table_sigma_mm, input.tiles_without_table_prior);
+  if (!TableSigmaConsistent(scatter, input.table_sigma_mm) &&
+      scatter.sigma_mm > input.table_sigma_mm) {
+    PlaneBundleInput widened = input;
+    widened.table_sigma_mm = scatter.sigma_mm;
+    TiedAdjustment retried =
+        AdjustWithHoleTies(camera, widened, registered, plate, prior, options, ties, tie_options);
+    if (retried.adjusted.summary.usable) {
+      input.table_sigma_mm = scatter.sigma_mm;
+      tied = std::move(retried);
+    }
+  }
   result.adjusted = std::move(tied.adjusted);
   result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
   result.overlap_report =
@@ -593,10 +612,12 @@ void RunMosaicStage(StageContext& context) {
   registration.bundle = adjusted.summary;
   registration.rms_px = adjusted.summary.final_rms_px;
   registration.table_adjustment_mm = adjusted.summary.table_adjustment_mm;
-  // The table's scatter about the features against table.sigma_mm (a check).
+  // The table's scatter about the features against table.sigma_mm (a
+  // check); the sigma the priors were weighed by (FinalAdjustmentWithHoles).
+  const double used_sigma_mm = registration.input.table_sigma_mm;
   const TableSigmaEstimate table_sigma =
       EstimateTableSigma(registration.input.commanded_table_pos_mm, adjusted.scene.table_pos_mm,
-                         adjusted.scene.covariance, project.table_sigma_mm,
+                         adjusted.scene.covariance, used_sigma_mm,
                          registration.input.tiles_without_table_prior);
   ReportValue table_sigma_check = "no estimate: no covariance or too few table positions checked";
   if (table_sigma.ok) {
@@ -604,15 +625,17 @@ void RunMosaicStage(StageContext& context) {
     if (!consistent) {
       spdlog::warn(
           "mosaic: the table positions scatter {:.4f} mm about where the features put the tiles, "
-          "{:.1f} times table.sigma_mm {} ({:.1f} dof), which no wrong position explains: "
-          "every sigma's table part assumes {} mm; check table.sigma_mm and table.csv",
+          "{:.1f} times table.sigma_mm {} ({:.1f} dof), which no wrong position explains: the "
+          "adjustment weighs them, and every sigma's table part assumes, {:.4f} mm; check "
+          "table.sigma_mm and table.csv",
           table_sigma.sigma_mm, table_sigma.sigma_mm / project.table_sigma_mm,
-          project.table_sigma_mm, table_sigma.redundancy, project.table_sigma_mm);
+          project.table_sigma_mm, table_sigma.redundancy, used_sigma_mm);
     }
     table_sigma_check = ReportObject{{"stated_mm", project.table_sigma_mm},
                                      {"estimated_mm", table_sigma.sigma_mm},
                                      {"redundancy", table_sigma.redundancy},
-                                     {"consistent", consistent}};
+                                     {"consistent", consistent},
+                                     {"used_mm", used_sigma_mm}};
   }
   ReportValue::Array priors_left_out;
   for (const auto& [test, bound] : final_outcome.table_priors_left_out) {
@@ -688,7 +711,7 @@ void RunMosaicStage(StageContext& context) {
   saved.commanded_table_pos_mm = commanded_mm;
   saved.tiles_held_by_prior = registration.tiles_held_by_prior;
   saved.tiles_without_table_prior = registration.input.tiles_without_table_prior;
-  saved.table_sigma_mm = project.table_sigma_mm;
+  saved.table_sigma_mm = registration.input.table_sigma_mm;  // as weighed
   saved.rms_px = registration.rms_px;
   saved.lens_model = camera.lens_model;
   saved.intrinsics_refined = adjusted.intrinsics_refined;
