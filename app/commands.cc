@@ -246,7 +246,7 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
           spdlog::info("started {}", rows[i].project);
         } catch (const ProcessStartError& e) {
           // That project's failure; the others still run.
-          conclude(i, {kExitInternal, "cannot start omm: " + e.code().message()});
+          conclude(i, {kExitFailed, "cannot start omm: " + e.code().message()});
         }
       }
       if (running.empty()) continue;

@@ -1,5 +1,6 @@
 #include "adapters/mrcal/cameramodel_io.h"
 
+#include <cerrno>
 #include <cstdlib>
 #include <fstream>
 #include <memory>
@@ -79,6 +80,7 @@ void WriteRegion(const std::filesystem::path& path, const Eigen::Matrix2Xd& regi
   }
   entry << "  ]\n";
   text.replace(last + 1, brace - last - 1, entry.str());
+  errno = 0;  // a failed write's reason (WriteError), not an earlier call's
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out << text;
   if (!out) throw WriteError(path, "cannot write the camera model's region");
@@ -106,6 +108,7 @@ void WriteCameraModel(const std::filesystem::path& path, const CameraModel& came
   model->imagersize[1] = static_cast<unsigned>(camera.height_px);
   model->lensmodel = lensmodel;
   for (int k = 0; k < n; ++k) model->intrinsics[k] = camera.intrinsics[k];
+  errno = 0;  // a failed write's reason (WriteError), not an earlier call's
   if (!mrcal_write_cameramodel_file(path.c_str(), model)) {
     throw WriteError(path, "mrcal could not write the camera model");
   }

@@ -1,5 +1,6 @@
 #include "adapters/mrcal/solve_record_json.h"
 
+#include <cerrno>
 #include <fstream>
 #include <sstream>
 
@@ -143,8 +144,10 @@ SolveRecord SolveRecordFromJson(const std::string& text, const std::string& wher
 }
 
 void WriteSolveRecord(const std::filesystem::path& path, const SolveRecord& record) {
+  const std::string text = SolveRecordToJson(record);
+  errno = 0;  // a failed write's reason (WriteError), not an earlier call's
   std::ofstream out(path);
-  out << SolveRecordToJson(record) << "\n";
+  out << text << "\n";
   if (!out) throw WriteError(path, "cannot write the solve record");
 }
 

@@ -134,16 +134,22 @@ void WriteStoredImage(const std::filesystem::path& path, const StoredImage& imag
       ok = false;
     }
   }
-  std::error_code ec;
+  std::error_code ignored;
   if (!ok) {
+    // The system's reason; none (OpenCV refused the image) is the input's.
+    if (errno == 0) {
+      std::filesystem::remove(tmp, ignored);
+      throw InputError(path.string(), "cannot write image (OpenCV refused it)");
+    }
     const std::system_error failed = WriteError(path, "cannot write image");
-    std::filesystem::remove(tmp, ec);
+    std::filesystem::remove(tmp, ignored);
     throw failed;
   }
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw std::system_error(ec, path.string() + ": cannot write image");
+  std::error_code failed;
+  std::filesystem::rename(tmp, path, failed);
+  if (failed) {
+    std::filesystem::remove(tmp, ignored);
+    throw std::system_error(failed, path.string() + ": cannot write image");
   }
 }
 

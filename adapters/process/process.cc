@@ -171,13 +171,14 @@ std::string DescribeProcessEnd(const ProcessEnd& end) {
   return fmt::format("exit code {}", end.exit_code);
 }
 
-fs::path OwnExecutable() { return fs::read_symlink("/proc/self/exe"); }
+fs::path OwnExecutable() { return fs::read_symlink("/proc/self/exe"); }  // Linux's /proc
 
 ScratchDir::ScratchDir(const std::string& prefix) {
   const fs::path parent = fs::temp_directory_path();
   std::string pattern = (parent / (prefix + "XXXXXX")).string();
   if (mkdtemp(pattern.data()) == nullptr) {
-    throw std::system_error(errno, std::generic_category(),
+    const int error = errno;  // before the message's allocations
+    throw std::system_error(error, std::generic_category(),
                             "cannot create a temporary directory in " + parent.string());
   }
   path_ = pattern;

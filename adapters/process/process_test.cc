@@ -144,10 +144,10 @@ TEST(Process, ATimeoutKillsTheProcessGroup) {
   const ScratchDir dir("omm_process_test_");
   ProcessOptions options = LogTo(dir.path() / "h.log");
   options.own_process_group = true;
-  // A grandchild that would write to the log after 0.5 s unless killed with
-  // its group.
+  // A grandchild that would write to the log after 2 s unless killed with
+  // its group (well after the timeout, even on a loaded machine).
   const pid_t pid = StartProcess(
-      {"/bin/sh", "-c", "(sleep 0.5; echo survived >&2) & sleep 30 & sleep 30"}, options);
+      {"/bin/sh", "-c", "(sleep 2; echo survived >&2) & sleep 30 & sleep 30"}, options);
   const auto start = std::chrono::steady_clock::now();
   const ProcessEnd end = WaitForProcess(pid, 0.3);
   EXPECT_LT(SecondsSince(start), 2.0);
@@ -156,7 +156,7 @@ TEST(Process, ATimeoutKillsTheProcessGroup) {
   EXPECT_EQ(end.signal, SIGKILL);
   EXPECT_FALSE(end.Succeeded());
   EXPECT_EQ(DescribeProcessEnd(end), "timed out after 0.3 s");
-  std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
   EXPECT_THAT(ReadFile(dir.path() / "h.log"), Not(HasSubstr("survived")));
 }
 

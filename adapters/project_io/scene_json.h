@@ -50,6 +50,8 @@ struct SavedScene {
   std::vector<Eigen::Vector2d> commanded_table_pos_mm;  // per tile (table.csv)
   std::vector<int> tiles_held_by_prior;                 // no feature kept: table prior only
   std::vector<int> tiles_without_table_prior;  // ascending: the features contradicted table.csv
+  // The sigma the table priors were weighed by: table.sigma_mm, or the
+  // scatter estimated where the data contradict it (mosaic_stage.cc).
   double table_sigma_mm = 0.0;
   double rms_px = 0.0;
   std::string lens_model;           // of scene.intrinsics ("" in files without it)

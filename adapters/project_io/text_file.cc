@@ -19,11 +19,12 @@ void WriteTextFileAtomically(const std::filesystem::path& path, const std::strin
     out.flush();
     if (!out) throw WriteError(path, "cannot write file");
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw std::system_error(ec, path.string() + ": cannot write file");
+  std::error_code failed;
+  std::filesystem::rename(tmp, path, failed);
+  if (failed) {
+    std::error_code ignored;
+    std::filesystem::remove(tmp, ignored);
+    throw std::system_error(failed, path.string() + ": cannot write file");
   }
 }
 

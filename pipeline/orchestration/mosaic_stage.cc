@@ -167,7 +167,11 @@ ReportValue WorkingDistanceReport(const PlaneScene& scene,
   const WorkingDistanceOptions options;
   const WorkingDistanceCheck check = CheckWorkingDistance(
       scene.cam_from_part_r, scene.cam_from_part_t_mm, rt_cam_from_plates, options);
-  if (!check.ok) return "not checked: no calibration plate poses (a .cameramodel)";
+  if (rt_cam_from_plates.empty()) {
+    return "not checked: no calibration plate poses (a .cameramodel, or another camera's solve)";
+  }
+  if (!check.ok)
+    return "not checked: the part plane does not cross the optical axis before the camera";
   if (!check.consistent) {
     spdlog::warn(
         "mosaic: the table positions put the part {:.0f} mm from the camera, the calibration "
@@ -469,12 +473,11 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   // position explains it: its priors are weighed by the scatter estimated
   // (their variance component) and the solve run again, so that the
   // covariance, and so every sigma's table part, rests on what the data
-  // show. Never narrower than stated.
+  // show. Never narrower than stated: the test is one-sided.
   const TableSigmaEstimate scatter = EstimateTableSigma(
       input.commanded_table_pos_mm, tied.adjusted.scene.table_pos_mm,
       tied.adjusted.scene.covariance, input.table_sigma_mm, input.tiles_without_table_prior);
-  if (!TableSigmaConsistent(scatter, input.table_sigma_mm) &&
-      scatter.sigma_mm > input.table_sigma_mm) {
+  if (!TableSigmaConsistent(scatter, input.table_sigma_mm)) {
     PlaneBundleInput widened = input;
     widened.table_sigma_mm = scatter.sigma_mm;
     TiedAdjustment retried =
@@ -615,10 +618,9 @@ void RunMosaicStage(StageContext& context) {
   // The table's scatter about the features against table.sigma_mm (a
   // check); the sigma the priors were weighed by (FinalAdjustmentWithHoles).
   const double used_sigma_mm = registration.input.table_sigma_mm;
-  const TableSigmaEstimate table_sigma =
-      EstimateTableSigma(registration.input.commanded_table_pos_mm, adjusted.scene.table_pos_mm,
-                         adjusted.scene.covariance, used_sigma_mm,
-                         registration.input.tiles_without_table_prior);
+  const TableSigmaEstimate table_sigma = EstimateTableSigma(
+      registration.input.commanded_table_pos_mm, adjusted.scene.table_pos_mm,
+      adjusted.scene.covariance, used_sigma_mm, registration.input.tiles_without_table_prior);
   ReportValue table_sigma_check = "no estimate: no covariance or too few table positions checked";
   if (table_sigma.ok) {
     const bool consistent = TableSigmaConsistent(table_sigma, project.table_sigma_mm);
