@@ -8,17 +8,28 @@
 #include <gtest/gtest.h>
 
 #include "pipeline/core/error.h"
+#include "tests/test_util.h"
 
 namespace omm {
 namespace {
 
-std::filesystem::path TempDir() {
-  auto dir = std::filesystem::temp_directory_path() / "omm_image_io_test";
-  std::filesystem::create_directories(dir);
-  return dir;
-}
+// Each test's files, removed with it.
+class ImageIo : public ::testing::Test {
+ protected:
+  std::filesystem::path TempDir() const { return dir_.path(); }
 
-TEST(ImageIo, SixteenBitRoundTripIsExact) {
+  // Decodes a PNG held in memory through the file reader.
+  GrayImage DecodePng(const std::string& bytes, const std::string& name) {
+    const auto path = TempDir() / name;
+    std::ofstream(path, std::ios::binary) << bytes;
+    return ReadGrayImage(path);
+  }
+
+ private:
+  testing::TempDir dir_;
+};
+
+TEST_F(ImageIo, SixteenBitRoundTripIsExact) {
   ImageF pixels(3, 5);
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 5; ++c) pixels(r, c) = static_cast<float>((r * 5 + c) * 4099 % 65536) / 65535.f;
@@ -34,7 +45,7 @@ TEST(ImageIo, SixteenBitRoundTripIsExact) {
 // What a run keeps in memory is what the file holds: the quantised samples
 // written and read back are identical, and decoding the file's bytes in memory
 // gives the same samples and, through ToGrayImage, the same floats bit for bit.
-TEST(ImageIo, QuantisedSamplesMatchTheFileExactly) {
+TEST_F(ImageIo, QuantisedSamplesMatchTheFileExactly) {
   for (const int bits : {8, 16}) {
     ImageF pixels(37, 53);
     for (int r = 0; r < 37; ++r)
@@ -64,7 +75,7 @@ TEST(ImageIo, QuantisedSamplesMatchTheFileExactly) {
   }
 }
 
-TEST(ImageIo, CorruptBytesInMemoryNameTheFile) {
+TEST_F(ImageIo, CorruptBytesInMemoryNameTheFile) {
   try {
     DecodeImage("\x89PNG this is not an image", "tiles/broken.png");
     FAIL() << "no error for corrupt bytes";
@@ -73,7 +84,7 @@ TEST(ImageIo, CorruptBytesInMemoryNameTheFile) {
   }
 }
 
-TEST(ImageIo, MissingAndCorruptFilesNameTheFile) {
+TEST_F(ImageIo, MissingAndCorruptFilesNameTheFile) {
   const auto missing = TempDir() / "missing.png";
   try {
     ReadGrayImage(missing);
@@ -88,7 +99,7 @@ TEST(ImageIo, MissingAndCorruptFilesNameTheFile) {
 
 // A file the system will not write (here: its directory does not exist)
 // names itself and the system's reason, in either format.
-TEST(ImageIo, AnImageThatCannotBeWrittenSaysWhy) {
+TEST_F(ImageIo, AnImageThatCannotBeWrittenSaysWhy) {
   const ImageF pixels = ImageF::Constant(4, 6, 0.5f);
   for (const char* name : {"x.png", "x.tif"}) {
     const auto path = TempDir() / "no_such_dir" / name;
@@ -105,14 +116,7 @@ TEST(ImageIo, AnImageThatCannotBeWrittenSaysWhy) {
   }
 }
 
-// Decodes a PNG held in memory through the file reader.
-GrayImage DecodePng(const std::string& bytes, const std::string& name) {
-  const auto path = TempDir() / name;
-  std::ofstream(path, std::ios::binary) << bytes;
-  return ReadGrayImage(path);
-}
-
-TEST(ImageIo, PreviewPngIsTheBlockMeanAtEightBits) {
+TEST_F(ImageIo, PreviewPngIsTheBlockMeanAtEightBits) {
   // 30 x 21 px shrunk to 10 px wide: exactly 3 x 3 blocks, so INTER_AREA is
   // each block's mean; 8 bits round it to within half a digital number.
   ImageF pixels(21, 30);
@@ -130,7 +134,7 @@ TEST(ImageIo, PreviewPngIsTheBlockMeanAtEightBits) {
   }
 }
 
-TEST(ImageIo, PreviewPngKeepsANarrowImageAndClamps) {
+TEST_F(ImageIo, PreviewPngKeepsANarrowImageAndClamps) {
   ImageF pixels(2, 3);
   pixels << -0.5f, 0.0f, 0.2f, 0.6f, 1.0f, 1.5f;
   const GrayImage preview = DecodePng(EncodePreviewPng(pixels, 1200), "narrow.png");
