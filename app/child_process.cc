@@ -1,5 +1,7 @@
 #include "app/child_process.h"
 
+#include <csignal>
+
 #include "app/exit_codes.h"
 
 namespace omm {
@@ -33,6 +35,10 @@ ChildVerdict Verdict(const ProcessEnd& end, const ChildLog& log) {
   const bool known_code = end.exit_code == kExitFailed || end.exit_code == kExitBadInput ||
                           end.exit_code == kExitInternal;
   if (end.signal == 0 && known_code && !log.error.empty()) return {end.exit_code, log.error};
+  // Ctrl-C reaches the children too; a stop, not a crash.
+  if (end.signal == SIGINT || end.signal == SIGTERM) {
+    return {kExitStopped, "stopped: omm run " + DescribeProcessEnd(end)};
+  }
   return {kExitInternal, "internal error (a bug; please report it): omm run " +
                              DescribeProcessEnd(end) + (log.error.empty() ? "" : ": " + log.error)};
 }

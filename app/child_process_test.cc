@@ -47,5 +47,17 @@ TEST(ChildProcess, TheVerdictKeepsTheChildsReasonAndCallsACrashABug) {
   EXPECT_THAT(crashed.message, HasSubstr("killed by signal 11"));
 }
 
+// Ctrl-C reaches the children as well as the batch: a stop, not a bug.
+TEST(ChildProcess, AChildEndedBySigintOrSigtermWasStopped) {
+  for (const int signal : {SIGINT, SIGTERM}) {
+    ProcessEnd end;
+    end.signal = signal;
+    const ChildVerdict verdict = Verdict(end, ParseChildLog("info: loaded\n"));
+    EXPECT_EQ(verdict.exit_code, kExitStopped);
+    EXPECT_THAT(verdict.message, HasSubstr("stopped: omm run killed by signal"));
+    EXPECT_THAT(verdict.message, ::testing::Not(HasSubstr("a bug")));
+  }
+}
+
 }  // namespace
 }  // namespace omm

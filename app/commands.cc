@@ -1,8 +1,11 @@
 #include "app/commands.h"
 
+#include <signal.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <functional>
 #include <map>
 #include <stdexcept>
@@ -123,6 +126,35 @@ struct BatchRow {
   double seconds = 0.0;
 };
 
+// The signal that asked `omm batch` to stop (SIGINT, SIGTERM); 0 while none.
+volatile std::sig_atomic_t g_stop_signal = 0;
+extern "C" void RecordStopSignal(int signal) { g_stop_signal = signal; }
+
+// While it lives, SIGINT and SIGTERM are recorded in g_stop_signal and end
+// the wait for the children they interrupt (no SA_RESTART); the earlier
+// handlers after.
+class StopSignals {
+ public:
+  StopSignals() {
+    g_stop_signal = 0;
+    struct sigaction action {};
+    action.sa_handler = RecordStopSignal;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, &previous_int_);
+    sigaction(SIGTERM, &action, &previous_term_);
+  }
+  ~StopSignals() {
+    sigaction(SIGINT, &previous_int_, nullptr);
+    sigaction(SIGTERM, &previous_term_, nullptr);
+  }
+  StopSignals(const StopSignals&) = delete;
+  StopSignals& operator=(const StopSignals&) = delete;
+
+ private:
+  struct sigaction previous_int_ {};
+  struct sigaction previous_term_ {};
+};
+
 // The outcome of a child `omm run`; its warnings are relayed, naming the
 // project.
 Outcome ChildOutcome(const ProcessEnd& end, const std::string& log, const std::string& project) {
@@ -180,7 +212,11 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
         if (report.measurements) made.measurements = *report.measurements;
       });
     }
-    if (outcome.exit_code != kExitOk) {
+    if (outcome.exit_code == kExitStopped) {
+      row.result = "STOPPED: " + outcome.message;
+      row.measurements = "-";
+      made = {projects[i].string(), {}, outcome.message};
+    } else if (outcome.exit_code != kExitOk) {
       row.result = fmt::format("FAILED ({}): {}", outcome.exit_code, outcome.message);
       row.measurements = "-";
       made = {projects[i].string(), {}, outcome.message};  // out/ is an earlier run's, if any
@@ -215,6 +251,9 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
 
   // Each project as its own `omm run -q`, up to `jobs` at a time; their logs
   // go to a scratch folder, and their warnings and errors are relayed.
+  // SIGINT or SIGTERM stops the batch: the children running are killed,
+  // the others not started, and the summary says which.
+  bool stopped = false;
   const Outcome ran = Guarded([&] {
     if (to_run.empty()) return;
     const fs::path program = OwnExecutable();
@@ -233,9 +272,11 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
         for (const auto& entry : children) KillProcess(entry.first);
       }
     } const kill_running{running};
+    const StopSignals stop_signals;
     size_t next = 0;
-    while (next < to_run.size() || !running.empty()) {
-      while (next < to_run.size() && running.size() < static_cast<size_t>(jobs)) {
+    while ((next < to_run.size() || !running.empty()) && g_stop_signal == 0) {
+      while (next < to_run.size() && running.size() < static_cast<size_t>(jobs) &&
+             g_stop_signal == 0) {
         const size_t i = to_run[next++];
         ProcessOptions options;
         options.log_path = logs.path() / fmt::format("{}.log", i);
@@ -249,8 +290,10 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
           conclude(i, {kExitFailed, "cannot start omm: " + e.code().message()});
         }
       }
-      if (running.empty()) continue;
-      const ProcessEnd end = WaitForAnyProcess();
+      if (running.empty() || g_stop_signal != 0) continue;
+      const std::optional<ProcessEnd> ended = WaitForAnyProcess();
+      if (!ended) continue;  // a signal: g_stop_signal says whether to stop
+      const ProcessEnd& end = *ended;
       const auto it = running.find(end.pid);
       if (it == running.end()) continue;
       const Running child = it->second;
@@ -260,6 +303,20 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
       conclude(child.index, ChildOutcome(end, ReadTextFile(child.log, "log not found"),
                                          rows[child.index].project));
     }
+    if (g_stop_signal == 0) return;
+    stopped = true;
+    const std::string why = fmt::format("the batch got signal {} ({})",
+                                        static_cast<int>(g_stop_signal), strsignal(g_stop_signal));
+    for (const auto& [pid, child] : running) {
+      KillProcess(pid);
+      conclude(child.index, {kExitStopped, "killed: " + why});
+    }
+    running.clear();
+    // What the stopped runs left (Ctrl-C stops the children too).
+    for (size_t i = 0; i < total; ++i) {
+      if (rows[i].result.rfind("STOPPED", 0) == 0) RemoveStaleStaging(projects[i] / "out");
+    }
+    for (; next < to_run.size(); ++next) conclude(to_run[next], {kExitStopped, "not run: " + why});
   });
   if (ran.exit_code != kExitOk) return Finish(ran);
 
@@ -272,7 +329,11 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
   }
   const auto failed = std::count_if(
       rows.begin(), rows.end(), [](const BatchRow& r) { return r.result.rfind("FAILED", 0) == 0; });
-  fmt::print("{} project{}, {} failed\n", rows.size(), rows.size() == 1 ? "" : "s", failed);
+  const auto num_stopped = std::count_if(rows.begin(), rows.end(), [](const BatchRow& r) {
+    return r.result.rfind("STOPPED", 0) == 0;
+  });
+  fmt::print("{} project{}, {} failed{}\n", rows.size(), rows.size() == 1 ? "" : "s", failed,
+             num_stopped > 0 ? fmt::format(", {} stopped", num_stopped) : "");
   fmt::print("{}\n", CmmAgreement(measurements));
   if (csv) {
     const Outcome written =
@@ -280,7 +341,8 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
     if (written.exit_code != kExitOk) return Finish(written);
     fmt::print("{}\n", csv->string());
   }
-  return failed > 0 ? kExitFailed : kExitOk;
+  if (stopped) return kExitStopped;
+  return failed > 0 || num_stopped > 0 ? kExitFailed : kExitOk;  // a child stopped from outside
 }
 
 int SimulateCommand(const fs::path& project_dir, const SimulationOptions& options,

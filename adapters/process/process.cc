@@ -126,9 +126,10 @@ bool ProcessEnd::Succeeded() const {
   return exit_code == 0 && signal == 0 && !timed_out_after_seconds;
 }
 
-ProcessEnd WaitForAnyProcess() {
+std::optional<ProcessEnd> WaitForAnyProcess() {
   int status = 0;
-  const pid_t pid = WaitPid(-1, &status, 0);
+  const pid_t pid = waitpid(-1, &status, 0);
+  if (pid < 0 && errno == EINTR) return std::nullopt;
   if (pid < 0) throw std::system_error(errno, std::generic_category(), "waitpid");
   return EndOf(pid, status);
 }

@@ -61,9 +61,11 @@ struct ProcessEnd {
   bool Succeeded() const;
 };
 
-// Waits until any child of this process ends. Throws std::system_error if
-// there is none.
-ProcessEnd WaitForAnyProcess();
+// Waits until any child of this process ends. Empty if a signal whose
+// handler does not restart calls (sigaction without SA_RESTART) interrupted
+// the wait: the caller's cue to look at what its handler recorded. Throws
+// std::system_error if there is no child.
+std::optional<ProcessEnd> WaitForAnyProcess();
 
 // Waits until child `pid` ends, at most `timeout_seconds`; then kills and
 // reaps it (KillProcess) and the end says so (timed_out_after_seconds).

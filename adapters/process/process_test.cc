@@ -3,7 +3,9 @@
 // that cannot start; scratch directories removed or kept.
 #include "adapters/process/process.h"
 
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
@@ -36,7 +38,7 @@ void WriteFile(const fs::path& path, const std::string& text) { std::ofstream(pa
 
 ProcessEnd RunShell(const std::string& script, const ProcessOptions& options) {
   const pid_t pid = StartProcess({"/bin/sh", "-c", script}, options);
-  const ProcessEnd end = WaitForAnyProcess();
+  const ProcessEnd end = WaitForAnyProcess().value();
   EXPECT_EQ(end.pid, pid);
   return end;
 }
@@ -99,7 +101,28 @@ TEST(Process, ANameIsLookedUpInPathOnlyWhenAsked) {
   EXPECT_THROW(StartProcess({"sh", "-c", "exit 0"}, options), ProcessStartError);
   options.search_path = true;
   StartProcess({"sh", "-c", "exit 4"}, options);
-  EXPECT_EQ(WaitForAnyProcess().exit_code, 4);
+  EXPECT_EQ(WaitForAnyProcess().value().exit_code, 4);
+}
+
+volatile std::sig_atomic_t g_alarms = 0;
+extern "C" void CountAlarm(int) { g_alarms = g_alarms + 1; }
+
+// A signal whose handler does not restart calls ends the wait, empty; the
+// child runs on.
+TEST(Process, ASignalInterruptsTheWait) {
+  const ScratchDir dir("omm_process_test_");
+  const pid_t pid = StartProcess({"/bin/sleep", "5"}, LogTo(dir.path() / "s.log"));
+  struct sigaction action {};
+  struct sigaction previous {};
+  action.sa_handler = CountAlarm;
+  sigemptyset(&action.sa_mask);
+  ASSERT_EQ(sigaction(SIGALRM, &action, &previous), 0);
+  alarm(1);
+  const std::optional<ProcessEnd> end = WaitForAnyProcess();
+  sigaction(SIGALRM, &previous, nullptr);
+  EXPECT_FALSE(end.has_value());
+  EXPECT_EQ(g_alarms, 1);
+  KillProcess(pid);
 }
 
 TEST(Process, TheEnvironmentIsInheritedWithTheOverridesSet) {

@@ -27,20 +27,6 @@ constexpr const char* kStagingPrefix = ".staging-";
 constexpr const char* kReportName = "report.json";
 constexpr const char* kReportHtmlName = "report.html";
 
-// Removes out/.staging-<pid> directories whose process is gone.
-void RemoveStaleStaging(const fs::path& out_dir) {
-  std::error_code ec;
-  for (const auto& entry : fs::directory_iterator(out_dir, ec)) {
-    const std::string name = entry.path().filename().string();
-    if (name.rfind(kStagingPrefix, 0) != 0) continue;
-    const pid_t pid = static_cast<pid_t>(std::atol(name.c_str() + std::strlen(kStagingPrefix)));
-    if (pid > 0 && kill(pid, 0) != 0 && errno == ESRCH) {
-      spdlog::debug("removing {} left by an interrupted run", entry.path().string());
-      fs::remove_all(entry.path(), ec);
-    }
-  }
-}
-
 // The report to start from: the earlier one if it belongs to these inputs.
 Report StartingReport(const Project& project, const std::string& inputs_sha256) {
   Report report;
@@ -106,6 +92,20 @@ void Commit(const fs::path& staging_dir, const fs::path& out_dir) {
 
 }  // namespace
 
+void RemoveStaleStaging(const fs::path& out_dir) {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(out_dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind(kStagingPrefix, 0) != 0) continue;
+    const pid_t pid = static_cast<pid_t>(std::atol(name.c_str() + std::strlen(kStagingPrefix)));
+    if (pid > 0 && kill(pid, 0) != 0 && errno == ESRCH) {
+      spdlog::debug("removing {} left by an interrupted run", entry.path().string());
+      fs::remove_all(entry.path(), ec);
+    }
+  }
+  if (fs::is_empty(out_dir, ec) && !ec) fs::remove(out_dir, ec);  // the stale run had made it
+}
+
 void RunStage(Stage stage, StageContext& context) {
   switch (stage) {
     case Stage::kCalibrate: return RunCalibrateStage(context);
@@ -141,11 +141,11 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
   }
   const auto start = std::chrono::steady_clock::now();
   const fs::path out_dir = project.OutDir();
+  RemoveStaleStaging(out_dir);
   std::error_code ec;
   const bool out_existed = fs::is_directory(out_dir, ec);
   fs::create_directories(out_dir, ec);
   if (ec) throw InputError(out_dir.string(), "cannot create the output directory: " + ec.message());
-  RemoveStaleStaging(out_dir);
 
   const fs::path staging_dir = out_dir / (kStagingPrefix + std::to_string(getpid()));
   fs::remove_all(staging_dir, ec);

@@ -24,6 +24,11 @@
 
 namespace omm {
 
+// Removes out/.staging-<pid> directories whose process is gone (a run
+// killed or interrupted), and out/ itself if that leaves it empty. A run
+// does so first; `omm batch` after the children it stopped.
+void RemoveStaleStaging(const std::filesystem::path& out_dir);
+
 // Runs one stage: RunStage dispatches to the runners of stage.h; tests pass
 // their own to exercise the output protocol.
 using StageRunner = std::function<void(Stage, StageContext&)>;

@@ -1,5 +1,7 @@
 #include "pipeline/orchestration/run_project.h"
 
+#include <unistd.h>
+
 #include <chrono>
 #include <future>
 #include <thread>
@@ -194,6 +196,21 @@ TEST_F(RunProjectTest, StagingOfADeadProcessIsRemoved) {
   options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
   RunProject(project_, options);
   EXPECT_EQ(StagingDirs(), 0);
+}
+
+// What `omm batch` calls after the runs it stopped: a dead run's staging
+// goes, and out/ with it when nothing else is there; a live one's stays.
+TEST_F(RunProjectTest, RemoveStaleStagingLeavesNoEmptyOutAndKeepsLiveRuns) {
+  fs::create_directories(Out(".staging-4194303") / "half");
+  RemoveStaleStaging(project_.OutDir());
+  EXPECT_FALSE(fs::exists(project_.OutDir()));
+  const fs::path live = Out(".staging-" + std::to_string(getpid()));
+  fs::create_directories(live);
+  fs::create_directories(Out(".staging-4194303"));
+  RemoveStaleStaging(project_.OutDir());
+  EXPECT_TRUE(fs::exists(live));
+  EXPECT_EQ(StagingDirs(), 1);
+  RemoveStaleStaging(project_.dir / "no_such_out");  // nothing to do, no error
 }
 
 TEST_F(RunProjectTest, OptionsCheckRejectsStagesOutOfOrder) {
