@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "adapters/project_io/project_reader.h"
@@ -36,12 +37,12 @@ struct TableError {
   double dx_mm = 0.0, dy_mm = 0.0;
 };
 
-// `omm run` on a copy of markers seed 101 with the errors added to their
-// tiles' positions, every position times `units` (a table.csv in other
-// units), and, if given, another table.sigma_mm stated (the table's is 0.02).
-Report RunWithTableErrors(const testing::CachedProject& sim, const std::vector<TableError>& errors,
-                          const std::string& stated_sigma_mm = "", double units = 1.0) {
-  testing::TempDir dir;
+// A copy of `sim` in `dir` with the errors added to their tiles' positions,
+// every position times `units` (a table.csv in other units), and, if given,
+// another table.sigma_mm stated (the table's is 0.02). Its directory.
+fs::path CopyWithTableErrors(const testing::TempDir& dir, const testing::CachedProject& sim,
+                             const std::vector<TableError>& errors,
+                             const std::string& stated_sigma_mm = "", double units = 1.0) {
   const fs::path project_dir = dir.path() / "job";
   testing::CopyProject(sim.project_dir, project_dir);
   if (!stated_sigma_mm.empty()) {
@@ -66,6 +67,14 @@ Report RunWithTableErrors(const testing::CachedProject& sim, const std::vector<T
     table += line + "\n";
   }
   testing::WriteTextFile(project_dir / "table.csv", table);
+  return project_dir;
+}
+
+// `omm run` on such a copy of markers seed 101 (CopyWithTableErrors).
+Report RunWithTableErrors(const testing::CachedProject& sim, const std::vector<TableError>& errors,
+                          const std::string& stated_sigma_mm = "", double units = 1.0) {
+  testing::TempDir dir;
+  const fs::path project_dir = CopyWithTableErrors(dir, sim, errors, stated_sigma_mm, units);
   RunProject(LoadProject(project_dir), RunOptions{});
   return ReadReportJson(project_dir / "out" / "report.json");
 }
@@ -191,6 +200,20 @@ TEST(TableBlunder, PositionsInOtherUnitsAreReported) {
   EXPECT_NEAR(AsNumber(Member(*check, "part_mm")).value_or(0.0), 0.1 * true_axis_mm,
               1e-3 * true_axis_mm);
   EXPECT_GT(AsNumber(Member(*check, "calibration_min_mm")).value_or(0.0), 0.2 * true_axis_mm);
+}
+
+// With the calibration plate on the part, the plate says so too: at the
+// scale of positions 3 times too large it measures 3 times its size (demo
+// seed 101, whose plate lies in one tile). It read +2 000 000 ppm silently
+// before.
+TEST(TableBlunder, PositionsInOtherUnitsDisagreeWithAPlateOnThePart) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 101);
+  testing::TempDir dir;
+  const fs::path project_dir = CopyWithTableErrors(dir, sim, {}, "", 3.0);
+  const testing::CommandResult run = testing::RunOmm("-q run " + project_dir.string());
+  EXPECT_THAT(run.output, ::testing::HasSubstr("the calibration plate on the part measures 3.00"))
+      << run.output;
+  EXPECT_THAT(run.output, ::testing::HasSubstr("table.csv's positions in mm?"));
 }
 
 }  // namespace

@@ -5,7 +5,6 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
-#include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/measure/scene_sensitivity.h"
 
 namespace omm {

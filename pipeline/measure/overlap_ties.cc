@@ -9,7 +9,6 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
-#include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/measure/ortho_patch.h"
 
 namespace omm {

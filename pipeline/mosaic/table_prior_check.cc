@@ -18,6 +18,42 @@ std::string TablePriorCheckOptions::Check() const {
   return "";
 }
 
+namespace {
+
+// T_0's index in PlaneScene::covariance, after r and t.
+const int kFirstTable = PlaneSceneCovarianceSize(0, 0, 0);
+
+// Whether `covariance` holds the table positions of `num_tiles` tiles.
+bool HasTableBlocks(const Eigen::MatrixXd& covariance, size_t num_tiles, double sigma_mm) {
+  return covariance.rows() >= kFirstTable + 2 * static_cast<int>(num_tiles) && sigma_mm > 0.0;
+}
+
+// Tile i's residual, adjusted minus commanded, and its w^2 against the
+// residual's covariance: sigma^2 I - C_i with its prior in the solve, sigma^2
+// I + C_i left out (a prediction). Empty where the features check too
+// little of it (options.min_redundancy).
+std::optional<TablePriorTest> TestPosition(int i, const std::vector<Eigen::Vector2d>& commanded_mm,
+                                           const std::vector<Eigen::Vector2d>& adjusted_mm,
+                                           const Eigen::MatrixXd& covariance, double variance,
+                                           bool left_out, const TablePriorCheckOptions& options) {
+  const Eigen::Matrix2d block = covariance.block<2, 2>(kFirstTable + 2 * i, kFirstTable + 2 * i);
+  const Eigen::Matrix2d residual_covariance = variance * Eigen::Matrix2d::Identity() +
+                                              (left_out ? 0.5 : -0.5) * (block + block.transpose());
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(residual_covariance);
+  if (!(eigen.eigenvalues()(0) >= options.min_redundancy * variance)) return std::nullopt;
+  TablePriorTest test;
+  test.tile = i;
+  test.residual_mm = adjusted_mm[i] - commanded_mm[i];
+  test.w2 = test.residual_mm.dot(residual_covariance.ldlt().solve(test.residual_mm));
+  return test;
+}
+
+bool Contains(const std::vector<int>& tiles, int i) {
+  return std::find(tiles.begin(), tiles.end(), i) != tiles.end();
+}
+
+}  // namespace
+
 std::vector<TablePriorTest> TestTablePriors(const std::vector<Eigen::Vector2d>& commanded_mm,
                                             const std::vector<Eigen::Vector2d>& adjusted_mm,
                                             const Eigen::MatrixXd& covariance, double sigma_mm,
@@ -25,23 +61,14 @@ std::vector<TablePriorTest> TestTablePriors(const std::vector<Eigen::Vector2d>& 
                                             const TablePriorCheckOptions& options) {
   assert(options.Check().empty());
   assert(adjusted_mm.size() == commanded_mm.size());
-  const int num_tiles = static_cast<int>(commanded_mm.size());
-  const int first = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
   std::vector<TablePriorTest> tests;
-  if (covariance.rows() < first + 2 * num_tiles || !(sigma_mm > 0.0)) return tests;
-  const double variance = sigma_mm * sigma_mm;
-  for (int i = 0; i < num_tiles; ++i) {
-    if (std::find(without_prior.begin(), without_prior.end(), i) != without_prior.end()) continue;
-    const Eigen::Matrix2d block = covariance.block<2, 2>(first + 2 * i, first + 2 * i);
-    const Eigen::Matrix2d residual_covariance =
-        variance * Eigen::Matrix2d::Identity() - 0.5 * (block + block.transpose());
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(residual_covariance);
-    if (!(eigen.eigenvalues()(0) >= options.min_redundancy * variance)) continue;
-    TablePriorTest test;
-    test.tile = i;
-    test.residual_mm = adjusted_mm[i] - commanded_mm[i];
-    test.w2 = test.residual_mm.dot(residual_covariance.ldlt().solve(test.residual_mm));
-    tests.push_back(test);
+  if (!HasTableBlocks(covariance, commanded_mm.size(), sigma_mm)) return tests;
+  for (int i = 0; i < static_cast<int>(commanded_mm.size()); ++i) {
+    if (Contains(without_prior, i)) continue;
+    if (const std::optional<TablePriorTest> test = TestPosition(
+            i, commanded_mm, adjusted_mm, covariance, sigma_mm * sigma_mm, false, options)) {
+      tests.push_back(*test);
+    }
   }
   return tests;
 }
@@ -67,23 +94,15 @@ bool LeftOutPriorsStandOut(const std::vector<Eigen::Vector2d>& commanded_mm,
                            const std::vector<int>& without_prior,
                            const TablePriorCheckOptions& options) {
   assert(adjusted_mm.size() == commanded_mm.size());
-  const int num_tiles = static_cast<int>(commanded_mm.size());
-  const int first = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
-  if (covariance.rows() < first + 2 * num_tiles || !(sigma_mm > 0.0)) return false;
-  const double variance = sigma_mm * sigma_mm;
+  if (!HasTableBlocks(covariance, commanded_mm.size(), sigma_mm)) return false;
   std::vector<double> all_w2, left_out_w2;
-  for (int i = 0; i < num_tiles; ++i) {
-    const bool left_out =
-        std::find(without_prior.begin(), without_prior.end(), i) != without_prior.end();
-    const Eigen::Matrix2d block = covariance.block<2, 2>(first + 2 * i, first + 2 * i);
-    const Eigen::Matrix2d residual_covariance =
-        variance * Eigen::Matrix2d::Identity() +
-        (left_out ? 0.5 : -0.5) * (block + block.transpose());
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(residual_covariance);
-    if (!(eigen.eigenvalues()(0) >= options.min_redundancy * variance)) continue;
-    const Eigen::Vector2d residual = adjusted_mm[i] - commanded_mm[i];
-    all_w2.push_back(residual.dot(residual_covariance.ldlt().solve(residual)));
-    if (left_out) left_out_w2.push_back(all_w2.back());
+  for (int i = 0; i < static_cast<int>(commanded_mm.size()); ++i) {
+    const bool left_out = Contains(without_prior, i);
+    const std::optional<TablePriorTest> test = TestPosition(
+        i, commanded_mm, adjusted_mm, covariance, sigma_mm * sigma_mm, left_out, options);
+    if (!test) continue;
+    all_w2.push_back(test->w2);
+    if (left_out) left_out_w2.push_back(test->w2);
   }
   if (left_out_w2.empty()) return false;
   const double scatter2 = std::max(1.0, Median(all_w2) / (2.0 * std::log(2.0)));
@@ -99,17 +118,15 @@ TableSigmaEstimate EstimateTableSigma(const std::vector<Eigen::Vector2d>& comman
                                       const Eigen::MatrixXd& covariance, double sigma_mm,
                                       const std::vector<int>& without_prior) {
   assert(adjusted_mm.size() == commanded_mm.size());
-  const int num_tiles = static_cast<int>(commanded_mm.size());
-  const int first = PlaneSceneCovarianceSize(0, 0, 0);  // T_0, after r and t
   TableSigmaEstimate estimate;
-  if (covariance.rows() < first + 2 * num_tiles || !(sigma_mm > 0.0)) return estimate;
+  if (!HasTableBlocks(covariance, commanded_mm.size(), sigma_mm)) return estimate;
   const double variance = sigma_mm * sigma_mm;
   double sum_squares = 0.0;
-  for (int i = 0; i < num_tiles; ++i) {
-    if (std::find(without_prior.begin(), without_prior.end(), i) != without_prior.end()) continue;
+  for (int i = 0; i < static_cast<int>(commanded_mm.size()); ++i) {
+    if (Contains(without_prior, i)) continue;
     sum_squares += (adjusted_mm[i] - commanded_mm[i]).squaredNorm();
     estimate.redundancy +=
-        2.0 - covariance.block<2, 2>(first + 2 * i, first + 2 * i).trace() / variance;
+        2.0 - covariance.block<2, 2>(kFirstTable + 2 * i, kFirstTable + 2 * i).trace() / variance;
   }
   if (!(estimate.redundancy >= 1.0)) return estimate;
   estimate.ok = true;

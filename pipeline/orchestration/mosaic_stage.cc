@@ -33,7 +33,6 @@
 #include "pipeline/core/statistics.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/measure/hole_ties.h"
-#include "pipeline/measure/measurement_uncertainty.h"
 #include "pipeline/measure/overlap_ties.h"
 #include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/exposure_compensation.h"
