@@ -1,5 +1,6 @@
 #include "adapters/mrcal/calibrate.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -257,6 +258,32 @@ CalibrationResult SummarizeSolve(const SolveRecord& record) {
       result.num_observations_used ? std::sqrt(sum_sq / (2.0 * result.num_observations_used)) : 0.0;
   result.usable = result.num_observations_used > 0 && std::isfinite(result.rms_px);
   result.brief = Brief(result);
+  return result;
+}
+
+CalibrationResult RefineCalibration(const CalibrationResult& previous,
+                                    const std::vector<PlateObservation>& observations,
+                                    const CalibrationOptions& options) {
+  if (const std::string what = options.Check(); !what.empty()) {
+    throw InputError("calibration options", what);
+  }
+  SolveRecord record = previous.record;
+  for (SolveImage& image : record.images) {
+    const auto observation =
+        std::find_if(observations.begin(), observations.end(),
+                     [&](const PlateObservation& o) { return o.image == image.image; });
+    if (observation == observations.end()) continue;
+    ThrowIfMisshapen(record.board, *observation);
+    image.q_px = observation->q_px;
+    image.weight = observation->weight;
+    for (int m = 0; m < image.weight.size(); ++m) image.outlier[m] = !(image.weight[m] > 0.0);
+  }
+  record.problem = StageProblem(!IsSplined(record.camera.lens_model), true,
+                                options.apply_regularization, options.apply_outlier_rejection,
+                                options.optimize_calobject_warp);
+  Solve(&record);
+  CalibrationResult result = SummarizeSolve(record);
+  result.images_not_used = previous.images_not_used;
   return result;
 }
 

@@ -67,49 +67,60 @@ std::vector<PlateObservation> CorrectBias(const std::vector<PlateObservation>& d
   return corrected;
 }
 
-// Largest |a - b| over all marks, and the rms and max of |b|.
-void CompareCorrections(const std::vector<Eigen::Matrix2Xd>& before,
-                        const std::vector<Eigen::Matrix2Xd>& after, BiasCorrectionSummary* bias) {
-  double change = 0.0, sum_sq = 0.0, max_px = 0.0;
+// Largest |a - b| over all marks.
+double LargestChange(const std::vector<Eigen::Matrix2Xd>& a,
+                     const std::vector<Eigen::Matrix2Xd>& b) {
+  double change = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (a[i].size() > 0 && a[i].cols() == b[i].cols())
+      change = std::max(change, (a[i] - b[i]).colwise().norm().maxCoeff());
+  }
+  return change;
+}
+
+// The rms and max size of the corrections over the marks that have one.
+void SizeOfCorrections(const std::vector<Eigen::Matrix2Xd>& corrections,
+                       BiasCorrectionSummary* bias) {
+  double sum_sq = 0.0, max_px = 0.0;
   int count = 0;
-  for (size_t i = 0; i < after.size(); ++i) {
-    for (int m = 0; m < after[i].cols(); ++m) {
-      const double size = after[i].col(m).norm();
+  for (const Eigen::Matrix2Xd& image : corrections) {
+    for (int m = 0; m < image.cols(); ++m) {
+      const double size = image.col(m).norm();
       if (size == 0.0) continue;
-      change = std::max(change, (after[i].col(m) - before[i].col(m)).norm());
       sum_sq += size * size;
       max_px = std::max(max_px, size);
       ++count;
     }
   }
-  bias->last_change_px = change;
   bias->rms_px = count > 0 ? std::sqrt(sum_sq / count) : 0.0;
   bias->max_px = max_px;
 }
 
-// From *result, solved on *corrected (the detections plus *corrections):
-// correct the detections with its camera and poses and re-solve, until the
-// corrections change by less than bias_settle_px (or max_bias_rounds more
-// rounds). A failed re-solve keeps the last consistent (observations, solve)
-// triple.
+// From *result, solved on *corrected (the detections plus *corrections): the
+// corrections its camera and poses give; while they differ from those it was
+// solved on by bias_settle_px or more, re-solve on them (from *result: they
+// moved little) and repeat, up to max_bias_rounds re-solves. A settled
+// solution needs no last solve to confirm it. A failed re-solve keeps the
+// last consistent (observations, solve) triple.
 void SettleBiasCorrection(const std::vector<PlateObservation>& detections, const BoardSpec& board,
                           const CalibrationOptions& solve_options,
                           const CalibrationStageOptions& options, CalibrationResult* result,
                           std::vector<PlateObservation>* corrected,
                           std::vector<Eigen::Matrix2Xd>* corrections, BiasCorrectionSummary* bias) {
-  for (int round = 1; round <= options.max_bias_rounds; ++round) {
+  for (int round = 0;; ++round) {
     std::vector<Eigen::Matrix2Xd> delta;
     std::vector<PlateObservation> round_corrected =
         CorrectBias(detections, board, *result, options.num_threads, &delta);
-    CalibrationResult next = CalibrateCamera(board, round_corrected, solve_options);
+    bias->last_change_px = LargestChange(*corrections, delta);
+    if (bias->last_change_px < options.bias_settle_px || round == options.max_bias_rounds) break;
+    CalibrationResult next = RefineCalibration(*result, round_corrected, solve_options);
     if (!next.usable) break;
-    CompareCorrections(*corrections, delta, bias);
     ++bias->rounds;
     *corrected = std::move(round_corrected);
     *corrections = std::move(delta);
     *result = std::move(next);
-    if (bias->last_change_px < options.bias_settle_px) break;
   }
+  SizeOfCorrections(*corrections, bias);
 }
 
 // Solve, then correct and re-solve until the corrections settle.

@@ -12,11 +12,12 @@
 //  3. Perspective bias (pipeline/calibration/perspective_bias.h): the centre of
 //     each imaged dot is not the image of the dot's centre. The corrections
 //     are computed from the DETECTED centres with the latest camera and poses,
-//     and the solve repeated, until the corrections change by less than
-//     bias_settle_px between rounds (they depend on the pose only to second
-//     order, so one or two rounds suffice with OPENCV8; a splined model,
-//     which bends to each round's corrections, takes up to ~9: lens-mismatch
-//     seed 102) or max_bias_rounds is reached.
+//     and the solve repeated from the last solution (RefineCalibration) until
+//     the corrections the solution gives differ by less than bias_settle_px
+//     from those it was solved on (they depend on the pose only to second
+//     order, so one round suffices with OPENCV8; a splined model, which bends
+//     to each round's corrections, takes more) or max_bias_rounds re-solves
+//     are reached.
 //  4. Lens model (when the user forced none), by the structure of the
 //     residuals: each candidate (OPENCV4, OPENCV5, OPENCV8, and a splined
 //     stereographic model sized for the observed marks, SplinedModelFor) is
@@ -65,7 +66,8 @@ struct CalibrationStageOptions {
   // Perspective-bias rounds (correction + re-solve) after the first solve,
   // and again after a change of lens model.
   int max_bias_rounds = 10;
-  double bias_settle_px = 0.001;  // stop when no correction moved more than this, px
+  // Settled when no correction differs by this much from the one solved on, px.
+  double bias_settle_px = 0.001;
 
   // Lens-model choice (only when camera.lens_model is not given).
   bool choose_lens_model = true;    // false: LENSMODEL_OPENCV8 without cross-validation
@@ -113,10 +115,12 @@ struct LensModelChoice {
 };
 
 struct BiasCorrectionSummary {
-  int rounds = 0;       // correction + re-solve rounds run
-  double rms_px = 0.0;  // size of the final corrections over all observed marks
+  int rounds = 0;       // re-solves on corrected marks
+  double rms_px = 0.0;  // size of the corrections solved on, over all observed marks
   double max_px = 0.0;
-  double last_change_px = 0.0;  // largest change of a correction in the last round
+  // Largest difference between the corrections the final solution gives and
+  // those it was solved on.
+  double last_change_px = 0.0;
 };
 
 struct UncertaintySummary {
