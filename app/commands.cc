@@ -23,6 +23,7 @@
 #include "app/exit_codes.h"
 #include "app/terminal_progress.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/orchestration/run_project.h"
 #include "pipeline/simulate/simulate_project.h"
 
@@ -167,9 +168,10 @@ Outcome ChildOutcome(const ProcessEnd& end, const std::string& log, const std::s
 }  // namespace
 
 int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
-               bool calibration_study, FeatureSource mosaic_features) {
+               bool calibration_study, FeatureSource mosaic_features, int num_threads) {
   return Finish(Guarded([&] {
-    const Project project = LoadProject(project_dir);
+    const int threads = num_threads > 0 ? num_threads : HardwareThreads();
+    const Project project = LoadProject(project_dir, threads);
     spdlog::info("loaded {}: {} calibration images, {} tiles, {} measurements", project.name,
                  project.calib_images.size(), project.tiles.size(), project.measurements.size());
     TerminalProgress progress(IsStderrTerminal());
@@ -177,6 +179,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     options.stages = stages;
     options.calibration_study = calibration_study;
     options.mosaic_features = mosaic_features;
+    options.num_threads = threads;
     options.progress = progress.Callback();
     const RunSummary summary = RunProject(project, options);
     progress.Finish();
@@ -186,7 +189,10 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
 }
 
 int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optional<fs::path>& csv,
-                 int jobs) {
+                 int jobs, int num_threads) {
+  const int threads = num_threads > 0 ? num_threads : HardwareThreads();
+  // The machine shared among the projects running at once.
+  const std::string child_threads = std::to_string(std::max(1, threads / std::max(1, jobs)));
   std::vector<fs::path> projects;
   if (const Outcome found = Guarded([&] { projects = FindProjects(dirs); });
       found.exit_code != kExitOk) {
@@ -238,7 +244,7 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
   for (size_t i = 0; i < total; ++i) {
     bool current = false;
     const Outcome loaded = Guarded([&] {
-      const Project project = LoadProject(projects[i]);
+      const Project project = LoadProject(projects[i], threads);
       current = !force && ReportIsCurrent(project);
     });
     if (loaded.exit_code != kExitOk || current) {
@@ -281,8 +287,9 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
         ProcessOptions options;
         options.log_path = logs.path() / fmt::format("{}.log", i);
         try {
-          const pid_t pid =
-              StartProcess({program.string(), "-q", "run", projects[i].string()}, options);
+          const pid_t pid = StartProcess(
+              {program.string(), "-q", "--threads", child_threads, "run", projects[i].string()},
+              options);
           running.emplace(pid, Running{i, options.log_path, std::chrono::steady_clock::now()});
           spdlog::info("started {}", rows[i].project);
         } catch (const ProcessStartError& e) {

@@ -17,6 +17,7 @@
 
 #include "app/commands.h"
 #include "app/exit_codes.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/orchestration/version.h"
 #include "pipeline/simulate/simulate_project.h"
 
@@ -88,6 +89,11 @@ int main(int argc, char** argv) {
   bool quiet = false;
   app.add_flag("-v,--verbose", verbose, "more log detail (-vv: everything)");
   app.add_flag("-q,--quiet", quiet, "warnings and errors only");
+  int threads = 0;
+  app.add_option("--threads", threads,
+                 "threads for one project's work (default: every hardware thread; batch: shared\n"
+                 "among the projects running at once). The results do not depend on it")
+      ->check(CLI::Range(1, 1024));
 
   std::string project;
   std::optional<omm::Stage> stage;
@@ -222,10 +228,14 @@ int main(int argc, char** argv) {
   SetUpLogging(verbose, quiet);
 
   const omm::FeatureSource mosaic_features = feature_sources.at(features);
-  if (run->parsed()) return omm::RunCommand(project, omm::AllStages(), false, mosaic_features);
-  if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features);
-  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force, batch_csv, jobs);
-  if (simulate->parsed()) return omm::SimulateCommand(simulate_out, simulation, truth);
+  if (run->parsed())
+    return omm::RunCommand(project, omm::AllStages(), false, mosaic_features, threads);
+  if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features, threads);
+  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force, batch_csv, jobs, threads);
+  if (simulate->parsed()) {
+    simulation.num_threads = threads > 0 ? threads : omm::HardwareThreads();
+    return omm::SimulateCommand(simulate_out, simulation, truth);
+  }
   if (report->parsed()) return omm::ReportCommand(project, json);
   return omm::kExitBadInput;
 }

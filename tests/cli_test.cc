@@ -49,6 +49,9 @@ TEST(Cli, VersionAndUsageErrors) {
   EXPECT_EQ(testing::RunOmm("").exit_code, 2);
   EXPECT_EQ(testing::RunOmm("frobnicate").exit_code, 2);
   EXPECT_EQ(testing::RunOmm("run").exit_code, 2);  // PROJECT missing
+  const auto no_threads = testing::RunOmm("--threads 0 run /nonexistent");
+  EXPECT_EQ(no_threads.exit_code, 2);
+  EXPECT_THAT(no_threads.output, HasSubstr("--threads"));
 }
 
 TEST_F(CliTest, BadProjectExitsTwoAndNamesFileAndKey) {

@@ -13,11 +13,13 @@
 #include <Eigen/Core>
 
 #include "pipeline/core/image.h"
+#include "pipeline/core/parallel_for.h"
 
 namespace omm {
 
 struct OpenCvStitcherOptions {
-  int num_threads = 2;  // cv::setNumThreads while stitching
+  // cv::setNumThreads while stitching: OpenCV's own default, as `omm run`'s.
+  int num_threads = HardwareThreads();
 
   // Empty if valid, else what is wrong.
   std::string Check() const;

@@ -26,8 +26,6 @@ namespace omm {
 namespace {
 
 constexpr const char* kProjectFormat = "omm-project/1";
-// Images are read and decoded on this many threads (the 2-core machine omm targets).
-constexpr int kNumThreads = 2;
 
 // ---------------------------------------------------------------- helpers --
 
@@ -540,7 +538,7 @@ std::vector<std::string> ListImages(const fs::path& dir) {
 
 }  // namespace
 
-Project LoadProject(const fs::path& dir_in) {
+Project LoadProject(const fs::path& dir_in, int num_threads) {
   std::error_code ec;
   if (!fs::is_directory(dir_in, ec)) {
     throw InputError(dir_in.string(), "project directory not found");
@@ -663,7 +661,7 @@ Project LoadProject(const fs::path& dir_in) {
   for (const TilePosition& tile : project.tiles) all_images.push_back(project.TilePath(tile.image));
   std::vector<LoadedImage> loaded(all_images.size());
   // Throws for the first bad file in file-name order, whatever the threads' order.
-  ParallelFor(static_cast<int>(all_images.size()), kNumThreads, [&](int i) {
+  ParallelFor(static_cast<int>(all_images.size()), std::max(1, num_threads), [&](int i) {
     const fs::path& path = all_images[i];
     std::error_code exists_ec;
     if (!fs::is_regular_file(path, exists_ec))

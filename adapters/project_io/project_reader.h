@@ -3,6 +3,7 @@
 
 #include <filesystem>
 
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/core/project.h"
 
 namespace omm {
@@ -10,9 +11,9 @@ namespace omm {
 // Parses project.yaml, table.csv, cmm.csv and the image lists of `dir`, and
 // checks them against each other (every feature, measurement, tile and CMM
 // name resolves; every image decodes and all have one size). Each image file
-// is read once (two at a time), hashed (SHA-256) and decoded; the result keeps
-// them in Project::images for the stages. Throws InputError naming the file,
-// the line or key, and what was expected.
-Project LoadProject(const std::filesystem::path& dir);
+// is read once (num_threads at a time), hashed (SHA-256) and decoded; the
+// result keeps them in Project::images for the stages. Throws InputError
+// naming the file, the line or key, and what was expected.
+Project LoadProject(const std::filesystem::path& dir, int num_threads = HardwareThreads());
 
 }  // namespace omm

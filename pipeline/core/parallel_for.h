@@ -14,6 +14,13 @@
 
 namespace omm {
 
+// The machine's hardware threads (2 if the system does not say): the
+// default thread count of one project's work.
+inline int HardwareThreads() {
+  const unsigned n = std::thread::hardware_concurrency();
+  return n > 0 ? static_cast<int>(n) : 2;
+}
+
 template <typename Fn>
 void ParallelFor(int n, int num_threads, Fn fn) {
   std::vector<std::exception_ptr> errors(std::max(n, 0));

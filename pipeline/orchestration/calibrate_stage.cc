@@ -198,6 +198,7 @@ void CalibrateFromImages(StageContext& context) {
   }
   const std::vector<NamedImage> images = CalibImages(project, context.progress);
   CalibrationStageOptions options;
+  options.num_threads = context.num_threads;
   const CalibrationStageSummary summary =
       RunCalibration(images, *project.board, project.camera, options);
 

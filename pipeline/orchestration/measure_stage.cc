@@ -86,8 +86,6 @@ std::vector<TileExposure> TileExposures(const MosaicReport& mosaic,
   return exposure;
 }
 
-// Hole fits run on this many threads (the 2-core machine the stages target).
-constexpr int kNumThreads = 2;
 // The part of a hole's edge error the tiles share (CombineCircleViews): they
 // show the same surface texture at the rim. Over 246 holes seen whole by 2-4
 // tiles in 30 simulated projects, the views' diameters disagreed by a pooled
@@ -365,7 +363,7 @@ void RunMeasureStage(StageContext& context) {
   std::vector<LocatedFeature> located(num_features);
   std::mutex progress_mutex;
   int num_located = 0;
-  ParallelFor(num_features, kNumThreads, [&](int i) {
+  ParallelFor(num_features, context.num_threads, [&](int i) {
     const FeatureSpec& spec = project.features[i];
     located[i] = LocateFeature(spec, inputs, saved);
     const std::lock_guard lock(progress_mutex);
@@ -392,7 +390,7 @@ void RunMeasureStage(StageContext& context) {
     for (int i = 0; i < num_features; ++i) {
       if (located[i].bore.unresolved) unresolved.push_back(i);
     }
-    ParallelFor(static_cast<int>(unresolved.size()), kNumThreads, [&](int j) {
+    ParallelFor(static_cast<int>(unresolved.size()), context.num_threads, [&](int j) {
       const int i = unresolved[static_cast<size_t>(j)];
       located[i] = LocateFeature(project.features[i], inputs, saved);
     });

@@ -387,7 +387,7 @@ struct FinalOutcome {
 FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<ImageF>& tiles,
                                       const CameraModel& camera, const PlateOnPart& plate,
                                       const IntrinsicsPrior& prior,
-                                      const FinalAdjustmentOptions& options,
+                                      const FinalAdjustmentOptions& options, int num_threads,
                                       TileRegistration* registration) {
   const auto start = std::chrono::steady_clock::now();
   const PlaneScene& registered = registration->scene;
@@ -415,7 +415,8 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
                           // rim's step fit takes its own levels and ramp.
                           std::vector<TileExposure>(tiles.size()),
                           tile_px_per_mosaic_px > 0.0 ? 1.0 / tile_px_per_mosaic_px : 1.0};
-  const HoleTieOptions tie_options;
+  HoleTieOptions tie_options;
+  tie_options.num_threads = num_threads;
   const std::vector<HoleTie> ties = FindHoleTies(in, holes, tie_options);
   FinalOutcome result;
   result.fit_seconds = SecondsSince(start);
@@ -435,10 +436,12 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
       }
     }
   }
+  OverlapTieOptions overlap_options;
+  overlap_options.num_threads = num_threads;
   const std::vector<OverlapTie> overlap_ties =
       FindOverlapTies(views_geometry, tiles,
                       OverlapsToAlign(views_geometry, registration->tiles_held_by_prior, links),
-                      holes, registration->input.table_sigma_mm, OverlapTieOptions());
+                      holes, registration->input.table_sigma_mm, overlap_options);
   const int first_overlap_observation = static_cast<int>(registration->input.observations.size());
   AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
   result.overlap_seconds = SecondsSince(overlap_start);
@@ -562,13 +565,17 @@ void RunMosaicStage(StageContext& context) {
   if (context.progress) context.progress(num_tiles, num_tiles + 4, "register tiles");
   RegisterTilesOptions register_options;
   register_options.compute_covariance = false;  // the final adjustment's
+  register_options.num_threads = context.num_threads;
+  register_options.bundle.num_threads = context.num_threads;
   register_options.features = context.mosaic_features;
   std::vector<ColmapPairMatches> sift_matches;
   if (context.mosaic_features != FeatureSource::kHarris) {
     std::vector<fs::path> tile_paths;
     for (const TilePosition& tile : project.tiles)
       tile_paths.push_back(project.TilePath(tile.image));
-    const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, ColmapSiftOptions());
+    ColmapSiftOptions sift_options;
+    sift_options.num_threads = context.num_threads;
+    const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, sift_options);
     spdlog::info("mosaic: {}", sift.brief);
     if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
     sift_matches = sift.matches.pairs;
@@ -587,6 +594,7 @@ void RunMosaicStage(StageContext& context) {
   if (project.board) {
     PlateOnPartOptions plate_options;
     plate_options.height_mm = project.plate_height_mm;
+    plate_options.num_threads = context.num_threads;
     plate = FindPlateOnPart(tiles, *project.board, camera, registration.input, registration.scene,
                             plate_options);
   } else {
@@ -597,8 +605,8 @@ void RunMosaicStage(StageContext& context) {
   final_options.bundle = register_options.bundle;
   if (context.progress)
     context.progress(num_tiles + 1, num_tiles + 4, "tie holes, final adjustment");
-  FinalOutcome final_outcome =
-      FinalAdjustmentWithHoles(project, tiles, camera, plate, prior, final_options, &registration);
+  FinalOutcome final_outcome = FinalAdjustmentWithHoles(
+      project, tiles, camera, plate, prior, final_options, context.num_threads, &registration);
   FinalAdjustment& adjusted = final_outcome.adjusted;
   spdlog::info("mosaic: holes: {}", final_outcome.ties_brief);
   spdlog::info("mosaic: overlaps: {}", final_outcome.overlap_brief);
@@ -669,6 +677,7 @@ void RunMosaicStage(StageContext& context) {
   if (context.progress) context.progress(num_tiles + 2, num_tiles + 4, "orthorectify");
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
+  ortho_options.num_threads = context.num_threads;
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options);
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) {

@@ -15,6 +15,7 @@
 #include "adapters/project_io/report_json.h"
 #include "adapters/report_html/report_html.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/orchestration/input_hash.h"
 #include "pipeline/orchestration/version.h"
 
@@ -117,6 +118,7 @@ void RunStage(Stage stage, StageContext& context) {
 std::string RunOptions::Check() const {
   if (stages.empty()) return "no stage to run";
   if (!runner) return "no stage runner";
+  if (num_threads < 0) return "num_threads must be >= 0 (0: every hardware thread)";
   const std::vector<Stage> all = AllStages();
   auto at = all.begin();
   for (const Stage stage : stages) {
@@ -157,8 +159,14 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
     spdlog::info("hashing the inputs of {}", project.dir.string());
     Report report = StartingReport(project, HashProjectInputs(project));
     DropSectionsFrom(options.stages.front(), report);
-    StageContext context{project, staging_dir, out_dir, report, options.progress,
-                         options.calibration_study, options.mosaic_features};
+    StageContext context{project,
+                         staging_dir,
+                         out_dir,
+                         report,
+                         options.progress,
+                         options.calibration_study,
+                         options.mosaic_features,
+                         options.num_threads > 0 ? options.num_threads : HardwareThreads()};
     for (const Stage stage : options.stages) {
       spdlog::info("{}: starting", StageName(stage));
       options.runner(stage, context);

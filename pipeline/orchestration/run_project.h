@@ -46,6 +46,9 @@ struct RunOptions {
   FeatureSource mosaic_features = FeatureSource::kHarris;
   // What runs a stage.
   StageRunner runner = RunStage;
+  // Threads for the stages' parallel work; 0: HardwareThreads(). The results
+  // do not depend on it.
+  int num_threads = 0;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;

@@ -60,6 +60,8 @@ struct StageContext {
   bool calibration_study = false;
   // `omm mosaic --features`: where the registration's anchors come from.
   FeatureSource mosaic_features = FeatureSource::kHarris;
+  // Threads for the stage's parallel work (>= 1; RunOptions::num_threads).
+  int num_threads = 2;
   // This run's mosaic exactly as its file holds it (set by the mosaic stage;
   // null if it did not run): the measure stage and report.html take it from
   // here instead of decoding the file again.
