@@ -269,6 +269,7 @@ void BM_OpenCvStitcherScans(benchmark::State& state) {
                                      RoughInPanorama(demo, result.panorama));
   state.counters["total_s"] = result.seconds;
   state.counters["cpu_s"] = cpu_s;
+  state.counters["tiles_used"] = result.tiles_used;
   state.counters["holes"] = score.num_found;
   state.counters["sim_rms_raw_px"] = score.similarity_rms_raw_px;
   std::printf(

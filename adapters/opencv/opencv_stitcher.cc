@@ -58,6 +58,7 @@ OpenCvStitcherResult StitchScans(const std::vector<ImageF>& tiles,
   result.status = StatusName(status);
   result.ok = status == cv::Stitcher::OK && !panorama.empty();
   if (!result.ok) return result;
+  result.tiles_used = static_cast<int>(stitcher->component().size());
   cv::Mat gray8, gray;
   cv::cvtColor(panorama, gray8, cv::COLOR_BGR2GRAY);
   gray8.convertTo(gray, CV_32F, 1.0 / 255.0);
