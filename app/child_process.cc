@@ -35,7 +35,11 @@ ChildVerdict Verdict(const ProcessEnd& end, const ChildLog& log) {
   const bool known_code = end.exit_code == kExitFailed || end.exit_code == kExitBadInput ||
                           end.exit_code == kExitInternal;
   if (end.signal == 0 && known_code && !log.error.empty()) return {end.exit_code, log.error};
-  // Ctrl-C reaches the children too; a stop, not a crash.
+  // Ctrl-C reaches the children too; a stop, not a crash: the run stops
+  // itself (exit 130), or the signal ends it.
+  if (end.signal == 0 && end.exit_code == kExitStopped) {
+    return {kExitStopped, log.error.empty() ? "stopped: omm run exited with 130" : log.error};
+  }
   if (end.signal == SIGINT || end.signal == SIGTERM) {
     return {kExitStopped, "stopped: omm run " + DescribeProcessEnd(end)};
   }

@@ -19,9 +19,9 @@ ChildLog ParseChildLog(const std::string& log);
 
 // How a child `omm` ended, as the batch reports it: exit code 0 and no
 // message when it succeeded; its own exit code (1, 2 or 4) and its last error
-// when it exited so and said why; kExitStopped when SIGINT or SIGTERM ended
-// it (Ctrl-C); otherwise kExitInternal, saying how it ended (a crash: killed
-// by a signal).
+// when it exited so and said why; kExitStopped when it stopped itself on
+// SIGINT or SIGTERM (Ctrl-C; exit 130) or one of them ended it; otherwise
+// kExitInternal, saying how it ended (a crash: killed by a signal).
 struct ChildVerdict {
   int exit_code = 0;
   std::string message;

@@ -57,6 +57,13 @@ TEST(ChildProcess, AChildEndedBySigintOrSigtermWasStopped) {
     EXPECT_THAT(verdict.message, HasSubstr("stopped: omm run killed by signal"));
     EXPECT_THAT(verdict.message, ::testing::Not(HasSubstr("a bug")));
   }
+  // The run stopping itself on the signal, with its own message.
+  ProcessEnd end;
+  end.exit_code = kExitStopped;
+  const ChildVerdict stopped =
+      Verdict(end, ParseChildLog("error: stopped by signal 2 (Interrupt); out/ left as it was\n"));
+  EXPECT_EQ(stopped.exit_code, kExitStopped);
+  EXPECT_EQ(stopped.message, "stopped by signal 2 (Interrupt); out/ left as it was");
 }
 
 }  // namespace

@@ -37,11 +37,22 @@ struct Outcome {
   std::string message;  // empty when ok
 };
 
+// Thrown through a run's stages when SIGINT or SIGTERM asked it to stop.
+// Not a std::exception, so that no stage takes it for a failure of its own:
+// only RunProject's clean-up (catch (...): the staging directory and an
+// out/ the run made removed) and Guarded see it.
+struct StopRequested {
+  int signal = 0;
+};
+
 // Runs `body`, turning the three kinds of failure into exit codes.
 Outcome Guarded(const std::function<void()>& body) {
   try {
     body();
     return {};
+  } catch (const StopRequested& stop) {
+    return {kExitStopped, fmt::format("stopped by signal {} ({}); out/ left as it was", stop.signal,
+                                      strsignal(stop.signal))};
   } catch (const InputError& e) {
     return {kExitBadInput, e.what()};
   } catch (const StageFailedError& e) {
@@ -127,19 +138,21 @@ struct BatchRow {
   double seconds = 0.0;
 };
 
-// The signal that asked `omm batch` to stop (SIGINT, SIGTERM); 0 while none.
+// The signal that asked `omm run` or `omm batch` to stop (SIGINT, SIGTERM);
+// 0 while none.
 volatile std::sig_atomic_t g_stop_signal = 0;
 extern "C" void RecordStopSignal(int signal) { g_stop_signal = signal; }
 
-// While it lives, SIGINT and SIGTERM are recorded in g_stop_signal and end
-// the wait for the children they interrupt (no SA_RESTART); the earlier
-// handlers after.
+// While it lives, SIGINT and SIGTERM are recorded in g_stop_signal, with
+// sigaction's `flags`: 0 for the batch, whose wait for its children they
+// must interrupt (no SA_RESTART); the earlier handlers after.
 class StopSignals {
  public:
-  StopSignals() {
+  explicit StopSignals(int flags = 0) {
     g_stop_signal = 0;
     struct sigaction action {};
     action.sa_handler = RecordStopSignal;
+    action.sa_flags = flags;
     sigemptyset(&action.sa_mask);
     sigaction(SIGINT, &action, &previous_int_);
     sigaction(SIGTERM, &action, &previous_term_);
@@ -170,6 +183,12 @@ Outcome ChildOutcome(const ProcessEnd& end, const std::string& log, const std::s
 int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
                bool calibration_study, FeatureSource mosaic_features, int num_threads) {
   return Finish(Guarded([&] {
+    // Ctrl-C or SIGTERM: the run stops at its next progress report (within
+    // a second or so: the longest stretch without one is a calibration's
+    // solves) and leaves out/ as it was. Reads and writes are restarted, not
+    // failed; a second signal ends the program at once (SA_RESETHAND: the
+    // next run removes what it left).
+    const StopSignals stop_signals(SA_RESTART | SA_RESETHAND);
     const int threads = num_threads > 0 ? num_threads : HardwareThreads();
     const Project project = LoadProject(project_dir, threads);
     spdlog::info("loaded {}: {} calibration images, {} tiles, {} measurements", project.name,
@@ -180,7 +199,11 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     options.calibration_study = calibration_study;
     options.mosaic_features = mosaic_features;
     options.num_threads = threads;
-    options.progress = progress.Callback();
+    options.progress = [report = progress.Callback()](int done, int total,
+                                                      const std::string& what) {
+      if (g_stop_signal != 0) throw StopRequested{g_stop_signal};
+      report(done, total, what);
+    };
     const RunSummary summary = RunProject(project, options);
     progress.Finish();
     spdlog::info("{}", summary.Brief());

@@ -8,6 +8,6 @@ inline constexpr int kExitFailed = 1;    // a stage failed on the data; batch: s
 inline constexpr int kExitBadInput = 2;  // bad command line, project files or options
 // 3 was "a stage not built yet" while the pipeline was being written; unused.
 inline constexpr int kExitInternal = 4;  // a bug: an unexpected error (please report it)
-inline constexpr int kExitStopped = 130;  // batch: stopped by SIGINT (Ctrl-C) or SIGTERM
+inline constexpr int kExitStopped = 130;  // stopped by SIGINT (Ctrl-C) or SIGTERM
 
 }  // namespace omm

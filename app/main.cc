@@ -31,8 +31,9 @@ constexpr const char* kExitCodes = R"(Exit codes:
      (a file not written: disk full, no permission); batch: some project failed
   2  bad input: command line, project files (the message names file and key or line)
   4  internal error (a bug; please report it)
-  130  batch: stopped by Ctrl-C (SIGINT) or SIGTERM; its children killed, the
-       rest not started, the summary printed
+  130  stopped by Ctrl-C (SIGINT) or SIGTERM: out/ left as it was (a second
+       Ctrl-C ends a run at once); batch: its children killed, the rest not
+       started, the summary printed
 
 Every project is a directory in format omm-project/1 (project.yaml, calib/,
 tiles/, table.csv, optional cmm.csv); results go to its out/ (report.json, ...),
