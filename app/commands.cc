@@ -3,6 +3,7 @@
 #include <signal.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -139,13 +140,17 @@ struct BatchRow {
 };
 
 // The signal that asked `omm run` or `omm batch` to stop (SIGINT, SIGTERM);
-// 0 while none.
-volatile std::sig_atomic_t g_stop_signal = 0;
+// 0 while none. Lock-free, so the handler may set it, and the threads that
+// report progress read it.
+std::atomic<int> g_stop_signal{0};
+static_assert(std::atomic<int>::is_always_lock_free);
 extern "C" void RecordStopSignal(int signal) { g_stop_signal = signal; }
 
 // While it lives, SIGINT and SIGTERM are recorded in g_stop_signal, with
 // sigaction's `flags`: 0 for the batch, whose wait for its children they
-// must interrupt (no SA_RESTART); the earlier handlers after.
+// must interrupt (no SA_RESTART); the earlier handlers after. A signal the
+// program was started ignoring (nohup, a script's background job) stays
+// ignored.
 class StopSignals {
  public:
   explicit StopSignals(int flags = 0) {
@@ -154,8 +159,11 @@ class StopSignals {
     action.sa_handler = RecordStopSignal;
     action.sa_flags = flags;
     sigemptyset(&action.sa_mask);
-    sigaction(SIGINT, &action, &previous_int_);
-    sigaction(SIGTERM, &action, &previous_term_);
+    for (const auto& [signal, previous] :
+         {std::pair{SIGINT, &previous_int_}, std::pair{SIGTERM, &previous_term_}}) {
+      sigaction(signal, nullptr, previous);
+      if (previous->sa_handler != SIG_IGN) sigaction(signal, &action, nullptr);
+    }
   }
   ~StopSignals() {
     sigaction(SIGINT, &previous_int_, nullptr);
@@ -185,9 +193,10 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
   return Finish(Guarded([&] {
     // Ctrl-C or SIGTERM: the run stops at its next progress report (within
     // a second or so: the longest stretch without one is a calibration's
-    // solves) and leaves out/ as it was. Reads and writes are restarted, not
-    // failed; a second signal ends the program at once (SA_RESETHAND: the
-    // next run removes what it left).
+    // solves; longer while COLMAP or the calibration study runs), the last
+    // just before out/ is replaced, and leaves out/ as it was. Reads and
+    // writes are restarted, not failed; the same signal again ends the
+    // program at once (SA_RESETHAND; the next run removes what it left).
     const StopSignals stop_signals(SA_RESTART | SA_RESETHAND);
     const int threads = num_threads > 0 ? num_threads : HardwareThreads();
     const Project project = LoadProject(project_dir, threads);

@@ -8,7 +8,6 @@
 #include <map>
 #include <optional>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -156,7 +155,7 @@ int main(int argc, char** argv) {
   batch->add_option("DIR", batch_dirs, "project directories or folders of projects")->required();
   batch->add_flag("--force", force, "rerun projects whose report is current");
   // A run keeps about 1.7 cores busy (`omm_run_benchmark`: CPU / wall time).
-  int jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency() / 2));
+  int jobs = std::max(1, omm::HardwareThreads() / 2);
   batch
       ->add_option("-j,--jobs", jobs,
                    "projects run at once (default: half the machine's hardware threads)")

@@ -21,6 +21,10 @@ namespace {
 
 using ::testing::HasSubstr;
 
+// The shell starts a background job with SIGINT ignored, and omm keeps a
+// signal it was started ignoring; Ctrl-C reaches a foreground one.
+const std::string kForeground = "env --default-signal=INT ";
+
 // `omm batch -j 1` on two copies of a demo project, given `signal` 0.3 s
 // after its scratch folder appears: the first child (a run of 1.5 s or
 // more) is running then.
@@ -30,8 +34,8 @@ void ExpectStopped(const std::string& signal) {
   testing::CopyProject(sim.project_dir, dir.path() / "a");
   testing::CopyProject(sim.project_dir, dir.path() / "b");
   const testing::CommandResult result = testing::RunCommand(
-      "TMPDIR=" + scratch.path().string() + " " + testing::OmmProgram().string() + " batch -j 1 " +
-      dir.path().string() + " & pid=$!; while kill -0 $pid && [ -z \"$(ls " +
+      "TMPDIR=" + scratch.path().string() + " " + kForeground + testing::OmmProgram().string() +
+      " batch -j 1 " + dir.path().string() + " & pid=$!; while kill -0 $pid && [ -z \"$(ls " +
       scratch.path().string() + ")\" ]; do sleep 0.05; done; sleep 0.3; kill -" + signal +
       " $pid; wait $pid");
   EXPECT_EQ(result.exit_code, 130) << result.output;
@@ -47,15 +51,15 @@ TEST(BatchStop, SigintStopsTheBatch) { ExpectStopped("INT"); }
 
 TEST(BatchStop, SigtermStopsTheBatch) { ExpectStopped("TERM"); }
 
-// `omm run` on `project`, given `signal` `delay_s` after its staging
-// directory appears (the calibration runs then).
+// `omm run` on `project` on one thread (3 s for the demo), given `signal`
+// `delay_s` after its staging directory appears.
 testing::CommandResult RunAndSignal(const fs::path& project, const std::string& signal,
                                     double delay_s) {
-  return testing::RunCommand(testing::OmmProgram().string() + " run " + project.string() +
-                             " 2>&1 & pid=$!; while kill -0 $pid && [ -z \"$(ls -a " +
-                             (project / "out").string() +
-                             " 2>/dev/null | grep staging)\" ]; do sleep 0.02; done; sleep " +
-                             std::to_string(delay_s) + "; kill -" + signal + " $pid; wait $pid");
+  return testing::RunCommand(
+      kForeground + testing::OmmProgram().string() + " --threads 1 run " + project.string() +
+      " 2>&1 & pid=$!; while kill -0 $pid && [ -z \"$(ls -a " + (project / "out").string() +
+      " 2>/dev/null | grep staging)\" ]; do sleep 0.02; done; sleep " + std::to_string(delay_s) +
+      "; kill -" + signal + " $pid; wait $pid");
 }
 
 // The files under `dir` with their contents, by relative path.
@@ -89,6 +93,20 @@ TEST(RunStop, SigtermKeepsAnEarlierOutByteForByte) {
   EXPECT_EQ(result.exit_code, 130) << result.output;
   EXPECT_THAT(result.output, HasSubstr("stopped by signal 15"));
   EXPECT_TRUE(Contents(dir.path() / "out") == before) << "out/ changed";
+}
+
+// Started with SIGINT ignored (a script's background job, nohup), a run
+// keeps ignoring it and completes.
+TEST(RunStop, ASigintIgnoredAtStartStaysIgnored) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 101);
+  testing::TempDir dir;
+  testing::CopyProject(sim.project_dir, dir.path());
+  const testing::CommandResult result = testing::RunCommand(
+      testing::OmmProgram().string() + " -q run " + dir.path().string() +
+      " 2>&1 & pid=$!; while kill -0 $pid && [ -z \"$(ls -a " + (dir.path() / "out").string() +
+      " 2>/dev/null | grep staging)\" ]; do sleep 0.02; done; kill -INT $pid; wait $pid");
+  EXPECT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_TRUE(fs::exists(dir.path() / "out" / "report.json"));
 }
 
 }  // namespace

@@ -272,7 +272,10 @@ CalibrationResult RefineCalibration(const CalibrationResult& previous,
     const auto observation =
         std::find_if(observations.begin(), observations.end(),
                      [&](const PlateObservation& o) { return o.image == image.image; });
-    if (observation == observations.end()) continue;
+    if (observation == observations.end() || !observation->usable) {
+      throw InputError(image.image, "RefineCalibration: no usable observation of an image of the "
+                                    "earlier solve");
+    }
     ThrowIfMisshapen(record.board, *observation);
     image.q_px = observation->q_px;
     image.weight = observation->weight;

@@ -66,8 +66,10 @@ CalibrationResult CalibrateCamera(const BoardSpec& board,
 
 // The final stage (4) again, from `previous`'s solution, on observations
 // that moved a little (the perspective-bias rounds): each image of
-// previous.record takes the observation of its name, its outliers are found
-// afresh, a splined model's core stays held (the solve from the seed would
+// previous.record takes the observation of its name (InputError if there is
+// none, or it is not usable; others are not added), its outliers are found
+// afresh, previous's images_not_used are kept, a splined model's core stays
+// held (the solve from the seed would
 // take OPENCV4's again). A splined model converges slowly, linearly in its
 // last ~100 iterations, so a start near the minimum saves about a third
 // (lens-mismatch seed 284: 0.13 s a round against 0.20 s from the seed).

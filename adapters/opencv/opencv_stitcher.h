@@ -18,7 +18,8 @@
 namespace omm {
 
 struct OpenCvStitcherOptions {
-  // cv::setNumThreads while stitching: OpenCV's own default, as `omm run`'s.
+  // cv::setNumThreads while stitching; by default the CPUs the process may
+  // use, as OpenCV's own default and `omm run`'s.
   int num_threads = HardwareThreads();
 
   // Empty if valid, else what is wrong.

@@ -67,13 +67,17 @@ std::vector<PlateObservation> CorrectBias(const std::vector<PlateObservation>& d
   return corrected;
 }
 
-// Largest |a - b| over all marks.
-double LargestChange(const std::vector<Eigen::Matrix2Xd>& a,
-                     const std::vector<Eigen::Matrix2Xd>& b) {
+// Largest |before - after| over the marks that have a correction after (an
+// image whose corrections could not be computed has none; it does not keep
+// the rounds going).
+double LargestChange(const std::vector<Eigen::Matrix2Xd>& before,
+                     const std::vector<Eigen::Matrix2Xd>& after) {
   double change = 0.0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    if (a[i].size() > 0 && a[i].cols() == b[i].cols())
-      change = std::max(change, (a[i] - b[i]).colwise().norm().maxCoeff());
+  for (size_t i = 0; i < after.size(); ++i) {
+    for (int m = 0; m < after[i].cols(); ++m) {
+      if (after[i].col(m).isZero() || before[i].cols() != after[i].cols()) continue;
+      change = std::max(change, (after[i].col(m) - before[i].col(m)).norm());
+    }
   }
   return change;
 }

@@ -115,7 +115,7 @@ struct LensModelChoice {
 };
 
 struct BiasCorrectionSummary {
-  int rounds = 0;       // re-solves on corrected marks
+  int rounds = 0;  // re-solves on corrected marks, over both settlings (each <= max_bias_rounds)
   double rms_px = 0.0;  // size of the corrections solved on, over all observed marks
   double max_px = 0.0;
   // Largest difference between the corrections the final solution gives and

@@ -6,6 +6,8 @@
 // order (e.g. the first corrupt file in file order).
 #pragma once
 
+#include <sched.h>
+
 #include <algorithm>
 #include <atomic>
 #include <exception>
@@ -14,9 +16,14 @@
 
 namespace omm {
 
-// The machine's hardware threads (2 if the system does not say): the
-// default thread count of one project's work.
+// The hardware threads this process may run on (its CPU affinity: a
+// container's or taskset's limit, where std::thread::hardware_concurrency
+// counts the host's), 2 if the system does not say: the default thread count
+// of one project's work.
 inline int HardwareThreads() {
+  cpu_set_t cpus;
+  if (sched_getaffinity(0, sizeof(cpus), &cpus) == 0 && CPU_COUNT(&cpus) > 0)
+    return CPU_COUNT(&cpus);
   const unsigned n = std::thread::hardware_concurrency();
   return n > 0 ? static_cast<int>(n) : 2;
 }

@@ -114,12 +114,13 @@ ReportValue StudyReport(const ImageCountStudy& study) {
                       {"seconds", study.seconds}};
 }
 
-// The calib images as gray, 2 at a time: converted from those LoadProject
-// decoded, else read from the files.
-std::vector<NamedImage> CalibImages(const Project& project, const ProgressCallback& progress) {
+// The calib images as gray, num_threads at a time: converted from those
+// LoadProject decoded, else read from the files.
+std::vector<NamedImage> CalibImages(const Project& project, const ProgressCallback& progress,
+                                    int num_threads) {
   const int num_images = static_cast<int>(project.calib_images.size());
   std::vector<NamedImage> images(num_images);
-  ParallelFor(num_images, 2, [&](int i) {
+  ParallelFor(num_images, num_threads, [&](int i) {
     images[i].name = project.calib_images[i].filename().string();
     images[i].image = project.images ? ToGrayImage(project.images->calib[i].image)
                                      : ReadGrayImage(project.calib_images[i]);
@@ -196,7 +197,8 @@ void CalibrateFromImages(StageContext& context) {
     throw InputError((project.dir / "calib").string(),
                      "no calibration images (and no calibration.from)");
   }
-  const std::vector<NamedImage> images = CalibImages(project, context.progress);
+  const std::vector<NamedImage> images =
+      CalibImages(project, context.progress, context.num_threads);
   CalibrationStageOptions options;
   options.num_threads = context.num_threads;
   const CalibrationStageSummary summary =

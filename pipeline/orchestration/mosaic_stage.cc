@@ -551,7 +551,8 @@ void RunMosaicStage(StageContext& context) {
   std::vector<Vector6d> rt_cam_from_plates;
   const IntrinsicsPrior prior = CalibrationPrior(context, &camera, &rt_cam_from_plates);
   const double prior_seconds = SecondsSince(prior_start);
-  const auto tile_images = std::make_shared<const std::vector<ImageF>>(TileImages(project, camera));
+  const auto tile_images =
+      std::make_shared<const std::vector<ImageF>>(TileImages(project, camera, context.num_threads));
   const std::vector<ImageF>& tiles = *tile_images;
   const double read_seconds = SecondsSince(stage_start);
 

@@ -175,6 +175,9 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
     }
     WriteReports(project, context);
     for (std::future<void>& write : context.pending_writes) write.get();
+    // The last report, and the last chance for a stop (RunCommand's) to
+    // leave out/ as it was.
+    if (options.progress) options.progress(1, 1, "move the results into out/");
     Commit(staging_dir, out_dir);
     summary.report = std::move(report);
   } catch (...) {

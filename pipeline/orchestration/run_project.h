@@ -37,7 +37,8 @@ void RunStage(Stage stage, StageContext& context);
 struct RunOptions {
   // The stages to run, in run order (a subsequence of AllStages()).
   std::vector<Stage> stages = AllStages();
-  // Progress of long work inside stages; may be empty.
+  // Progress of long work inside stages, and once just before out/ is
+  // replaced; may be empty. What it throws stops the run, out/ untouched.
   ProgressCallback progress;
   // Run the calibration's image-count study (`omm calibrate --study`).
   bool calibration_study = false;

@@ -23,10 +23,10 @@ const char* StageName(Stage stage) {
 
 std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stage::kMeasure}; }
 
-std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera) {
+std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera, int num_threads) {
   const int num_tiles = static_cast<int>(project.tiles.size());
   std::vector<ImageF> tiles(num_tiles);
-  ParallelFor(num_tiles, 2, [&](int i) {
+  ParallelFor(num_tiles, num_threads, [&](int i) {
     const std::filesystem::path path = project.TilePath(project.tiles[i].image);
     GrayImage image =
         project.images ? ToGrayImage(project.images->tiles[i].image) : ReadGrayImage(path);

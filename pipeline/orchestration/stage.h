@@ -60,8 +60,9 @@ struct StageContext {
   bool calibration_study = false;
   // `omm mosaic --features`: where the registration's anchors come from.
   FeatureSource mosaic_features = FeatureSource::kHarris;
-  // Threads for the stage's parallel work (>= 1; RunOptions::num_threads).
-  int num_threads = 2;
+  // Threads for the stage's parallel work (>= 1): RunProject sets it from
+  // RunOptions::num_threads.
+  int num_threads = 1;
   // This run's mosaic exactly as its file holds it (set by the mosaic stage;
   // null if it did not run): the measure stage and report.html take it from
   // here instead of decoding the file again.
@@ -83,12 +84,12 @@ struct StageContext {
   std::filesystem::path Published(const std::filesystem::path& path) const;
 };
 
-// The project's tiles as gray images, in its tile order, 2 at a time:
-// converted from those LoadProject decoded, else read from the files. Throws
+// The project's tiles as gray images, in its tile order, num_threads at a
+// time: converted from those LoadProject decoded, else read from the files. Throws
 // InputError for a tile whose size is not the camera's, or that is blank
 // (BlankImageLevel): held by its table position alone it would show a
 // uniform square in the mosaic, and its holes would fail as poor fits.
-std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera);
+std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera, int num_threads);
 
 // Where a calibration measured the lens: the convex hull of its solve's inlier
 // mark centres, px (CameraModel::valid_region_px; empty if they span no area).
