@@ -91,9 +91,11 @@ int main(int argc, char** argv) {
   app.add_flag("-q,--quiet", quiet, "warnings and errors only");
   int threads = 0;
   app.add_option("--threads", threads,
-                 "threads for one project's work (default: every hardware thread; batch: shared\n"
-                 "among the projects running at once). The results do not depend on it")
-      ->check(CLI::Range(1, 1024));
+                 "threads for one project's work (default: the CPUs this process may use;\n"
+                 "batch: shared among the projects running at once); the results do not depend\n"
+                 "on it")
+      ->check(CLI::Range(1, 1024).description(""))
+      ->type_name("N");
 
   std::string project;
   std::optional<omm::Stage> stage;
