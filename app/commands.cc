@@ -6,7 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <csignal>
+#include <cstring>
 #include <functional>
 #include <map>
 #include <stdexcept>
@@ -24,7 +24,6 @@
 #include "app/exit_codes.h"
 #include "app/terminal_progress.h"
 #include "pipeline/core/error.h"
-#include "pipeline/core/parallel_for.h"
 #include "pipeline/orchestration/run_project.h"
 #include "pipeline/simulate/simulate_project.h"
 
@@ -198,8 +197,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     // writes are restarted, not failed; the same signal again ends the
     // program at once (SA_RESETHAND; the next run removes what it left).
     const StopSignals stop_signals(SA_RESTART | SA_RESETHAND);
-    const int threads = num_threads > 0 ? num_threads : HardwareThreads();
-    const Project project = LoadProject(project_dir, threads);
+    const Project project = LoadProject(project_dir, num_threads);
     spdlog::info("loaded {}: {} calibration images, {} tiles, {} measurements", project.name,
                  project.calib_images.size(), project.tiles.size(), project.measurements.size());
     TerminalProgress progress(IsStderrTerminal());
@@ -207,7 +205,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     options.stages = stages;
     options.calibration_study = calibration_study;
     options.mosaic_features = mosaic_features;
-    options.num_threads = threads;
+    options.num_threads = num_threads;
     options.progress = [report = progress.Callback()](int done, int total,
                                                       const std::string& what) {
       if (g_stop_signal != 0) throw StopRequested{g_stop_signal};
@@ -222,9 +220,8 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
 
 int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optional<fs::path>& csv,
                  int jobs, int num_threads) {
-  const int threads = num_threads > 0 ? num_threads : HardwareThreads();
   // The machine shared among the projects running at once.
-  const std::string child_threads = std::to_string(std::max(1, threads / std::max(1, jobs)));
+  const int child_threads = std::max(1, num_threads / std::max(1, jobs));
   std::vector<fs::path> projects;
   if (const Outcome found = Guarded([&] { projects = FindProjects(dirs); });
       found.exit_code != kExitOk) {
@@ -276,7 +273,7 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
   for (size_t i = 0; i < total; ++i) {
     bool current = false;
     const Outcome loaded = Guarded([&] {
-      const Project project = LoadProject(projects[i], threads);
+      const Project project = LoadProject(projects[i], num_threads);
       current = !force && ReportIsCurrent(project);
     });
     if (loaded.exit_code != kExitOk || current) {
@@ -319,11 +316,13 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
         ProcessOptions options;
         options.log_path = logs.path() / fmt::format("{}.log", i);
         try {
-          const pid_t pid = StartProcess(
-              {program.string(), "-q", "--threads", child_threads, "run", projects[i].string()},
-              options);
+          const pid_t pid =
+              StartProcess({program.string(), "-q", "--threads", std::to_string(child_threads),
+                            "run", projects[i].string()},
+                           options);
           running.emplace(pid, Running{i, options.log_path, std::chrono::steady_clock::now()});
-          spdlog::info("started {}", rows[i].project);
+          spdlog::info("started {} on {} thread{}", rows[i].project, child_threads,
+                       child_threads == 1 ? "" : "s");
         } catch (const ProcessStartError& e) {
           // That project's failure; the others still run.
           conclude(i, {kExitFailed, "cannot start omm: " + e.code().message()});

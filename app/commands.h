@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/orchestration/stage.h"
 #include "pipeline/simulate/simulation.h"
 
@@ -14,22 +15,23 @@ namespace omm {
 
 // `omm run` (all stages) and `omm calibrate|mosaic|measure` (one stage);
 // `calibration_study`: `omm calibrate --study`; `mosaic_features`: `--features`;
-// `num_threads`: `--threads` (0: every hardware thread).
+// `num_threads`: `--threads` (>= 1).
 int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage>& stages,
                bool calibration_study = false,
-               FeatureSource mosaic_features = FeatureSource::kHarris, int num_threads = 0);
+               FeatureSource mosaic_features = FeatureSource::kHarris,
+               int num_threads = HardwareThreads());
 
 // `omm batch`: each argument is a project directory or a directory whose
 // subdirectories are projects. Projects whose report is current are skipped
 // unless `force`. Each other project runs as its own `omm run` process, up to
 // `jobs` at once (child_process.h), each on num_threads / jobs threads (at
-// least one; num_threads 0: every hardware thread). Prints a summary table
+// least one). Prints a summary table
 // and how the measurements agree with the CMM values over all projects; with
 // `csv`, also writes every measurement to that file (measurements_csv.h).
 // Exits kExitFailed if any project failed.
 int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force,
                  const std::optional<std::filesystem::path>& csv = std::nullopt, int jobs = 1,
-                 int num_threads = 0);
+                 int num_threads = HardwareThreads());
 
 // `omm simulate`.
 int SimulateCommand(const std::filesystem::path& project_dir, const SimulationOptions& options,

@@ -89,7 +89,7 @@ int main(int argc, char** argv) {
   bool quiet = false;
   app.add_flag("-v,--verbose", verbose, "more log detail (-vv: everything)");
   app.add_flag("-q,--quiet", quiet, "warnings and errors only");
-  int threads = 0;
+  int threads = omm::HardwareThreads();
   app.add_option("--threads", threads,
                  "threads for one project's work (default: the CPUs this process may use;\n"
                  "batch: shared among the projects running at once); the results do not depend\n"
@@ -160,7 +160,7 @@ int main(int argc, char** argv) {
   int jobs = std::max(1, omm::HardwareThreads() / 2);
   batch
       ->add_option("-j,--jobs", jobs,
-                   "projects run at once (default: half the machine's hardware threads)")
+                   "projects run at once (default: half the CPUs this process may use)")
       ->check(CLI::Range(1, 256))
       ->capture_default_str();
   std::optional<fs::path> batch_csv;
@@ -235,7 +235,7 @@ int main(int argc, char** argv) {
   if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features, threads);
   if (batch->parsed()) return omm::BatchCommand(batch_dirs, force, batch_csv, jobs, threads);
   if (simulate->parsed()) {
-    simulation.num_threads = threads > 0 ? threads : omm::HardwareThreads();
+    simulation.num_threads = threads;
     return omm::SimulateCommand(simulate_out, simulation, truth);
   }
   if (report->parsed()) return omm::ReportCommand(project, json);

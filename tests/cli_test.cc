@@ -159,6 +159,12 @@ TEST_F(CliTest, BatchRunsProjectsAsTheirOwnRunsAndRefusesZeroJobs) {
   EXPECT_THAT(batch.output, HasSubstr("; plate not found: calib_01.png, calib_02.png"));
   EXPECT_FALSE(fs::exists(project_.OutDir()));
 
+  // The threads shared among the projects running at once.
+  const auto shared = testing::RunOmm("--threads 5 batch -j 2 " + Quoted(project_.dir));
+  EXPECT_THAT(shared.output, HasSubstr("on 2 threads")) << shared.output;
+  const auto one = testing::RunOmm("--threads 3 batch -j 3 " + Quoted(project_.dir));
+  EXPECT_THAT(one.output, HasSubstr("on 1 thread\n")) << one.output;
+
   const auto zero = testing::RunOmm("batch --jobs 0 " + Quoted(project_.dir));
   EXPECT_EQ(zero.exit_code, 2);
   EXPECT_THAT(zero.output, HasSubstr("--jobs"));

@@ -151,6 +151,13 @@ TEST(Calibrate, RefineFromAnEarlierSolutionReachesTheFreshSolve) {
   EXPECT_EQ(refined.num_outliers, fresh.num_outliers);
   EXPECT_NEAR(refined.rms_px, fresh.rms_px, 1e-6);
   EXPECT_LT(ProjectionDiffRms(refined.camera, fresh.camera, kDistanceMm), 1e-5);
+
+  // An image of the earlier solve without a usable observation: refused,
+  // rather than solved on its old marks.
+  after[3].usable = false;
+  EXPECT_THROW(RefineCalibration(earlier, after, options), InputError);
+  after.erase(after.begin() + 3);
+  EXPECT_THROW(RefineCalibration(earlier, after, options), InputError);
 }
 
 // Rms projection difference between two cameras over the pixels of the

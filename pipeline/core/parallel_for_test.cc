@@ -1,8 +1,11 @@
 #include "pipeline/core/parallel_for.h"
 
+#include <sched.h>
+
 #include <atomic>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -31,6 +34,24 @@ TEST(ParallelFor, RethrowsTheLowestIndexsErrorAfterAllItemsRan) {
     }
     EXPECT_EQ(ran.load(), 100);
   }
+}
+
+// The CPUs the caller may run on, not the machine's: a thread limited to
+// one CPU (as taskset or a container limits a process) counts one.
+TEST(HardwareThreads, CountsTheCpusTheCallerMayUse) {
+  cpu_set_t allowed;
+  ASSERT_EQ(sched_getaffinity(0, sizeof(allowed), &allowed), 0);
+  EXPECT_EQ(HardwareThreads(), CPU_COUNT(&allowed));
+  int first = 0;
+  while (!CPU_ISSET(first, &allowed)) ++first;
+  int limited = 0;
+  std::thread([&] {
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(first, &one);
+    if (sched_setaffinity(0, sizeof(one), &one) == 0) limited = HardwareThreads();
+  }).join();
+  EXPECT_EQ(limited, 1);
 }
 
 }  // namespace

@@ -344,7 +344,8 @@ void RunMeasureStage(StageContext& context) {
   }
   const std::shared_ptr<const std::vector<ImageF>> tiles =
       context.tiles ? context.tiles
-                    : std::make_shared<const std::vector<ImageF>>(TileImages(project, camera, context.num_threads));
+                    : std::make_shared<const std::vector<ImageF>>(
+                          TileImages(project, camera, context.num_threads));
   const std::optional<OrthoGeometry> fine = MeasurementGeometry(camera, saved.scene, geometry);
   HoleViewInputs inputs{saved.scene,
                         lens,

@@ -118,7 +118,7 @@ void RunStage(Stage stage, StageContext& context) {
 std::string RunOptions::Check() const {
   if (stages.empty()) return "no stage to run";
   if (!runner) return "no stage runner";
-  if (num_threads < 0) return "num_threads must be >= 0 (0: every hardware thread)";
+  if (num_threads < 0) return "num_threads must be >= 0 (0: HardwareThreads())";
   const std::vector<Stage> all = AllStages();
   auto at = all.begin();
   for (const Stage stage : stages) {

@@ -111,6 +111,24 @@ TEST_F(RunProjectTest, FailureKeepsTheEarlierOutputsExactly) {
   EXPECT_EQ(StagingDirs(), 0);
 }
 
+// The progress callback hears once more after the last stage, before out/
+// is replaced: what it throws then (a stop asked late) leaves the earlier
+// outputs as they were.
+TEST_F(RunProjectTest, AStopAfterTheLastStageKeepsTheEarlierOutputs) {
+  RunOptions options;
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
+  RunProject(project_, options);
+  const std::string report_before = testing::ReadTextFile(Out("report.json"));
+
+  struct Stop {};
+  options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v2"); };
+  options.progress = [](int, int, const std::string&) { throw Stop{}; };
+  EXPECT_THROW(RunProject(project_, options), Stop);
+  EXPECT_EQ(testing::ReadTextFile(Out("report.json")), report_before);
+  EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
+  EXPECT_EQ(StagingDirs(), 0);
+}
+
 // A file a stage leaves to a background thread is in out/ once the run
 // returns, however late it is written; if its write fails, the run fails and
 // out/ keeps the earlier outputs.
