@@ -14,6 +14,8 @@ packages=(
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev libsqlite3-dev libssl-dev libdeflate-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
+  # GDAL's gdalinfo: a test reads the mosaic's placement (its world file) as GIS tools do
+  gdal-bin
   # headless browser for the HTML report's test
   chromium
 )

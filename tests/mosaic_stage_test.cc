@@ -395,5 +395,32 @@ TEST_F(MosaicStageTest, ColmapReadsTheExportedModel) {
   EXPECT_GT(number("Points"), 100);
 }
 
+// GDAL (and through it QGIS and the like) reads the mosaic's placement from
+// its world file: the outer corner of pixel (0, 0) at report.json's
+// origin_mm, gsd_mm per pixel, rows along -Y.
+TEST_F(MosaicStageTest, GdalPlacesTheMosaicInThePartFrame) {
+  const Report report = ReadReportJson(Out() / "report.json");
+  const MosaicReport& mosaic = *report.mosaic;
+  EXPECT_EQ(std::get<std::string>(Member(mosaic.extra, "world_file")->data()), "mosaic.pgw");
+  const fs::path log = dir_->path() / "gdalinfo.json";
+  const std::string command =
+      "gdalinfo -json '" + (Out() / mosaic.file).string() + "' > '" + log.string() + "' 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0) << testing::ReadTextFile(log);
+  const std::string text = testing::ReadTextFile(log);
+  std::smatch m;
+  const std::string number = "\\s*([0-9.eE+-]+)\\s*";
+  ASSERT_TRUE(std::regex_search(text, m,
+                                std::regex("\"geoTransform\":\\s*\\[" + number + "," + number +
+                                           "," + number + "," + number + "," + number + "," +
+                                           number + "\\]")))
+      << text;
+  EXPECT_NEAR(std::stod(m[1]), mosaic.origin_mm.x(), 1e-9);
+  EXPECT_NEAR(std::stod(m[2]), mosaic.gsd_mm, 1e-12);
+  EXPECT_EQ(std::stod(m[3]), 0.0);
+  EXPECT_NEAR(std::stod(m[4]), mosaic.origin_mm.y(), 1e-9);
+  EXPECT_EQ(std::stod(m[5]), 0.0);
+  EXPECT_NEAR(std::stod(m[6]), -mosaic.gsd_mm, 1e-12);
+}
+
 }  // namespace
 }  // namespace omm

@@ -1,6 +1,9 @@
 #include "pipeline/mosaic/ortho_file.h"
 
+#include <fmt/format.h>
+
 #include "adapters/opencv/image_io.h"
+#include "adapters/project_io/text_file.h"
 
 namespace omm {
 
@@ -13,9 +16,24 @@ MosaicReport OrthoMosaicReport(const std::filesystem::path& path, const OrthoGri
   return report;
 }
 
+std::string WorldFileText(const OrthoGrid& grid) {
+  const Eigen::Vector2d first_centre = grid.PartFromMosaic(Eigen::Vector2d::Zero());
+  // 17 significant digits: the doubles exactly, so the file says what the report says.
+  return fmt::format("{:.17g}\n0\n0\n{:.17g}\n{:.17g}\n{:.17g}\n", grid.gsd_mm, -grid.gsd_mm,
+                     first_centre.x(), first_centre.y());
+}
+
+std::filesystem::path WorldFilePath(const std::filesystem::path& mosaic_path) {
+  const std::string extension = mosaic_path.extension().string();  // ".png"
+  std::filesystem::path path = mosaic_path;
+  if (extension.size() < 3) return path.replace_extension(".wld");
+  return path.replace_extension(std::string{'.', extension[1], extension.back(), 'w'});
+}
+
 MosaicReport WriteOrthoMosaic(const std::filesystem::path& path, const OrthoGrid& grid,
                               const StoredImage& samples) {
   WriteStoredImage(path, samples, /*png_deflate_level=*/0);
+  WriteTextFileAtomically(WorldFilePath(path), WorldFileText(grid));
   return OrthoMosaicReport(path, grid);
 }
 

@@ -4,9 +4,9 @@
 // the calibration's intrinsics prior (plate_on_part.h) and the project's
 // holes that several tiles see whole as tie points
 // (pipeline/measure/hole_ties.h), Orthorectify (pipeline/mosaic), and out
-// mosaic.png (16 bit), mosaic/scene.json (the adjusted scene and its joint
-// covariance for the measure stage), colmap/ (the scene as a COLMAP sparse
-// model) and report.mosaic.
+// mosaic.png (16 bit) with its world file mosaic.pgw, mosaic/scene.json (the
+// adjusted scene and its joint covariance for the measure stage), colmap/
+// (the scene as a COLMAP sparse model) and report.mosaic.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -781,6 +781,7 @@ void RunMosaicStage(StageContext& context) {
                              {"clipped_fraction", ortho.summary.clipped_fraction},
                              {"tile_px_per_mosaic_px", ortho.summary.tile_px_per_mosaic_px},
                              {"lens_table_max_error_px", ortho.summary.lens_table_max_error_px}}},
+      {"world_file", WorldFilePath(kMosaicName).string()},
       {"scene_file", kSceneName},
       {"colmap", ReportObject{{"dir", kColmapDirName},
                               {"camera_model", colmap.camera_model},
