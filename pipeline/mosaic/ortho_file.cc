@@ -18,9 +18,10 @@ MosaicReport OrthoMosaicReport(const std::filesystem::path& path, const OrthoGri
 
 std::string WorldFileText(const OrthoGrid& grid) {
   const Eigen::Vector2d first_centre = grid.PartFromMosaic(Eigen::Vector2d::Zero());
-  // 17 significant digits: the doubles exactly, so the file says what the report says.
-  return fmt::format("{:.17g}\n0\n0\n{:.17g}\n{:.17g}\n{:.17g}\n", grid.gsd_mm, -grid.gsd_mm,
-                     first_centre.x(), first_centre.y());
+  // fmt's shortest form that reads back as the same double (0.15, not
+  // 0.14999999999999999): the file says exactly what the report says.
+  return fmt::format("{}\n0\n0\n{}\n{}\n{}\n", grid.gsd_mm, -grid.gsd_mm, first_centre.x(),
+                     first_centre.y());
 }
 
 std::filesystem::path WorldFilePath(const std::filesystem::path& mosaic_path) {
