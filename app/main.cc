@@ -16,6 +16,7 @@
 
 #include "app/commands.h"
 #include "app/exit_codes.h"
+#include "pipeline/core/board.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/orchestration/version.h"
 #include "pipeline/simulate/simulate_project.h"
@@ -185,6 +186,23 @@ int main(int argc, char** argv) {
   simulate->add_flag("--plate-on-part", simulation.plate_on_part,
                      "also lay the calibration plate on the part (a scale reference; the demo "
                      "preset always has it)");
+  simulate
+      ->add_option_function<std::string>(
+          "--board",
+          [&simulation](const std::string& board) {
+            for (omm::BoardType type :
+                 {omm::BoardType::kCaltab, omm::BoardType::kCircles, omm::BoardType::kChessboard}) {
+              if (board == omm::BoardTypeName(type)) {
+                simulation.board = type;
+                return;
+              }
+            }
+            throw CLI::ValidationError(
+                "--board", "expected caltab, circles or chessboard, got '" + board + "'");
+          },
+          "the calibration plate: caltab (default: 7 x 7 dots in a frame), circles (the same "
+          "dots alone) or chessboard (7 x 9 inner corners, 11 mm squares)")
+      ->type_name("TYPE");
   simulate
       ->add_option("--calib-images", simulation.num_calib_images,
                    "calibration images (3..100: one partly outside the image, one without "

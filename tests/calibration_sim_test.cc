@@ -4,8 +4,12 @@
 // adapters/mrcal/projection_diff.h), the rejected images, the lens-model
 // choice. Each project is rendered once per build tree (tests/sim_cache.h) and
 // calibrated once per test process (ctest runs each TEST in its own).
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <map>
 #include <memory>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -31,17 +35,36 @@ struct Calibrated {
   double truth_diff_px = 0.0;  // calibrated vs true projection, rms over the imager
   OpenCvCalibration opencv;    // OpenCV's findCirclesGrid + calibrateCamera, same images
   double opencv_truth_diff_px = 0.0;
+  // At each point of the uncertainty grid, the calibrated projection's
+  // distance from the truth (after the rigid fit) over the stated
+  // worst-direction 1-sigma there.
+  Eigen::VectorXd truth_z;
 };
 
-// One calibration per (preset, seed, images) per process.
+// The RMS of the projects' truth_z, all their grid points pooled.
+double PooledRmsZ(const std::vector<const Calibrated*>& calibrated) {
+  double sum2 = 0.0;
+  Eigen::Index n = 0;
+  for (const Calibrated* c : calibrated) {
+    sum2 += c->truth_z.squaredNorm();
+    n += c->truth_z.size();
+  }
+  return n > 0 ? std::sqrt(sum2 / static_cast<double>(n)) : 0.0;
+}
+
+// One calibration per (preset, seed, images, board) per process. OpenCV's
+// calibration of the same images is the baseline for dot boards only: its
+// findChessboardCorners took 60-150 s on a rendered image with the board
+// partly outside it or absent (adapters/opencv/plate_detector.h).
 const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed,
-                            int num_calib_images = 20) {
+                            int num_calib_images = 20, BoardType board = BoardType::kCaltab) {
   static std::map<std::string, std::unique_ptr<Calibrated>> cache;
   std::unique_ptr<Calibrated>& entry =
-      cache[preset + std::to_string(seed) + "-" + std::to_string(num_calib_images)];
+      cache[preset + std::to_string(seed) + "-" + std::to_string(num_calib_images) + "-" +
+            BoardTypeName(board)];
   if (!entry) {
     entry = std::make_unique<Calibrated>();
-    entry->sim = testing::SimulatedProject(preset, seed, num_calib_images);
+    entry->sim = testing::SimulatedProject(preset, seed, num_calib_images, false, {}, board);
     entry->project = LoadProject(entry->sim.project_dir);
     // The simulator's project.yaml names the lens model; these tests exercise
     // the stage's own choice, as for a project.yaml without camera.lens_model.
@@ -55,14 +78,26 @@ const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed,
       names.push_back(images.back().name);
     }
     entry->summary = RunCalibration(images, *entry->project.board, entry->project.camera, {});
-    entry->opencv = OpenCvCalibrate(pixels, names, *entry->project.board);
-    EXPECT_TRUE(entry->opencv.usable) << entry->opencv.brief;
+    if (board != BoardType::kChessboard) {
+      entry->opencv = OpenCvCalibrate(pixels, names, *entry->project.board);
+      EXPECT_TRUE(entry->opencv.usable) << entry->opencv.brief;
+    }
     EXPECT_TRUE(entry->summary.usable) << entry->summary.brief;
     entry->distance_mm = WorkingDistanceMm(entry->summary.result);
     entry->truth_diff_px = ProjectionDiffRms(entry->summary.result.camera,
                                              entry->sim.truth.camera.model, entry->distance_mm);
-    entry->opencv_truth_diff_px =
-        ProjectionDiffRms(entry->opencv.camera, entry->sim.truth.camera.model, entry->distance_mm);
+    if (entry->opencv.usable) {
+      entry->opencv_truth_diff_px = ProjectionDiffRms(
+          entry->opencv.camera, entry->sim.truth.camera.model, entry->distance_mm);
+    }
+    if (entry->summary.usable) {
+      // The error over the stage's uncertainty grid, in its sigmas.
+      const UncertaintySummary& u = entry->summary.uncertainty;
+      const ProjectionDiff diff =
+          FitProjectionDiff(entry->summary.result.camera, entry->sim.truth.camera.model,
+                            entry->distance_mm, u.grid_nx, u.grid_ny);
+      entry->truth_z = diff.diff_px.cwiseQuotient(u.grid_worst_px);
+    }
     std::cout << preset << "-" << seed << ": " << entry->summary.brief
               << "\n  lens: " << entry->summary.lens.why << "\n  bias rounds "
               << entry->summary.bias.rounds << ", rms " << entry->summary.bias.rms_px << " px, max "
@@ -107,6 +142,43 @@ TEST(CalibrationOnSimulatedProjects, DemoProjectionMatchesTheTruth) {
   // The stage's own uncertainty is of the size of the error it makes.
   EXPECT_TRUE(c.summary.uncertainty.available);
   EXPECT_LT(c.summary.uncertainty.typical_px, 0.02);
+}
+
+// The stated projection uncertainty covers the error the calibration makes,
+// over the whole imager, the corners the plates never reach included. With
+// the worst-direction sigma as the unit, an honest uncertainty gives a
+// pooled RMS of at most sqrt(2) (|e|^2 / sigma_max^2 <= chi2 with 2 dof);
+// one project's error field is a few random parameters, so a project alone
+// scatters widely (0.4-2.4 on demo seeds 1-13) and the bound is on four
+// pooled. Measured: caltab 0.88, chessboard 1.22 on these seeds; 2.24 for
+// the caltab when the lens choice could take OPENCV4 (its extrapolation
+// into the corners biased, its sigma there small), 11-42 per project for
+// chessboards weighed by the detector's assumed 0.1 px (calibrate_stage.h).
+TEST(CalibrationOnSimulatedProjects, StatedUncertaintyCoversTheErrorOverTheImager) {
+  for (BoardType board : {BoardType::kCaltab, BoardType::kChessboard}) {
+    std::vector<const Calibrated*> calibrated;
+    for (std::uint64_t seed : {2, 5, 7, 9}) {
+      const Calibrated& c = Calibrate("demo", seed, 20, board);
+      ASSERT_TRUE(c.summary.usable) << BoardTypeName(board) << " " << seed;
+      ASSERT_TRUE(c.summary.uncertainty.available);
+      EXPECT_EQ(c.summary.result.camera.lens_model, "LENSMODEL_OPENCV8") << c.summary.lens.why;
+      calibrated.push_back(&c);
+    }
+    const double rms_z = PooledRmsZ(calibrated);
+    std::printf("%s: pooled rms of error / stated sigma %.2f\n", BoardTypeName(board), rms_z);
+    EXPECT_LE(rms_z, 2.0) << BoardTypeName(board);
+  }
+}
+
+// A circles grid (the caltab's dots without its frame) calibrates as the
+// caltab does from the same poses, and beats OpenCV on its images.
+TEST(CalibrationOnSimulatedProjects, CirclesGridCalibratesAsTheCaltab) {
+  const Calibrated& circles = Calibrate("demo", 2, 20, BoardType::kCircles);
+  const Calibrated& caltab = Calibrate("demo", 2, 20, BoardType::kCaltab);
+  ASSERT_TRUE(circles.summary.usable);
+  EXPECT_EQ(circles.summary.result.record.images.size(), 18u);
+  EXPECT_NEAR(circles.truth_diff_px, caltab.truth_diff_px, 0.1 * caltab.truth_diff_px);
+  EXPECT_LE(circles.truth_diff_px, 0.75 * circles.opencv_truth_diff_px);
 }
 
 TEST(CalibrationOnSimulatedProjects, PartlyVisibleAndPlateAbsentImagesAreRejectedWithReasons) {

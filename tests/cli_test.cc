@@ -81,6 +81,14 @@ TEST_F(CliTest, SimulateRefusesABadGridBeforeWriting) {
   }
 }
 
+TEST_F(CliTest, SimulateRefusesAnUnknownBoardBeforeWriting) {
+  const auto result =
+      testing::RunOmm("simulate " + Quoted(dir_.path() / "sim") + " --board checkerboard");
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("expected caltab, circles or chessboard"));
+  EXPECT_FALSE(fs::exists(dir_.path() / "sim"));
+}
+
 TEST_F(CliTest, MissingProjectExitsTwo) {
   const auto result = testing::RunOmm("run " + Quoted(dir_.path() / "nowhere"));
   EXPECT_EQ(result.exit_code, 2);

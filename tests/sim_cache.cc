@@ -37,7 +37,7 @@ class FileLock {
 
 CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
                                std::optional<int> num_calib_images, bool plate_on_part,
-                               TileGrid grid) {
+                               TileGrid grid, BoardType board) {
   const fs::path cache = OMM_SIM_CACHE_DIR;
   fs::create_directories(cache);
   const bool grid3 = grid.cols == 3 && grid.rows == 3;
@@ -45,7 +45,8 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
       preset + "-" + std::to_string(seed) +
       (num_calib_images ? "-calib" + std::to_string(*num_calib_images) : "") +
       (plate_on_part ? "-plate" : "") +
-      (grid3 ? "" : "-g" + std::to_string(grid.cols) + "x" + std::to_string(grid.rows));
+      (grid3 ? "" : "-g" + std::to_string(grid.cols) + "x" + std::to_string(grid.rows)) +
+      (board == BoardType::kCaltab ? "" : std::string("-") + BoardTypeName(board));
   const fs::path final_dir = cache / name;
   {
     FileLock lock(cache / (name + ".lock"));
@@ -60,6 +61,7 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
       options.plate_on_part = plate_on_part;
       options.grid_cols = grid.cols;
       options.grid_rows = grid.rows;
+      options.board = board;
       try {
         SimulateProjectDirectory(options, temp / "project", temp / "truth.json", {});
       } catch (const std::exception& e) {

@@ -14,6 +14,7 @@
 #include <optional>
 #include <string>
 
+#include "pipeline/core/board.h"
 #include "pipeline/core/truth.h"
 
 namespace omm::testing {
@@ -28,14 +29,17 @@ struct CachedProject {
 // defaults, or with num_calib_images calib/ images if given (cached apart, as
 // <preset>-<seed>-calib<N>), with the plate on the part if asked (a -plate
 // suffix; the demo preset always has it), and on a grid of cols x rows tiles
-// (a -g<cols>x<rows> suffix unless 3 x 3). Fails the calling test
-// (ADD_FAILURE) and throws if rendering fails.
+// (a -g<cols>x<rows> suffix unless 3 x 3), with a calibration plate of
+// another board than the caltab if asked (a -circles or -chessboard suffix,
+// SimulatedBoard). Fails the calling test (ADD_FAILURE) and throws if
+// rendering fails.
 struct TileGrid {
   int cols = 3, rows = 3;
 };
 CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
                                std::optional<int> num_calib_images = std::nullopt,
-                               bool plate_on_part = false, TileGrid grid = {});
+                               bool plate_on_part = false, TileGrid grid = {},
+                               BoardType board = BoardType::kCaltab);
 
 // Copies a project's inputs (everything but out/) into `to` (created).
 void CopyProject(const std::filesystem::path& from, const std::filesystem::path& to);

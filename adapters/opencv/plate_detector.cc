@@ -118,8 +118,7 @@ PlateObservation RefineMarks(const GrayImage& image, const BoardSpec& board, con
     }
     observation.q_px.col(i) = mark.ellipse.centre_px;
     observation.sigma_px(i) = mark.sigma_px;
-    observation.weight(i) =
-        std::clamp(options.nominal_sigma_px / std::max(mark.sigma_px, 1e-9), options.min_weight, options.max_weight);
+    observation.weight(i) = MarkWeight(mark.sigma_px, options);
     edge_sigmas.push_back(mark.edge_sigma_px);
   }
   std::nth_element(edge_sigmas.begin(), edge_sigmas.begin() + n / 2, edge_sigmas.end());
@@ -373,12 +372,22 @@ PlateObservation DetectCircles(const GrayImage& image, const BoardSpec& board, c
 PlateObservation DetectChessboard(const GrayImage& image, const BoardSpec& board, const PlateDetectionOptions& options) {
   const int n = board.rows * board.cols;
   const cv::Mat gray8 = ToGray8(image);
+  const cv::Size pattern(board.cols, board.rows);
   std::vector<cv::Point2f> corners;
-  if (!cv::findChessboardCorners(gray8, cv::Size(board.cols, board.rows), corners,
-                                 cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE) ||
-      static_cast<int>(corners.size()) != n) {
-    return Rejected(n, "plate not found");
+  bool found = false;
+  // Half size first: 4x faster, and squares of ~10 px or more there are
+  // found; the whole image finds a small board in a large image too.
+  if (std::max(gray8.cols, gray8.rows) >= options.chessboard_half_size_from_px) {
+    cv::Mat half;
+    cv::resize(gray8, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+    found = cv::findChessboardCornersSB(half, pattern, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
+    // Half-size pixel i covers full-size pixels 2i and 2i + 1.
+    for (cv::Point2f& corner : corners) corner = 2.0f * corner + cv::Point2f(0.5f, 0.5f);
   }
+  if (!found) {
+    found = cv::findChessboardCornersSB(gray8, pattern, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
+  }
+  if (!found || static_cast<int>(corners.size()) != n) return Rejected(n, "plate not found");
   // Search window: well inside one square.
   double spacing = 1e30;
   for (int r = 0; r < board.rows; ++r) {
@@ -401,8 +410,7 @@ PlateObservation DetectChessboard(const GrayImage& image, const BoardSpec& board
     observation.q_px.col(i) = q;
   }
   observation.sigma_px.setConstant(options.chessboard_sigma_px);
-  observation.weight.setConstant(
-      std::clamp(options.nominal_sigma_px / options.chessboard_sigma_px, options.min_weight, options.max_weight));
+  observation.weight.setConstant(MarkWeight(options.chessboard_sigma_px, options));
   observation.usable = true;
   return observation;
 }
@@ -422,7 +430,12 @@ std::string PlateDetectionOptions::Check() const {
   if (!(nominal_sigma_px > 0.0)) return "nominal_sigma_px must be > 0";
   if (!(min_weight > 0.0 && min_weight <= max_weight)) return "need 0 < min_weight <= max_weight";
   if (!(chessboard_sigma_px > 0.0)) return "chessboard_sigma_px must be > 0";
+  if (chessboard_half_size_from_px < 1) return "chessboard_half_size_from_px must be >= 1";
   return {};
+}
+
+double MarkWeight(double sigma_px, const PlateDetectionOptions& options) {
+  return std::clamp(options.nominal_sigma_px / std::max(sigma_px, 1e-9), options.min_weight, options.max_weight);
 }
 
 PlateObservation DetectPlate(const GrayImage& image, const BoardSpec& board, const PlateDetectionOptions& options) {

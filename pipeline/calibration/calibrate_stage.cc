@@ -24,6 +24,9 @@
 namespace omm {
 namespace {
 
+// The working model, and the smallest the lens choice takes (step 4).
+constexpr const char* kWorkingLensModel = "LENSMODEL_OPENCV8";
+
 using Clock = std::chrono::steady_clock;
 
 CalibrationOptions SolveOptions(const CameraSpec& camera, int width_px, int height_px,
@@ -127,7 +130,20 @@ void SettleBiasCorrection(const std::vector<PlateObservation>& detections, const
   SizeOfCorrections(*corrections, bias);
 }
 
-// Solve, then correct and re-solve until the corrections settle.
+// The chessboard corners' 1-sigma, px: their scatter about `result`,
+// corrected for its degrees of freedom. 0 if it has none.
+double CornerScatterPx(const CalibrationResult& result) {
+  Eigen::Matrix2Xd q_px, residual_px;
+  ResidualVectors(result, &q_px, &residual_px);
+  const int num_states = LensModelNumParams(result.camera.lens_model) +
+                         6 * static_cast<int>(result.record.images.size()) +
+                         (result.record.problem.optimize_calobject_warp ? 2 : 0);
+  const Eigen::Index dof = 2 * residual_px.cols() - num_states;
+  return dof > 0 ? std::sqrt(residual_px.squaredNorm() / static_cast<double>(dof)) : 0.0;
+}
+
+// Solve, then correct and re-solve until the corrections settle; a
+// chessboard's corners are weighed by their scatter and solved once more.
 CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& detections,
                                           const BoardSpec& board,
                                           const CalibrationOptions& solve_options,
@@ -138,7 +154,21 @@ CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& d
   CalibrationResult result = CalibrateCamera(board, detections, solve_options);
   *corrected = detections;
   corrections->assign(detections.size(), Eigen::Matrix2Xd::Zero(2, board.rows * board.cols));
-  if (!result.usable || board.type == BoardType::kChessboard) return result;
+  if (!result.usable) return result;
+  if (board.type == BoardType::kChessboard) {
+    const double sigma_px = CornerScatterPx(result);
+    if (!(sigma_px > 0.0)) return result;
+    std::vector<PlateObservation> weighed = detections;
+    for (PlateObservation& observation : weighed) {
+      if (!observation.usable) continue;
+      observation.sigma_px.setConstant(sigma_px);
+      observation.weight.setConstant(MarkWeight(sigma_px, options.detection));
+    }
+    CalibrationResult reweighed = RefineCalibration(result, weighed, solve_options);
+    if (!reweighed.usable) return result;
+    *corrected = std::move(weighed);
+    return reweighed;
+  }
   SettleBiasCorrection(detections, board, solve_options, options, &result, corrected, corrections,
                        bias);
   return result;
@@ -186,6 +216,13 @@ bool ResidualsDropSignificantly(const LensCandidate& a, const LensCandidate& b, 
   const double h = 2.0 / (9.0 * extra);
   const double critical = std::pow(1.0 - h + z * std::sqrt(h), 3);
   return f > critical;
+}
+
+// Whether the misfit the bigger model b removes, sqrt(sigma_a^2 - sigma_b^2),
+// is at least `fraction` of the noise it leaves, sigma_b.
+bool ResidualsDropMaterially(const LensCandidate& a, const LensCandidate& b, double fraction) {
+  const double removed2 = a.sigma_px * a.sigma_px - b.sigma_px * b.sigma_px;
+  return removed2 > 0 && removed2 >= fraction * fraction * b.sigma_px * b.sigma_px;
 }
 
 // The image's outermost pixel centres, about every step_px along each side.
@@ -284,6 +321,9 @@ std::string CalibrationStageOptions::Check() const {
   if (!(splined_fov_margin > 0.5 && splined_fov_margin <= 1.5))
     what << "splined_fov_margin must be in (0.5, 1.5]; ";
   if (!(lens_choice_significance_z > 0)) what << "lens_choice_significance_z must be > 0; ";
+  if (!(lens_choice_min_misfit_fraction >= 0)) {
+    what << "lens_choice_min_misfit_fraction must be >= 0; ";
+  }
   if (min_images < 3) what << "min_images must be >= 3; ";
   if (uncertainty_grid_nx < 2 || uncertainty_grid_ny < 2)
     what << "uncertainty grid must be >= 2 x 2; ";
@@ -388,7 +428,7 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
 
   // Working model for the bias rounds.
   const bool forced = camera.lens_model.has_value();
-  const std::string working_model = forced ? *camera.lens_model : "LENSMODEL_OPENCV8";
+  const std::string working_model = forced ? *camera.lens_model : kWorkingLensModel;
   CalibrationOptions solve_options =
       SolveOptions(camera, width_px, height_px, working_model, options);
   if (const std::string what = solve_options.Check(); !what.empty()) {
@@ -414,7 +454,7 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   } else {
     const Clock::time_point choice_start = Clock::now();
     const std::vector<std::string> candidates = {
-        "LENSMODEL_OPENCV4", "LENSMODEL_OPENCV5", "LENSMODEL_OPENCV8",
+        kWorkingLensModel,
         SplinedModelFor(result.camera, corrected, options.splined_nx, options.splined_fov_margin)};
     std::vector<CalibrationResult> solved;
     for (const std::string& model : candidates) {
@@ -425,13 +465,16 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     }
     // Candidates are listed by increasing parameter count. Starting from the
     // smallest usable one, a larger one replaces the current choice only if
-    // its fit is better by more than its extra parameters explain by chance.
+    // its fit is better by more than its extra parameters explain by chance,
+    // and by more than a trace of the noise.
     int chosen = -1;
     for (int k = 0; k < static_cast<int>(candidates.size()); ++k) {
       const LensCandidate& c = summary.lens.candidates[k];
       if (!c.usable) continue;
-      if (chosen < 0 || ResidualsDropSignificantly(summary.lens.candidates[chosen], c,
-                                                   options.lens_choice_significance_z)) {
+      if (chosen < 0 || (ResidualsDropSignificantly(summary.lens.candidates[chosen], c,
+                                                    options.lens_choice_significance_z) &&
+                         ResidualsDropMaterially(summary.lens.candidates[chosen], c,
+                                                 options.lens_choice_min_misfit_fraction))) {
         chosen = k;
       }
     }
@@ -440,8 +483,10 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
       summary.lens.lens_model = c.lens_model;
       summary.lens.why = fmt::format(
           "{} ({} parameters): residual sigma {:.4f} px (dof-corrected); no candidate with more "
-          "parameters lowers the residuals beyond chance (F-test, z = {:.2f})",
-          c.lens_model, c.num_params, c.sigma_px, options.lens_choice_significance_z);
+          "parameters lowers the residuals beyond chance (F-test, z = {:.2f}) and by a misfit of "
+          "{:.2f} of the noise or more",
+          c.lens_model, c.num_params, c.sigma_px, options.lens_choice_significance_z,
+          options.lens_choice_min_misfit_fraction);
       for (const LensCandidate& other : summary.lens.candidates) {
         if (&other != &c) {
           summary.lens.why += fmt::format("; {} ({}) {:.4f} px", other.lens_model, other.num_params,

@@ -67,7 +67,7 @@ CentroidStats CompareDotCentroids(const CameraModel& camera,
                                   double psf_sigma_px) {
   const BoardSpec board;
   const Materials materials;
-  const CaltabPattern pattern(board, 120.0, materials);
+  const PlatePattern pattern(board, 120.0, materials);
   RayTableOptions ray_options;
   RayTableSummary ray_summary;
   const RayTable rays = ComputeRayTable(camera, rect, ray_options, &ray_summary);
@@ -232,10 +232,10 @@ TEST(IntegratePixels, TextureAndHoleRimsMatchADenseMeanOfRays) {
   EXPECT_LT(result.rms, 4e-5);
 }
 
-TEST(CaltabPattern, FollowsTheFormatDocument) {
+TEST(PlatePattern, FollowsTheFormatDocument) {
   const BoardSpec board;
   const Materials m;
-  const CaltabPattern pattern(board, 120.0, m);
+  const PlatePattern pattern(board, 120.0, m);
   EXPECT_TRUE(pattern.Contains(59.9, -59.9));
   EXPECT_FALSE(pattern.Contains(60.1, 0));
   EXPECT_EQ(pattern.Sample(55, 0).reflectance, m.plate_white);      // margin
@@ -254,6 +254,43 @@ TEST(CaltabPattern, FollowsTheFormatDocument) {
   EXPECT_EQ(pattern.Sample(46.0, -40.0).reflectance, m.plate_white);
   EXPECT_EQ(pattern.Sample(-46.0, 40.0).reflectance, m.plate_white);
   EXPECT_EQ(pattern.Sample(46.0, 40.0).reflectance, m.plate_white);
+}
+
+TEST(PlatePattern, CirclesAreTheCaltabsDotsAlone) {
+  const BoardSpec board = SimulatedBoard(BoardType::kCircles);
+  const Materials m;
+  const PlatePattern pattern(board, 120.0, m);
+  const Eigen::Matrix3Xd marks = BoardPoints(board);
+  for (int i = 0; i < marks.cols(); ++i) {
+    EXPECT_EQ(pattern.Sample(marks(0, i) + 3.1, marks(1, i)).region, Region::kPlateBlack) << i;
+    EXPECT_EQ(pattern.Sample(marks(0, i) + 3.15, marks(1, i)).region, Region::kPlateWhite) << i;
+  }
+  // No frame bar, no corner triangle.
+  EXPECT_EQ(pattern.Sample(48.4, 0).region, Region::kPlateWhite);
+  EXPECT_EQ(pattern.Sample(-46.0, -40.0).region, Region::kPlateWhite);
+}
+
+TEST(PlatePattern, ChessboardCornersSitAtTheMarks) {
+  const BoardSpec board = SimulatedBoard(BoardType::kChessboard);
+  const Materials m;
+  const PlatePattern pattern(board, 120.0, m);
+  const Eigen::Matrix3Xd marks = BoardPoints(board);
+  const double d = 0.3 * board.pitch_mm;
+  for (int i = 0; i < marks.cols(); ++i) {
+    const double x = marks(0, i), y = marks(1, i);
+    const Region lower_left = pattern.Sample(x - d, y - d).region;
+    // Diagonal squares alike, neighbouring squares different: an X-junction.
+    EXPECT_EQ(pattern.Sample(x + d, y + d).region, lower_left) << i;
+    EXPECT_NE(pattern.Sample(x + d, y - d).region, lower_left) << i;
+    EXPECT_EQ(pattern.Sample(x - d, y + d).region, pattern.Sample(x + d, y - d).region) << i;
+  }
+  // The square at the (-x, -y) corner is black; beyond the squares, white.
+  const double half_x = 0.5 * (board.cols + 1) * board.pitch_mm;
+  const double half_y = 0.5 * (board.rows + 1) * board.pitch_mm;
+  EXPECT_EQ(pattern.Sample(-half_x + 1, -half_y + 1).region, Region::kPlateBlack);
+  EXPECT_EQ(pattern.Sample(-half_x - 1, 0).region, Region::kPlateWhite);
+  EXPECT_EQ(pattern.Sample(0, half_y + 1).region, Region::kPlateWhite);
+  EXPECT_TRUE(pattern.Contains(half_x + 4, half_y + 4));
 }
 
 TEST(GaussianBlur, PreservesSumAndCentroid) {

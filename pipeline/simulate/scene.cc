@@ -5,8 +5,7 @@
 
 namespace omm {
 
-CaltabPattern::CaltabPattern(const BoardSpec& board, double plate_size_mm,
-                             const Materials& materials)
+PlatePattern::PlatePattern(const BoardSpec& board, double plate_size_mm, const Materials& materials)
     : board_(board),
       half_plate_(0.5 * plate_size_mm),
       half_frame_(0.5 * board.frame_mm),

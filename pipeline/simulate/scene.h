@@ -1,7 +1,7 @@
 // The analytic scenes the simulator images: reflectance as an exact function
 // of position on a plane, so edges are exact at any sampling density.
 //
-// Two planes are imaged: the caltab plate (plate frame, project-format.md) and
+// Two planes are imaged: the calibration plate (plate frame, project-format.md) and
 // the workpiece's top surface (part frame, Z = 0). A view of a plane maps a
 // camera ray (x/z, y/z) to the plane point it meets:
 //   X(lambda) = R^T (lambda d - t),  d = (x/z, y/z, 1),  lambda = (R^T t)_z / (R^T d)_z
@@ -52,11 +52,14 @@ struct Materials {
   float ink = 0.05f;               // marker print
 };
 
-// The caltab plate: square plate of `plate_size_mm` (white), the black frame,
-// the rows x cols dots and the corner triangle of project-format.md.
-class CaltabPattern {
+// The calibration plate: a square white plate of `plate_size_mm` carrying
+// the board of project-format.md: a caltab (black frame, rows x cols dots,
+// corner triangle), a circles grid (the dots alone) or a chessboard (rows x
+// cols inner corners at the marks of BoardPoints, squares of pitch_mm, the
+// square at its (-x, -y) corner black).
+class PlatePattern {
  public:
-  CaltabPattern(const BoardSpec& board, double plate_size_mm, const Materials& materials);
+  PlatePattern(const BoardSpec& board, double plate_size_mm, const Materials& materials);
   bool Contains(double x_mm, double y_mm) const {
     return std::abs(x_mm) <= half_plate_ && std::abs(y_mm) <= half_plate_;
   }
@@ -64,12 +67,22 @@ class CaltabPattern {
   // (Contains). Inline: the renderer calls it for every ray of a calib image.
   SceneSample Sample(double x, double y) const {
     const SceneSample white{white_, Region::kPlateWhite}, black{black_, Region::kPlateBlack};
+    if (board_.type == BoardType::kChessboard) {
+      // Squares k = 0 .. cols (x) and 0 .. rows (y); corner c sits between
+      // squares c and c + 1.
+      const double sx = x * inv_pitch_ + 0.5 * (board_.cols + 1);
+      const double sy = y * inv_pitch_ + 0.5 * (board_.rows + 1);
+      if (sx < 0 || sy < 0 || sx >= board_.cols + 1 || sy >= board_.rows + 1) return white;
+      return (static_cast<int>(sx) + static_cast<int>(sy)) % 2 == 0 ? black : white;
+    }
     const double ax = std::abs(x), ay = std::abs(y);
-    if (ax > half_frame_ || ay > half_frame_) return white;    // margin
-    if (ax >= half_inner_ || ay >= half_inner_) return black;  // frame bar
-    // Corner triangle in the inner corner next to mark (0, 0), i.e. at -x, -y.
-    const double tx = x + half_inner_, ty = y + half_inner_;
-    if (tx + ty <= board_.triangle_mm) return black;
+    if (board_.type == BoardType::kCaltab) {
+      if (ax > half_frame_ || ay > half_frame_) return white;    // margin
+      if (ax >= half_inner_ || ay >= half_inner_) return black;  // frame bar
+      // Corner triangle in the inner corner next to mark (0, 0), i.e. at -x, -y.
+      const double tx = x + half_inner_, ty = y + half_inner_;
+      if (tx + ty <= board_.triangle_mm) return black;
+    }
     // Nearest mark (+ 1/2 and truncation round every index that survives the
     // clamp; at a tie the point is far from both dots).
     const double fc = x * inv_pitch_ + 0.5 * (board_.cols - 1);
@@ -113,8 +126,7 @@ class PlaneView {
 // The plate in a calib/ image: the pattern on the plate, background beyond.
 class PlateScene {
  public:
-  PlateScene(const CaltabPattern* pattern, const Eigen::Isometry3d& cam_from_plate,
-             float background)
+  PlateScene(const PlatePattern* pattern, const Eigen::Isometry3d& cam_from_plate, float background)
       : pattern_(pattern), view_(cam_from_plate), background_(background) {}
   SceneSample operator()(double x, double y) const {
     Eigen::Vector2d p;
@@ -125,7 +137,7 @@ class PlateScene {
   }
 
  private:
-  const CaltabPattern* pattern_;
+  const PlatePattern* pattern_;
   PlaneView view_;
   float background_;
 };
@@ -164,7 +176,7 @@ class WorkpieceScene {
     double thickness_mm = 0.0;
     std::vector<HoleShape> holes;
     std::vector<MarkerShape> markers;
-    const CaltabPattern* plate = nullptr;  // may be null
+    const PlatePattern* plate = nullptr;  // may be null
     Eigen::Isometry3d part_from_plate = Eigen::Isometry3d::Identity();
   };
   WorkpieceScene(Layout layout, const SurfaceTexture* texture, const Materials& materials);

@@ -680,6 +680,17 @@ std::string SimulationOptions::Check() const {
   return "";
 }
 
+BoardSpec SimulatedBoard(BoardType type) {
+  BoardSpec board;  // the caltab
+  board.type = type;
+  if (type == BoardType::kChessboard) {
+    board.rows = 7;
+    board.cols = 9;
+    board.pitch_mm = 11.0;
+  }
+  return board;
+}
+
 PlaneScene TruthPlaneScene(const SimulationTruth& truth) {
   PlaneScene scene;
   const Eigen::AngleAxisd r(truth.cam_from_part.linear());
@@ -707,6 +718,7 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   truth.preset = options.preset;
   truth.seed = options.seed;
   truth.plate_size_mm = kPlateSizeMm;
+  truth.board = SimulatedBoard(options.board);
   truth.table_sigma_mm = options.table_sigma_mm;
   plan.texture_seed = SimRandom(options.seed, kTextureStream).Next();
 

@@ -10,9 +10,10 @@
 //   pitch 4.5 um, focal length within ~1.5 % of the nominal 12 mm. It looks
 //   down from ~390 mm with a 0.5-2.5 deg tilt and a rotation about its axis of
 //   k * 90 deg +- 8 deg relative to the machine axes.
-// - Calibration: the caltab plate at ~18 poses over the whole field (flat and
-//   tilted 10-35 deg, 340-440 mm away, any rotation), one partly outside the
-//   image, one image without the plate.
+// - Calibration: the plate (a caltab by default; a circles grid or a
+//   chessboard on request, SimulatedBoard) at ~18 poses over the whole field
+//   (flat and tilted 10-35 deg, 340-440 mm away, any rotation), one partly
+//   outside the image, one image without the plate.
 // - Workpiece: a ~450 mm square plate, top surface at Z = 0, textured, with
 //   through-holes (8-60 mm), optionally paper AprilTags and the caltab lying
 //   on it; imaged as a 3 x 3 grid with 35-45 % overlap; actual table
@@ -53,6 +54,7 @@ struct SimulationOptions {
   // capture in the paper's set-up, with a scale reference on the workpiece.
   bool plate_on_part = false;
   int grid_cols = 3, grid_rows = 3;  // tiles per row, rows (1..6 each, 2 tiles or more)
+  BoardType board = BoardType::kCaltab;  // the calibration plate's board (SimulatedBoard)
   double table_sigma_mm = 0.02;      // actual - commanded table position, 1-sigma per axis
   bool sensor_noise = true;     // shot and read noise (images are quantised either way)
   int supersampling = 4;        // S: the ray table's S x S rays per pixel (IntegratePixels)
@@ -62,6 +64,14 @@ struct SimulationOptions {
   // Empty if valid, else what is wrong (unknown preset, ...).
   std::string Check() const;
 };
+
+// The board of each type on the simulator's 120 mm plate: the caltab of
+// project-format.md (7 x 7 dots, pitch 12.5 mm, 100 mm frame); the same 7 x 7
+// dots without frame and triangle (circles); 7 x 9 inner corners of 11 mm
+// squares (chessboard: 88 x 110 mm of squares, its corners spanning 66 x 88 mm
+// as the caltab's dots span 75 x 75; rows and columns of different count so
+// that only a half turn is ambiguous).
+BoardSpec SimulatedBoard(BoardType type);
 
 // Names of the presets: "demo", "markers", "low-texture", "sparse-texture",
 // "exposure", "low-texture-exposure", "lens-mismatch".
@@ -119,7 +129,7 @@ class ProjectRenderer {
                 std::uint64_t noise_stream) const;
 
   const SimulationPlan& plan_;
-  CaltabPattern plate_;
+  PlatePattern plate_;
   std::unique_ptr<SurfaceTexture> texture_;
   std::unique_ptr<WorkpieceScene> workpiece_;
 };
