@@ -190,15 +190,12 @@ int main(int argc, char** argv) {
       ->add_option_function<std::string>(
           "--board",
           [&simulation](const std::string& board) {
-            for (omm::BoardType type :
-                 {omm::BoardType::kCaltab, omm::BoardType::kCircles, omm::BoardType::kChessboard}) {
-              if (board == omm::BoardTypeName(type)) {
-                simulation.board = type;
-                return;
-              }
+            const std::optional<omm::BoardType> type = omm::BoardTypeFromName(board);
+            if (!type) {
+              throw CLI::ValidationError(
+                  "--board", "expected caltab, circles or chessboard, got '" + board + "'");
             }
-            throw CLI::ValidationError(
-                "--board", "expected caltab, circles or chessboard, got '" + board + "'");
+            simulation.board = *type;
           },
           "the calibration plate: caltab (default: 7 x 7 dots in a frame), circles (the same "
           "dots alone) or chessboard (7 x 9 inner corners, 11 mm squares)")

@@ -149,8 +149,10 @@ TEST(CalibrationOnSimulatedProjects, DemoProjectionMatchesTheTruth) {
 // the worst-direction sigma as the unit, an honest uncertainty gives a
 // pooled RMS of at most sqrt(2) (|e|^2 / sigma_max^2 <= chi2 with 2 dof);
 // one project's error field is a few random parameters, so a project alone
-// scatters widely (0.4-2.4 on demo seeds 1-13) and the bound is on four
-// pooled. Measured: caltab 0.88, chessboard 1.22 on these seeds; 2.24 for
+// scatters widely and the bound is on four pooled. Over demo seeds 1, 2, 5,
+// 7, 9, 11 and 13 a project's mean z^2 was 1.55 +- 1.9 (caltab) and
+// 1.76 +- 1.05 (chessboard): four pooled stay under ~1.9 in RMS at 97.5 %,
+// hence 2. Measured: caltab 0.88, chessboard 1.22 on these seeds; 2.24 for
 // the caltab when the lens choice could take OPENCV4 (its extrapolation
 // into the corners biased, its sigma there small), 11-42 per project for
 // chessboards weighed by the detector's assumed 0.1 px (calibrate_stage.h).
@@ -170,14 +172,62 @@ TEST(CalibrationOnSimulatedProjects, StatedUncertaintyCoversTheErrorOverTheImage
   }
 }
 
+// The chessboard is searched in the half-size image first (1600 x 1200 px
+// images): cornerSubPix at full size then takes the corners to where a
+// search of the whole image leads it. Partial and absent boards are refused
+// either way.
+TEST(CalibrationOnSimulatedProjects, ChessboardCornersFromTheHalfSizeSearchAreTheFullSizeOnes) {
+  const testing::CachedProject sim =
+      testing::SimulatedProject("demo", 2, 20, false, {}, BoardType::kChessboard);
+  const Project project = LoadProject(sim.project_dir);
+  PlateDetectionOptions half, whole;
+  half.chessboard_half_size_from_px = 1;
+  whole.chessboard_half_size_from_px = 1 << 30;
+  int num_full = 0;
+  for (const CalibImageTruth& image : sim.truth.calib_images) {
+    const GrayImage pixels = ReadGrayImage(sim.project_dir / "calib" / image.image);
+    const PlateObservation a = DetectPlate(pixels, *project.board, half);
+    const PlateObservation b = DetectPlate(pixels, *project.board, whole);
+    if (image.kind != CalibImageTruth::Kind::kFull) {
+      EXPECT_FALSE(a.usable) << image.image;
+      EXPECT_FALSE(b.usable) << image.image;
+      continue;
+    }
+    ASSERT_TRUE(a.usable && b.usable) << image.image << ": " << a.why_rejected << b.why_rejected;
+    EXPECT_LT((a.q_px - b.q_px).cwiseAbs().maxCoeff(), 1e-3) << image.image;
+    ++num_full;
+  }
+  EXPECT_EQ(num_full, 18);
+}
+
+// On a lens OPENCV8 cannot represent, the corners' scatter about the
+// working OPENCV8 solve is mostly its misfit (~1.6 px): they are weighed
+// again by their scatter about the splined model chosen, their noise.
+TEST(CalibrationOnSimulatedProjects, LensMismatchChessboardCornersAreWeighedByTheChosenModel) {
+  const Calibrated& c = Calibrate("lens-mismatch", 2, 20, BoardType::kChessboard);
+  ASSERT_TRUE(c.summary.usable) << c.summary.brief;
+  EXPECT_NE(c.summary.result.camera.lens_model.find("SPLINED"), std::string::npos)
+      << c.summary.lens.why;
+  // Rendered corners scatter by ~0.02 px about the truth (demo seeds 2-13).
+  EXPECT_GT(c.summary.corner_sigma_px, 0.0);
+  EXPECT_LT(c.summary.corner_sigma_px, 0.05);
+  for (const PlateObservation& o : c.summary.observations) {
+    if (o.usable) {
+      EXPECT_DOUBLE_EQ(o.sigma_px.maxCoeff(), c.summary.corner_sigma_px) << o.image;
+    }
+  }
+}
+
 // A circles grid (the caltab's dots without its frame) calibrates as the
-// caltab does from the same poses, and beats OpenCV on its images.
+// caltab does from the same poses: the same dots, so the same solve but for
+// the dots the frame's edge disturbs (within 1.3 % on demo seeds 1-13), and
+// it meets issue 3's bound against OpenCV on its images as the caltab does.
 TEST(CalibrationOnSimulatedProjects, CirclesGridCalibratesAsTheCaltab) {
   const Calibrated& circles = Calibrate("demo", 2, 20, BoardType::kCircles);
   const Calibrated& caltab = Calibrate("demo", 2, 20, BoardType::kCaltab);
   ASSERT_TRUE(circles.summary.usable);
   EXPECT_EQ(circles.summary.result.record.images.size(), 18u);
-  EXPECT_NEAR(circles.truth_diff_px, caltab.truth_diff_px, 0.1 * caltab.truth_diff_px);
+  EXPECT_NEAR(circles.truth_diff_px, caltab.truth_diff_px, 0.05 * caltab.truth_diff_px);
   EXPECT_LE(circles.truth_diff_px, 0.75 * circles.opencv_truth_diff_px);
 }
 
@@ -200,6 +250,7 @@ TEST(CalibrationOnSimulatedProjects, PartlyVisibleAndPlateAbsentImagesAreRejecte
   EXPECT_EQ(num_not_full, 2);
 }
 
+// The leaner fixed models, which the choice no longer takes, as a baseline.
 TEST(CalibrationOnSimulatedProjects, DemoLensChoiceIsNotWorseThanTheBestFixedModel) {
   const Calibrated& c = Calibrate("demo", 1);
   double best = 1e9;
@@ -226,8 +277,8 @@ TEST(CalibrationOnSimulatedProjects, LensMismatchChoosesASplinedModelSeveralTime
 
 // Few images leave the lens's corners to extrapolation: the splined
 // candidate must still solve there (with 14 images, 12 usable, its solve once
-// diverged from an OPENCV8 seed, and OPENCV4 was chosen at 1.9 px residual
-// sigma).
+// diverged from an OPENCV8 seed, and OPENCV4, then a candidate, was chosen
+// at 1.9 px residual sigma).
 TEST(CalibrationOnSimulatedProjects, LensMismatchWithFewImagesStillChoosesASplinedModel) {
   const Calibrated& c = Calibrate("lens-mismatch", 103, 14);
   ASSERT_TRUE(c.summary.usable);

@@ -435,7 +435,8 @@ std::string PlateDetectionOptions::Check() const {
 }
 
 double MarkWeight(double sigma_px, const PlateDetectionOptions& options) {
-  return std::clamp(options.nominal_sigma_px / std::max(sigma_px, 1e-9), options.min_weight, options.max_weight);
+  return std::clamp(options.nominal_sigma_px / std::max(sigma_px, 1e-9), options.min_weight,
+                    options.max_weight);
 }
 
 PlateObservation DetectPlate(const GrayImage& image, const BoardSpec& board, const PlateDetectionOptions& options) {

@@ -63,7 +63,8 @@ struct PlateDetectionOptions {
   double min_weight = 0.1;          // weights are nominal / sigma clamped to [min, max]
   double max_weight = 4.0;
   // Assumed corner 1-sigma, px: cornerSubPix gives none. The calibration
-  // stage replaces it by the corners' scatter about its first solve.
+  // stage replaces it by the corners' scatter about its solve; a chessboard
+  // lying on the part (pipeline/mosaic/plate_on_part.h) keeps it.
   double chessboard_sigma_px = 0.1;
   // A chessboard is searched in a half-size image first when the image's
   // longer side has at least this many pixels (then in the whole image).

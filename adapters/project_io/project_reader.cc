@@ -233,17 +233,13 @@ BoardSpec ReadBoard(const YamlReader& yaml, const YAML::Node& node) {
   const YAML::Node type_node = yaml.Required(node, "board", "type");
   const std::string type = yaml.String(type_node, "board.type");
   const std::vector<std::string> types = {"caltab", "circles", "chessboard"};
-  if (type == "caltab") {
-    board.type = BoardType::kCaltab;
-  } else if (type == "circles") {
-    board.type = BoardType::kCircles;
-  } else if (type == "chessboard") {
-    board.type = BoardType::kChessboard;
-  } else {
+  const std::optional<BoardType> board_type = BoardTypeFromName(type);
+  if (!board_type) {
     yaml.Fail(type_node, "board.type",
               fmt::format("unknown board type '{}'{}; expected one of {}", type,
                           Suggest(type, types), Join(types)));
   }
+  board.type = *board_type;
   board.rows = yaml.Int(yaml.Required(node, "board", "rows"), "board.rows", 2);
   board.cols = yaml.Int(yaml.Required(node, "board", "cols"), "board.cols", 2);
   board.pitch_mm = yaml.Positive(yaml.Required(node, "board", "pitch_mm"), "board.pitch_mm");

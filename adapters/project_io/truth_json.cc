@@ -158,15 +158,9 @@ SimulationTruth TruthFromJson(const std::string& text, const std::string& where)
 
   const json& board = in.At(root, "board", "");
   const std::string type = in.String(board, "type", "board");
-  if (type == "caltab") {
-    truth.board.type = BoardType::kCaltab;
-  } else if (type == "circles") {
-    truth.board.type = BoardType::kCircles;
-  } else if (type == "chessboard") {
-    truth.board.type = BoardType::kChessboard;
-  } else {
-    in.Fail("board.type", "expected caltab, circles or chessboard");
-  }
+  const std::optional<BoardType> board_type = BoardTypeFromName(type);
+  if (!board_type) in.Fail("board.type", "expected caltab, circles or chessboard");
+  truth.board.type = *board_type;
   truth.board.rows = in.Int(board, "rows", "board");
   truth.board.cols = in.Int(board, "cols", "board");
   truth.board.pitch_mm = in.Number(board, "pitch_mm", "board");

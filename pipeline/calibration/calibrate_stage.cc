@@ -130,44 +130,70 @@ void SettleBiasCorrection(const std::vector<PlateObservation>& detections, const
   SizeOfCorrections(*corrections, bias);
 }
 
+// The states of a solve: the lens model's parameters, each image's pose and
+// the board's warp when it is solved for.
+int NumStates(const CalibrationResult& result) {
+  return LensModelNumParams(result.camera.lens_model) +
+         6 * static_cast<int>(result.record.images.size()) +
+         (result.record.problem.optimize_calobject_warp ? 2 : 0);
+}
+
 // The chessboard corners' 1-sigma, px: their scatter about `result`,
 // corrected for its degrees of freedom. 0 if it has none.
 double CornerScatterPx(const CalibrationResult& result) {
   Eigen::Matrix2Xd q_px, residual_px;
   ResidualVectors(result, &q_px, &residual_px);
-  const int num_states = LensModelNumParams(result.camera.lens_model) +
-                         6 * static_cast<int>(result.record.images.size()) +
-                         (result.record.problem.optimize_calobject_warp ? 2 : 0);
-  const Eigen::Index dof = 2 * residual_px.cols() - num_states;
+  const Eigen::Index dof = 2 * residual_px.cols() - NumStates(result);
   return dof > 0 ? std::sqrt(residual_px.squaredNorm() / static_cast<double>(dof)) : 0.0;
 }
 
+// A chessboard's corners (`detections`, weighed by the detector's assumed
+// chessboard_sigma_px) weighed by their scatter about *result instead, and
+// *result solved again on them from its solution, with *corrected the
+// observations it was solved on. Returns the sigma used; 0 (and *result,
+// *corrected kept) when the solve has no degrees of freedom left or the
+// re-solve fails.
+double WeighCornersByScatter(const std::vector<PlateObservation>& detections,
+                             const CalibrationOptions& solve_options,
+                             const PlateDetectionOptions& detection, CalibrationResult* result,
+                             std::vector<PlateObservation>* corrected) {
+  const double sigma_px = CornerScatterPx(*result);
+  if (!(sigma_px > 0.0)) return 0.0;
+  std::vector<PlateObservation> weighed = detections;
+  for (PlateObservation& observation : weighed) {
+    if (!observation.usable) continue;
+    for (Eigen::Index m = 0; m < observation.weight.size(); ++m) {
+      if (!(observation.weight(m) > 0.0)) continue;  // not observed
+      observation.sigma_px(m) = sigma_px;
+      observation.weight(m) = MarkWeight(sigma_px, detection);
+    }
+  }
+  CalibrationResult reweighed = RefineCalibration(*result, weighed, solve_options);
+  if (!reweighed.usable) return 0.0;
+  *corrected = std::move(weighed);
+  *result = std::move(reweighed);
+  return sigma_px;
+}
+
 // Solve, then correct and re-solve until the corrections settle; a
-// chessboard's corners are weighed by their scatter and solved once more.
+// chessboard's corners are weighed by their scatter and solved once more
+// (*corner_sigma_px: the sigma they were given, else 0).
 CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& detections,
                                           const BoardSpec& board,
                                           const CalibrationOptions& solve_options,
                                           const CalibrationStageOptions& options,
                                           std::vector<PlateObservation>* corrected,
                                           std::vector<Eigen::Matrix2Xd>* corrections,
-                                          BiasCorrectionSummary* bias) {
+                                          BiasCorrectionSummary* bias, double* corner_sigma_px) {
   CalibrationResult result = CalibrateCamera(board, detections, solve_options);
   *corrected = detections;
   corrections->assign(detections.size(), Eigen::Matrix2Xd::Zero(2, board.rows * board.cols));
+  *corner_sigma_px = 0.0;
   if (!result.usable) return result;
   if (board.type == BoardType::kChessboard) {
-    const double sigma_px = CornerScatterPx(result);
-    if (!(sigma_px > 0.0)) return result;
-    std::vector<PlateObservation> weighed = detections;
-    for (PlateObservation& observation : weighed) {
-      if (!observation.usable) continue;
-      observation.sigma_px.setConstant(sigma_px);
-      observation.weight.setConstant(MarkWeight(sigma_px, options.detection));
-    }
-    CalibrationResult reweighed = RefineCalibration(result, weighed, solve_options);
-    if (!reweighed.usable) return result;
-    *corrected = std::move(weighed);
-    return reweighed;
+    *corner_sigma_px =
+        WeighCornersByScatter(detections, solve_options, options.detection, &result, corrected);
+    return result;
   }
   SettleBiasCorrection(detections, board, solve_options, options, &result, corrected, corrections,
                        bias);
@@ -194,8 +220,7 @@ LensCandidate ScoreCandidate(const std::string& lens_model, const CalibrationRes
   if (!result.usable) return c;
   c.rms_px = result.rms_px;
   c.num_measurements = 2 * result.num_observations_used;
-  c.num_states = c.num_params + 6 * static_cast<int>(result.record.images.size()) +
-                 (result.record.problem.optimize_calobject_warp ? 2 : 0);
+  c.num_states = NumStates(result);
   const int dof = c.num_measurements - c.num_states;
   c.usable = dof > 0;
   c.sigma_px =
@@ -436,8 +461,9 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   }
   std::vector<PlateObservation> corrected;
   std::vector<Eigen::Matrix2Xd> corrections;
-  CalibrationResult result = SolveWithBiasCorrection(detections, board, solve_options, options,
-                                                     &corrected, &corrections, &summary.bias);
+  CalibrationResult result =
+      SolveWithBiasCorrection(detections, board, solve_options, options, &corrected, &corrections,
+                              &summary.bias, &summary.corner_sigma_px);
   if (!result.usable) {
     summary.brief = "calibration failed: " + result.brief;
     summary.result = std::move(result);
@@ -497,14 +523,21 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     }
     if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;
     summary.lens_choice_seconds = SecondsSince(choice_start);
-    if (summary.lens.lens_model != working_model && board.type != BoardType::kChessboard) {
-      // The corrections settle again with the chosen model's camera and
-      // poses (`result`, solved on the working model's corrections): the
-      // working model's were off by up to 0.03 px on a lens it cannot
-      // represent, and one recorrection left them moving by as much.
+    if (summary.lens.lens_model != working_model) {
       solve_options.lens_model = summary.lens.lens_model;
-      SettleBiasCorrection(detections, board, solve_options, options, &result, &corrected,
-                           &corrections, &summary.bias);
+      if (board.type == BoardType::kChessboard) {
+        // The corners' scatter about the working model was its misfit too.
+        const double sigma_px = WeighCornersByScatter(detections, solve_options, options.detection,
+                                                      &result, &corrected);
+        if (sigma_px > 0.0) summary.corner_sigma_px = sigma_px;
+      } else {
+        // The corrections settle again with the chosen model's camera and
+        // poses (`result`, solved on the working model's corrections): the
+        // working model's were off by up to 0.03 px on a lens it cannot
+        // represent, and one recorrection left them moving by as much.
+        SettleBiasCorrection(detections, board, solve_options, options, &result, &corrected,
+                             &corrections, &summary.bias);
+      }
     }
   }
 
@@ -531,6 +564,10 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
       "mark(s)",
       result.camera.lens_model, num_usable, num_rejected, rms_px, result.rms_px,
       summary.outliers.size());
+  if (summary.corner_sigma_px > 0.0) {
+    summary.brief +=
+        fmt::format(", corners' sigma {:.4f} px (their scatter)", summary.corner_sigma_px);
+  }
   if (summary.uncertainty.available) {
     summary.brief +=
         fmt::format(", projection 1-sigma {:.4f} px typical, {:.4f} px worst at {:.0f} mm",

@@ -40,7 +40,8 @@
 //     the misfit it removes, sqrt(sigma_8^2 - sigma_s^2), is at least
 //     lens_choice_min_misfit_fraction of the noise it leaves. If it is
 //     chosen, the bias corrections settle again with it (step 3's rounds
-//     from its solve).
+//     from its solve), or a chessboard's corners are weighed again by their
+//     scatter about it (about OPENCV8 it held OPENCV8's misfit too).
 //     Why no smaller model than OPENCV8: a leaner one (OPENCV4, OPENCV5)
 //     often fits the marks to the noise, so an F-test keeps it, but it
 //     extrapolates into the corners the plates do not reach with a bias its
@@ -92,7 +93,7 @@ struct CalibrationStageOptions {
   double bias_settle_px = 0.001;
 
   // Lens-model choice (only when camera.lens_model is not given).
-  bool choose_lens_model = true;    // false: LENSMODEL_OPENCV8 without cross-validation
+  bool choose_lens_model = true;    // false: the working model OPENCV8, no candidate solved
   int splined_nx = 10;              // knots across (Ny from the imager's aspect ratio)
   double splined_fov_margin = 0.9;  // the spline's fov_x is the marks' horizontal extent times this
   // A bigger model is chosen only if its residuals drop beyond chance at this
@@ -187,6 +188,10 @@ struct CalibrationStageSummary {
   Eigen::Matrix2Xd residual_q_px;
   Eigen::Matrix2Xd residual_px;
 
+  // A chessboard's corners' 1-sigma as estimated from their scatter about
+  // the solve (step 3), px; 0 for dots, or when it could not be estimated
+  // (then they keep the detector's assumed chessboard_sigma_px).
+  double corner_sigma_px = 0.0;
   double detection_seconds = 0.0;
   double lens_choice_seconds = 0.0;
   double total_seconds = 0.0;

@@ -11,6 +11,13 @@ const char* BoardTypeName(BoardType type) {
   return "?";
 }
 
+std::optional<BoardType> BoardTypeFromName(std::string_view name) {
+  for (BoardType type : {BoardType::kCaltab, BoardType::kCircles, BoardType::kChessboard}) {
+    if (name == BoardTypeName(type)) return type;
+  }
+  return std::nullopt;
+}
+
 Eigen::Matrix3Xd BoardPoints(const BoardSpec& board) {
   Eigen::Matrix3Xd points(3, board.rows * board.cols);
   for (int r = 0; r < board.rows; ++r) {

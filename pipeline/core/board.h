@@ -1,7 +1,9 @@
 // Calibration boards and the plate coordinates of their marks.
 #pragma once
 
+#include <optional>
 #include <string>
+#include <string_view>
 
 #include <Eigen/Core>
 
@@ -23,6 +25,10 @@ struct BoardSpec {
 };
 
 const char* BoardTypeName(BoardType type);
+
+// The type BoardTypeName gives `name` ("caltab", "circles", "chessboard");
+// nullopt for any other name.
+std::optional<BoardType> BoardTypeFromName(std::string_view name);
 
 // Plate coordinates (mm, z = 0) of mark (r, c), stored at column r * cols + c:
 // x = (c - (cols-1)/2) pitch, y = (r - (rows-1)/2) pitch. Shape 3 x rows*cols.

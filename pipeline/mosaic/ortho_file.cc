@@ -19,7 +19,7 @@ MosaicReport OrthoMosaicReport(const std::filesystem::path& path, const OrthoGri
 std::string WorldFileText(const OrthoGrid& grid) {
   const Eigen::Vector2d first_centre = grid.PartFromMosaic(Eigen::Vector2d::Zero());
   // fmt's shortest form that reads back as the same double (0.15, not
-  // 0.14999999999999999): the file says exactly what the report says.
+  // 0.14999999999999999): each number reads back as the double computed.
   return fmt::format("{}\n0\n0\n{}\n{}\n{}\n", grid.gsd_mm, -grid.gsd_mm, first_centre.x(),
                      first_centre.y());
 }

@@ -33,8 +33,9 @@ std::filesystem::path WorldFilePath(const std::filesystem::path& mosaic_path);
 // through a temporary file and a rename, and returns
 // OrthoMosaicReport(path, grid). A PNG is stored uncompressed: the demo's
 // 16-bit 2667 x 3697 mosaic takes ~0.05 s of CPU instead of ~0.25 s for 1.28x
-// the bytes (its low bytes are noise to deflate). Throws InputError if the
-// image cannot be written, std::system_error if the world file cannot.
+// the bytes (its low bytes are noise to deflate). Throws as WriteStoredImage
+// does for the image, std::system_error naming the world file if it cannot
+// be written.
 MosaicReport WriteOrthoMosaic(const std::filesystem::path& path, const OrthoGrid& grid,
                               const StoredImage& samples);
 

@@ -2,7 +2,6 @@
 // pixel centre where the grid (project-format.md's pixel convention) does.
 #include "pipeline/mosaic/ortho_file.h"
 
-#include <fstream>
 #include <sstream>
 #include <vector>
 
@@ -49,7 +48,10 @@ TEST(WorldFile, WrittenBesideTheMosaicAndMapsPixelCentres) {
         Eigen::Vector2d(2.5, 1.25)}) {
     const Eigen::Vector2d world(a * col_row.x() + b * col_row.y() + c,
                                 d * col_row.x() + e * col_row.y() + f);
-    const Eigen::Vector2d expected = grid.PartFromMosaic(col_row);
+    // project-format.md: the centre of pixel (col, row) is at part-frame
+    // (origin_x + (col + 0.5) gsd, origin_y - (row + 0.5) gsd).
+    const Eigen::Vector2d expected(-459.75 + (col_row.x() + 0.5) * 0.15,
+                                   73.5 - (col_row.y() + 0.5) * 0.15);
     EXPECT_NEAR(world.x(), expected.x(), 1e-12) << col_row.transpose();
     EXPECT_NEAR(world.y(), expected.y(), 1e-12) << col_row.transpose();
   }

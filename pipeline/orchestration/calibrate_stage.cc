@@ -83,9 +83,10 @@ ReportValue LensChoice(const LensModelChoice& lens) {
     }
     choice.emplace_back(
         "criterion",
-        "residual structure: each candidate solved on all images; going up in "
-        "parameters, a bigger model is chosen only if its residual drop passes an "
-        "F-test (extra sum of squares, 1% level); sigma_px = rms sqrt(M / (M - P))");
+        "residual structure: OPENCV8 and a splined model solved on all images; the splined "
+        "model is chosen only if its residual drop passes an F-test (extra sum of squares) and "
+        "the misfit it removes is a set fraction of the noise or more (both levels in 'why'); "
+        "sigma_px = rms sqrt(M / (M - P))");
     choice.emplace_back("candidates", candidates);
   }
   return choice;

@@ -278,10 +278,10 @@ TEST(PlatePattern, ChessboardCornersSitAtTheMarks) {
   const double d = 0.3 * board.pitch_mm;
   for (int i = 0; i < marks.cols(); ++i) {
     const double x = marks(0, i), y = marks(1, i);
-    const Region lower_left = pattern.Sample(x - d, y - d).region;
+    const Region at_minus_xy = pattern.Sample(x - d, y - d).region;
     // Diagonal squares alike, neighbouring squares different: an X-junction.
-    EXPECT_EQ(pattern.Sample(x + d, y + d).region, lower_left) << i;
-    EXPECT_NE(pattern.Sample(x + d, y - d).region, lower_left) << i;
+    EXPECT_EQ(pattern.Sample(x + d, y + d).region, at_minus_xy) << i;
+    EXPECT_NE(pattern.Sample(x + d, y - d).region, at_minus_xy) << i;
     EXPECT_EQ(pattern.Sample(x - d, y + d).region, pattern.Sample(x + d, y - d).region) << i;
   }
   // The square at the (-x, -y) corner is black; beyond the squares, white.

@@ -38,7 +38,7 @@ constexpr double kNominalFocalMm = 12.0;
 constexpr int kWidthPx = 1600;
 constexpr int kHeightPx = 1200;
 constexpr double kWorkingDistanceMm = 390.0;
-constexpr double kPlateSizeMm = 120.0;  // caltab plate with a 10 mm white margin
+constexpr double kPlateSizeMm = 120.0;  // the plate, white around its board (SimulatedBoard)
 constexpr double kMosaicGsdMm = 0.15;
 constexpr double kCmmSigmaMm = 0.001;
 

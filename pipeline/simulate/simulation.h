@@ -15,8 +15,8 @@
 //   (flat and tilted 10-35 deg, 340-440 mm away, any rotation), one partly
 //   outside the image, one image without the plate.
 // - Workpiece: a ~450 mm square plate, top surface at Z = 0, textured, with
-//   through-holes (8-60 mm), optionally paper AprilTags and the caltab lying
-//   on it; imaged as a 3 x 3 grid with 35-45 % overlap; actual table
+//   through-holes (8-60 mm), optionally paper AprilTags and the calibration
+//   plate lying on it; imaged as a 3 x 3 grid with 35-45 % overlap; actual table
 //   positions = commanded + N(0, table sigma). Other grids (a strip of one
 //   row, 4 x 3, ...) keep the step and the part's margin: the part is
 //   ~450 mm times the grid's reach over the 3 x 3 grid's, per axis.
@@ -50,7 +50,7 @@ struct SimulationOptions {
   // Number of calib/ images, including one with the plate partly outside the
   // image and one without the plate (>= 3).
   int num_calib_images = 20;
-  // Also lay the caltab on the part (the demo preset always does): a
+  // Also lay the calibration plate on the part (the demo preset always does): a
   // capture in the paper's set-up, with a scale reference on the workpiece.
   bool plate_on_part = false;
   int grid_cols = 3, grid_rows = 3;  // tiles per row, rows (1..6 each, 2 tiles or more)
@@ -84,7 +84,7 @@ struct PresetSpec {
   bool splined_truth = false;  // lens-mismatch: a truth OPENCV8 cannot represent
   TextureStyle texture = TextureStyle::kRich;
   bool markers = false;             // paper AprilTags on the part
-  bool plate_on_part = false;       // the caltab lying on the part (independent scale check)
+  bool plate_on_part = false;       // the calibration plate lying on the part (a scale check)
   bool exposure_variation = false;  // tiles of clearly different gain and vignetting
 };
 
