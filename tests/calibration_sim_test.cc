@@ -90,7 +90,7 @@ const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed,
       entry->opencv_truth_diff_px = ProjectionDiffRms(
           entry->opencv.camera, entry->sim.truth.camera.model, entry->distance_mm);
     }
-    if (entry->summary.usable) {
+    if (entry->summary.usable && entry->summary.uncertainty.available) {
       // The error over the stage's uncertainty grid, in its sigmas.
       const UncertaintySummary& u = entry->summary.uncertainty;
       const ProjectionDiff diff =

@@ -49,6 +49,7 @@ ProjectionDiff FitRigidToProjections(const Eigen::Matrix3Xd& p, const Eigen::Mat
                                      const CameraModel& camera_b) {
   ProjectionDiff result;
   result.q_px = q_px;
+  if (p.cols() < 3) return result;  // fewer points than the rigid motion's 6 unknowns
   Vector6d rt = Vector6d::Zero();
   Eigen::VectorXd r;
   Eigen::MatrixXd J;

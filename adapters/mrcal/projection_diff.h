@@ -33,7 +33,8 @@ struct ProjectionDiff {
 ProjectionDiff FitRigidToProjections(const Eigen::Matrix3Xd& p, const Eigen::Matrix2Xd& q_px,
                                      const CameraModel& camera_b);
 
-// Precondition: both cameras have the same imager size (assert).
+// Preconditions: both cameras have the same imager size (assert); a grid of
+// 2 x 2 or more (with fewer points the result is not converged).
 ProjectionDiff FitProjectionDiff(const CameraModel& camera_a, const CameraModel& camera_b,
                                  double distance_mm, int grid_nx = 40, int grid_ny = 30);
 
