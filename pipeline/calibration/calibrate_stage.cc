@@ -175,28 +175,40 @@ double WeighCornersByScatter(const std::vector<PlateObservation>& detections,
   return sigma_px;
 }
 
-// Solve, then correct and re-solve until the corrections settle; a
-// chessboard's corners are weighed by their scatter and solved once more
-// (*corner_sigma_px: the sigma they were given, else 0).
-CalibrationResult SolveWithBiasCorrection(const std::vector<PlateObservation>& detections,
-                                          const BoardSpec& board,
-                                          const CalibrationOptions& solve_options,
-                                          const CalibrationStageOptions& options,
-                                          std::vector<PlateObservation>* corrected,
-                                          std::vector<Eigen::Matrix2Xd>* corrections,
-                                          BiasCorrectionSummary* bias, double* corner_sigma_px) {
+// The observations' model settled on *result's camera and poses, *result
+// solved again on them: a dot board's perspective-bias corrections
+// (SettleBiasCorrection), a chessboard's corners weighed by their scatter
+// (WeighCornersByScatter; *corner_sigma_px: the sigma they were given, left
+// as it was when none could be).
+void SettleObservations(const std::vector<PlateObservation>& detections, const BoardSpec& board,
+                        const CalibrationOptions& solve_options,
+                        const CalibrationStageOptions& options, CalibrationResult* result,
+                        std::vector<PlateObservation>* corrected,
+                        std::vector<Eigen::Matrix2Xd>* corrections, BiasCorrectionSummary* bias,
+                        double* corner_sigma_px) {
+  if (board.type == BoardType::kChessboard) {
+    const double sigma_px =
+        WeighCornersByScatter(detections, solve_options, options.detection, result, corrected);
+    if (sigma_px > 0.0) *corner_sigma_px = sigma_px;
+    return;
+  }
+  SettleBiasCorrection(detections, board, solve_options, options, result, corrected, corrections,
+                       bias);
+}
+
+// Solve, then settle the observations' model (SettleObservations).
+CalibrationResult SolveAndSettle(const std::vector<PlateObservation>& detections,
+                                 const BoardSpec& board, const CalibrationOptions& solve_options,
+                                 const CalibrationStageOptions& options,
+                                 std::vector<PlateObservation>* corrected,
+                                 std::vector<Eigen::Matrix2Xd>* corrections,
+                                 BiasCorrectionSummary* bias, double* corner_sigma_px) {
   CalibrationResult result = CalibrateCamera(board, detections, solve_options);
   *corrected = detections;
   corrections->assign(detections.size(), Eigen::Matrix2Xd::Zero(2, board.rows * board.cols));
-  *corner_sigma_px = 0.0;
   if (!result.usable) return result;
-  if (board.type == BoardType::kChessboard) {
-    *corner_sigma_px =
-        WeighCornersByScatter(detections, solve_options, options.detection, &result, corrected);
-    return result;
-  }
-  SettleBiasCorrection(detections, board, solve_options, options, &result, corrected, corrections,
-                       bias);
+  SettleObservations(detections, board, solve_options, options, &result, corrected, corrections,
+                     bias, corner_sigma_px);
   return result;
 }
 
@@ -461,9 +473,8 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   }
   std::vector<PlateObservation> corrected;
   std::vector<Eigen::Matrix2Xd> corrections;
-  CalibrationResult result =
-      SolveWithBiasCorrection(detections, board, solve_options, options, &corrected, &corrections,
-                              &summary.bias, &summary.corner_sigma_px);
+  CalibrationResult result = SolveAndSettle(detections, board, solve_options, options, &corrected,
+                                            &corrections, &summary.bias, &summary.corner_sigma_px);
   if (!result.usable) {
     summary.brief = "calibration failed: " + result.brief;
     summary.result = std::move(result);
@@ -524,20 +535,14 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;
     summary.lens_choice_seconds = SecondsSince(choice_start);
     if (summary.lens.lens_model != working_model) {
+      // The observations settle again with the chosen model's camera and
+      // poses (`result`, solved on the working model's observations): the
+      // working model's bias corrections were off by up to 0.03 px on a
+      // lens it cannot represent, and one recorrection left them moving by
+      // as much; a chessboard's scatter about it was its misfit too.
       solve_options.lens_model = summary.lens.lens_model;
-      if (board.type == BoardType::kChessboard) {
-        // The corners' scatter about the working model was its misfit too.
-        const double sigma_px = WeighCornersByScatter(detections, solve_options, options.detection,
-                                                      &result, &corrected);
-        if (sigma_px > 0.0) summary.corner_sigma_px = sigma_px;
-      } else {
-        // The corrections settle again with the chosen model's camera and
-        // poses (`result`, solved on the working model's corrections): the
-        // working model's were off by up to 0.03 px on a lens it cannot
-        // represent, and one recorrection left them moving by as much.
-        SettleBiasCorrection(detections, board, solve_options, options, &result, &corrected,
-                             &corrections, &summary.bias);
-      }
+      SettleObservations(detections, board, solve_options, options, &result, &corrected,
+                         &corrections, &summary.bias, &summary.corner_sigma_px);
     }
   }
 
