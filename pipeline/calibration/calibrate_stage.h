@@ -54,7 +54,7 @@
 //     0.15 of the noise) and then extrapolated 0.7-1.3 px off in the corners
 //     (seeds 5, 9, 13); a lens the parametric model cannot represent leaves
 //     far more (lens-mismatch: 1.6 px against the splined model's 0.04).
-//     Why not cross-validation between halves (adapters/mrcal/cross_validation.h):
+//     Why not cross-validation between halves (tried in an earlier revision):
 //     it compares the halves over the WHOLE imager, where the plates rarely
 //     reach the corners; each half extrapolates there on its own, so it
 //     scores extrapolation rather than fit (on the lens-mismatch preset it
