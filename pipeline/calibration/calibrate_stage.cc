@@ -497,7 +497,10 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     for (const std::string& model : candidates) {
       CalibrationOptions candidate_options = solve_options;
       candidate_options.lens_model = model;
-      solved.push_back(CalibrateCamera(board, corrected, candidate_options));
+      // The working model's candidate is `result`, solved on `corrected`
+      // already (SettleObservations).
+      solved.push_back(
+          model == working_model ? result : CalibrateCamera(board, corrected, candidate_options));
       summary.lens.candidates.push_back(ScoreCandidate(model, solved.back()));
     }
     // Candidates are listed by increasing parameter count. Starting from the

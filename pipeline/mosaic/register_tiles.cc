@@ -47,6 +47,8 @@ std::string RegisterTilesOptions::Check() const {
   if (!(outlier_factor > 1)) return "outlier_factor must be > 1";
   if (!(min_outlier_threshold_px > 0)) return "min_outlier_threshold_px must be > 0";
   if (rematch_passes < 0) return "rematch_passes must be >= 0";
+  if (!(screening_function_tolerance >= 0 && screening_function_tolerance < 1))
+    return "screening_function_tolerance must be in [0, 1)";
   if (!(relocation_min_change_px >= 0)) return "relocation_min_change_px must be >= 0";
   if (num_threads < 1) return "num_threads must be >= 1";
   return {};
@@ -651,10 +653,17 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   std::vector<int> anchor_observation;
   std::vector<std::pair<int, int>> match_of_observation;
   PlaneAdjustment adjustment;
-  const auto solve = [&](bool final_solve) {
+  PlaneBundleOptions screening_bundle = options.bundle;
+  screening_bundle.function_tolerance =
+      std::max(options.bundle.function_tolerance, options.screening_function_tolerance);
+  enum class Solve { kScreening, kRelocated, kFinal };
+  bool screened = false;  // the adjustment is a screening solve's
+  const auto solve = [&](Solve kind) {
     PlaneBundleInput input = build_input(&anchor_observation, &match_of_observation);
-    config.compute_covariance = final_solve && options.compute_covariance;
-    adjustment = AdjustPlaneScene(camera, input, config, options.bundle);
+    config.compute_covariance = kind == Solve::kFinal && options.compute_covariance;
+    screened = kind == Solve::kScreening;
+    adjustment =
+        AdjustPlaneScene(camera, input, config, screened ? screening_bundle : options.bundle);
     result.input = std::move(input);
   };
   // Drops matches whose target or anchor observation has a large residual
@@ -816,21 +825,24 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     return num_rescued.load();
   };
 
-  solve(false);
-  if (adjustment.seed.ok && options.rescue_unusable_pairs && rescue_pairs() > 0) solve(false);
+  solve(Solve::kScreening);
+  if (adjustment.seed.ok && options.rescue_unusable_pairs && rescue_pairs() > 0)
+    solve(Solve::kScreening);
   if (adjustment.seed.ok) {
     int dropped = drop_outliers();
     for (int pass = 0; pass < options.rematch_passes; ++pass) {
       const int relocated = relocate();
       result.num_relocated += relocated;
       if (relocated == 0) break;  // the final solve below sees the same matches
-      solve(false);
+      solve(Solve::kRelocated);
       if (!adjustment.seed.ok) break;
       dropped = drop_outliers();
     }
-    // Nothing dropped since the last solve: solving the same matches again
-    // would reproduce it (the demo's third solve, a third of the step).
-    if (dropped > 0 || options.compute_covariance || !adjustment.seed.ok) solve(true);
+    // Nothing dropped since the last solve, a full one: solving the same
+    // matches again would reproduce it (the demo's third solve, a third of
+    // the step).
+    if (dropped > 0 || screened || options.compute_covariance || !adjustment.seed.ok)
+      solve(Solve::kFinal);
   }
   result.track_anchor_observation = anchor_observation;
   result.track_tag_id = track_tag_id;

@@ -292,6 +292,37 @@ TEST(RegisterTiles, TagGateSkipsTheDemoAndKeepsEveryMarkersTag) {
 }
 #endif
 
+#ifdef OMM_TEST_SCREENING
+// The screening solves stop early (screening_function_tolerance); a scene
+// one leaves is solved in full before it is returned. Nothing is dropped or
+// relocated here, so the first, screening solve would be the last; at a
+// tolerance of 1e-2 it stops well short of the optimum, yet the result is
+// the full solve's.
+TEST(RegisterTiles, AScreeningSolveIsNeverTheLastOne) {
+  const Rendered r = Render("demo-1");
+  RegisterTilesOptions options;
+  options.outlier_factor = 1e9;
+  options.rematch_passes = 0;
+  options.compute_covariance = false;
+  options.screening_function_tolerance = 0.0;
+  const TileRegistration full =
+      RegisterTiles(r.tiles, r.commanded_mm, r.truth.table_sigma_mm, r.truth.camera.model, options);
+  options.screening_function_tolerance = 1e-2;
+  const TileRegistration screened =
+      RegisterTiles(r.tiles, r.commanded_mm, r.truth.table_sigma_mm, r.truth.camera.model, options);
+  ASSERT_TRUE(full.usable) << full.brief;
+  ASSERT_TRUE(screened.usable) << screened.brief;
+  EXPECT_EQ(full.num_dropped_observations, 0);
+  ASSERT_EQ(full.scene.table_pos_mm.size(), screened.scene.table_pos_mm.size());
+  double largest_mm = 0.0;
+  for (size_t i = 0; i < full.scene.table_pos_mm.size(); ++i) {
+    largest_mm = std::max(largest_mm,
+                          (full.scene.table_pos_mm[i] - screened.scene.table_pos_mm[i]).norm());
+  }
+  EXPECT_LT(largest_mm, 1e-7);
+}
+#endif
+
 #ifdef OMM_TEST_WEAK_TILE
 // low-texture seed 12: tile 8's overlaps are faint texture and the part's
 // edge; its probe templates correlate well with their surroundings (smooth)
