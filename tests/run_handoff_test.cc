@@ -6,6 +6,7 @@
 // the mosaic's is refused.
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -70,6 +71,43 @@ TEST(RunHandoff, MeasureAloneReproducesTheRunExactly) {
   // Not a comparison of two empty lists: the demo's holes are all found.
   EXPECT_EQ(num_found, static_cast<int>(run.features->size()));
   EXPECT_EQ(num_made, static_cast<int>(run.measurements->size()));
+}
+
+// `omm run` prepares the mosaic's tiles (PrepareTiles) on other threads
+// while it calibrates; `omm mosaic` alone prepares them itself. The calibrate
+// stage starts the preparation when the mosaic follows, and the mosaic alone
+// on the run's out/ reproduces the run's mosaic, scene and COLMAP model bit
+// for bit.
+TEST(RunHandoff, MosaicAloneReproducesTheRunsTilesPreparedDuringCalibration) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "demo";
+  testing::CopyProject(sim.project_dir, project_dir);
+  RunOptions run;
+  run.num_threads = 2;
+  bool prepared_during_calibration = false;
+  run.runner = [&](Stage stage, StageContext& context) {
+    RunStage(stage, context);
+    if (stage == Stage::kCalibrate) prepared_during_calibration = context.mosaic_tiles.valid();
+  };
+  RunProject(LoadProject(project_dir), run);
+  EXPECT_TRUE(prepared_during_calibration);
+  const fs::path out = project_dir / "out";
+  const std::vector<fs::path> files = {"mosaic.png",        "mosaic.pgw",
+                                       "mosaic/scene.json", "colmap/cameras.txt",
+                                       "colmap/images.txt", "colmap/points3D.txt"};
+  std::vector<std::string> by_run;
+  for (const fs::path& file : files) by_run.push_back(testing::ReadTextFile(out / file));
+
+  RunOptions mosaic_only;
+  mosaic_only.stages = {Stage::kMosaic};
+  mosaic_only.num_threads = 2;
+  RunProject(LoadProject(project_dir), mosaic_only);
+  for (size_t k = 0; k < files.size(); ++k) {
+    EXPECT_FALSE(by_run[k].empty()) << files[k];
+    // Not EXPECT_EQ: a mosaic printed twice would drown the message.
+    EXPECT_TRUE(testing::ReadTextFile(out / files[k]) == by_run[k]) << files[k] << " differs";
+  }
 }
 
 // `omm measure` alone on an out/ that mixes runs (hand-edited, or files

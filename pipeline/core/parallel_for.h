@@ -7,6 +7,8 @@
 #pragma once
 
 #include <sched.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -26,6 +28,13 @@ inline int HardwareThreads() {
     return CPU_COUNT(&cpus);
   const unsigned n = std::thread::hardware_concurrency();
   return n > 0 ? static_cast<int>(n) : 2;
+}
+
+// Makes the calling thread yield its core to the process's other threads
+// (nice +10; the threads it then starts inherit that): for work that should
+// only fill the cores they leave idle. Linux's nice is per thread.
+inline void YieldCoresToOtherThreads() {
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 10);
 }
 
 template <typename Fn>

@@ -133,37 +133,59 @@ long long PixelKey(int tile, const Eigen::Vector2i& pixel, int width, int height
 }
 long long TagKey(int id, int k) { return -(static_cast<long long>(id) * 4 + k + 1); }
 
+// A corner of tile a is a candidate of the pair (a, b > a) when its pixel
+// moved by shift_ab = A (T_b - T_a) lies this far inside b: the commanded
+// positions and A alone decide, so a tile's corners are searched only in the
+// boxes of its pairs as a (none for a tile that is b in all of its pairs):
+// 46 % of the demo's pixels, in whole bucketing cells.
+int CandidateMarginPx(const RegisterTilesOptions& options) {
+  return options.patch.half_size_px + options.probe_search_radius_px + 3;
+}
+
+// shift_ab = A (T_b - T_a), px.
+Eigen::Vector2d PairShiftPx(const PreparedTiles& prepared, const PairRegistration& pair) {
+  return prepared.motion.px_per_table_mm * (prepared.commanded_table_pos_mm[pair.tile_b] -
+                                            prepared.commanded_table_pos_mm[pair.tile_a]);
+}
+
 }  // namespace
 
-TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
-                               const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
-                               double table_sigma_mm, const CameraModel& camera,
-                               const RegisterTilesOptions& options,
-                               const std::vector<ColmapPairMatches>& sift_matches) {
+PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
+                           const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                           const RegisterTilesOptions& options) {
   if (const std::string e = options.Check(); !e.empty())
     throw InputError("", "tile registration: " + e);
   if (tiles.size() != commanded_table_pos_mm.size())
     throw InputError("", "tile registration: " + std::to_string(tiles.size()) + " tiles but " +
                              std::to_string(commanded_table_pos_mm.size()) + " table positions");
-  for (size_t i = 0; i < tiles.size(); ++i) {
-    if (tiles[i].cols() != camera.width_px || tiles[i].rows() != camera.height_px)
+  for (size_t i = 1; i < tiles.size(); ++i) {
+    if (tiles[i].cols() != tiles[0].cols() || tiles[i].rows() != tiles[0].rows())
       throw InputError("", "tile registration: tile " + std::to_string(i) + " is " +
                                std::to_string(tiles[i].cols()) + " x " +
-                               std::to_string(tiles[i].rows()) + " px, the camera " +
-                               std::to_string(camera.width_px) + " x " +
-                               std::to_string(camera.height_px));
+                               std::to_string(tiles[i].rows()) + " px, tile 0 " +
+                               std::to_string(tiles[0].cols()) + " x " +
+                               std::to_string(tiles[0].rows()));
   }
-  if (!(table_sigma_mm > 0)) throw InputError("", "tile registration: table sigma must be > 0");
-
-  TileRegistration result;
+  PreparedTiles prepared;
+  prepared.options = options;
+  prepared.commanded_table_pos_mm = commanded_table_pos_mm;
   const int num_tiles = static_cast<int>(tiles.size());
-  const int width = camera.width_px, height = camera.height_px;
+  const int width = num_tiles > 0 ? static_cast<int>(tiles[0].cols()) : 0;
+  const int height = num_tiles > 0 ? static_cast<int>(tiles[0].rows()) : 0;
+  prepared.width_px = width;
+  prepared.height_px = height;
 
   // 1. Features.
   auto t0 = Clock::now();
-  std::vector<ImageF> normalized(num_tiles), spline(num_tiles), coarse_probe(num_tiles);
-  std::vector<std::vector<Corner>> corners(num_tiles);
-  std::vector<std::vector<TagDetection>> tags(num_tiles);
+  std::vector<ImageF>& normalized = prepared.normalized;
+  std::vector<ImageF>& spline = prepared.spline;
+  std::vector<ImageF>& coarse_probe = prepared.coarse_probe;
+  std::vector<std::vector<TagDetection>>& tags = prepared.tags;
+  normalized.resize(num_tiles);
+  spline.resize(num_tiles);
+  coarse_probe.resize(num_tiles);
+  tags.resize(num_tiles);
+  prepared.corners.resize(num_tiles);
   // The tags as work items of their own, after the tiles' (longer) features:
   // nine tiles on two threads would leave one thread idle for the last tile.
   ParallelFor(options.use_apriltags ? 2 * num_tiles : num_tiles, options.num_threads, [&](int k) {
@@ -178,8 +200,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     spline[i] = CubicBSplineCoefficients(normalized[i]);
     coarse_probe[i] = DownsampleBox(normalized[i], options.probe_downsample_factor);
   });
-  for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());
-  result.features_seconds = SecondsSince(t0);
+  prepared.features_seconds = SecondsSince(t0);
 
   // 2. Image motion per table mm from nearest-neighbour pairs.
   t0 = Clock::now();
@@ -212,20 +233,16 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                         neighbour_pairs.end());
   ImageMotionOptions motion_options = options.motion;
   motion_options.num_threads = options.num_threads;
-  const ImageMotionEstimate motion =
+  prepared.motion =
       EstimateImageMotion(normalized, commanded_table_pos_mm, neighbour_pairs, motion_options);
-  result.motion_brief = motion.brief;
-  if (!motion.ok) {
-    result.matching_seconds = SecondsSince(t0);
-    result.tiles_held_by_prior.resize(num_tiles);
-    for (int i = 0; i < num_tiles; ++i) result.tiles_held_by_prior[i] = i;
-    result.brief = "registration UNUSABLE: " + motion.brief;
-    return result;
+  if (!prepared.motion.ok) {
+    prepared.matching_seconds = SecondsSince(t0);
+    return prepared;
   }
-  result.image_px_per_table_mm = motion.px_per_table_mm;
-  const Eigen::Matrix2d& a_px_per_mm = result.image_px_per_table_mm;
+  const Eigen::Matrix2d& a_px_per_mm = prepared.motion.px_per_table_mm;
 
-  // 3. Pairs predicted to overlap, matched.
+  // 3. Pairs predicted to overlap, and the Harris corners that can anchor
+  // their matches.
   for (int i = 0; i < num_tiles; ++i) {
     for (int j = i + 1; j < num_tiles; ++j) {
       const Eigen::Vector2d d =
@@ -237,9 +254,75 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
       pair.tile_a = i;
       pair.tile_b = j;
       pair.predicted_overlap = overlap;
-      result.pairs.push_back(pair);
+      prepared.pairs.push_back(pair);
     }
   }
+  const int candidate_margin = CandidateMarginPx(options);
+  std::vector<std::vector<Eigen::AlignedBox2i>> harris_regions(num_tiles);
+  for (const PairRegistration& pair : prepared.pairs) {
+    const Eigen::Vector2d shift = PairShiftPx(prepared, pair);
+    harris_regions[pair.tile_a].emplace_back(
+        Eigen::Vector2i(static_cast<int>(std::floor(candidate_margin - shift.x())),
+                        static_cast<int>(std::floor(candidate_margin - shift.y()))),
+        Eigen::Vector2i(static_cast<int>(std::ceil(width - candidate_margin - shift.x())),
+                        static_cast<int>(std::ceil(height - candidate_margin - shift.y()))));
+  }
+  if (options.features != FeatureSource::kSift) {
+    ParallelFor(num_tiles, options.num_threads, [&](int i) {
+      // On the matching image, so that the texture test sees the templates.
+      if (!harris_regions[i].empty())
+        prepared.corners[i] = DetectHarrisCorners(normalized[i], options.harris, harris_regions[i]);
+    });
+  }
+  prepared.matching_seconds = SecondsSince(t0);
+  return prepared;
+}
+
+TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
+                               const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                               double table_sigma_mm, const CameraModel& camera,
+                               const RegisterTilesOptions& options,
+                               const std::vector<ColmapPairMatches>& sift_matches) {
+  return RegisterTiles(PrepareTiles(tiles, commanded_table_pos_mm, options), table_sigma_mm,
+                       camera, sift_matches);
+}
+
+TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma_mm,
+                               const CameraModel& camera,
+                               const std::vector<ColmapPairMatches>& sift_matches) {
+  const RegisterTilesOptions& options = prepared.options;
+  const int num_tiles = static_cast<int>(prepared.normalized.size());
+  if (num_tiles > 0 &&
+      (prepared.width_px != camera.width_px || prepared.height_px != camera.height_px))
+    throw InputError("", "tile registration: the tiles are " + std::to_string(prepared.width_px) +
+                             " x " + std::to_string(prepared.height_px) + " px, the camera " +
+                             std::to_string(camera.width_px) + " x " +
+                             std::to_string(camera.height_px));
+  if (!(table_sigma_mm > 0)) throw InputError("", "tile registration: table sigma must be > 0");
+
+  TileRegistration result;
+  const int width = camera.width_px, height = camera.height_px;
+  const std::vector<Eigen::Vector2d>& commanded_table_pos_mm = prepared.commanded_table_pos_mm;
+  const std::vector<ImageF>& normalized = prepared.normalized;
+  const std::vector<ImageF>& spline = prepared.spline;
+  const std::vector<ImageF>& coarse_probe = prepared.coarse_probe;
+  const std::vector<std::vector<Corner>>& corners = prepared.corners;
+  const std::vector<std::vector<TagDetection>>& tags = prepared.tags;
+  for (const auto& t : tags) result.num_tags_detected += static_cast<int>(t.size());
+  result.features_seconds = prepared.features_seconds;
+  result.motion_brief = prepared.motion.brief;
+  if (!prepared.motion.ok) {
+    result.matching_seconds = prepared.matching_seconds;
+    result.tiles_held_by_prior.resize(num_tiles);
+    for (int i = 0; i < num_tiles; ++i) result.tiles_held_by_prior[i] = i;
+    result.brief = "registration UNUSABLE: " + prepared.motion.brief;
+    return result;
+  }
+  result.image_px_per_table_mm = prepared.motion.px_per_table_mm;
+  result.pairs = prepared.pairs;
+
+  // 3. (continued) The pairs matched.
+  auto t0 = Clock::now();
   // Undistorted rays of every corner (the anchors).
   const auto unproject = [&](const Eigen::Matrix2Xd& q) {
     Eigen::Matrix3Xd v;
@@ -248,30 +331,12 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
   };
   const int h = options.patch.half_size_px;
   const bool use_harris = options.features != FeatureSource::kSift;
-  // A corner of tile a is a candidate of the pair (a, b > a) when its pixel
-  // moved by shift_ab = A (T_b - T_a) lies this far inside b (below): the
-  // commanded positions and A alone decide, so a tile's corners are searched
-  // only in the boxes of its pairs as a (none for a tile that is b in all of
-  // its pairs): 46 % of the demo's pixels, in whole bucketing cells.
-  const int candidate_margin = h + options.probe_search_radius_px + 3;
-  const auto pair_shift = [&](const PairRegistration& pair) -> Eigen::Vector2d {
-    return a_px_per_mm *
-           (commanded_table_pos_mm[pair.tile_b] - commanded_table_pos_mm[pair.tile_a]);
+  const int candidate_margin = CandidateMarginPx(options);
+  const auto pair_shift = [&](const PairRegistration& pair) {
+    return PairShiftPx(prepared, pair);
   };
-  std::vector<std::vector<Eigen::AlignedBox2i>> harris_regions(num_tiles);
-  for (const PairRegistration& pair : result.pairs) {
-    const Eigen::Vector2d shift = pair_shift(pair);
-    harris_regions[pair.tile_a].emplace_back(
-        Eigen::Vector2i(static_cast<int>(std::floor(candidate_margin - shift.x())),
-                        static_cast<int>(std::floor(candidate_margin - shift.y()))),
-        Eigen::Vector2i(static_cast<int>(std::ceil(width - candidate_margin - shift.x())),
-                        static_cast<int>(std::ceil(height - candidate_margin - shift.y()))));
-  }
   std::vector<Eigen::Matrix2Xd> corner_rays(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
-    // On the matching image, so that the texture test sees the templates.
-    if (use_harris && !harris_regions[i].empty())
-      corners[i] = DetectHarrisCorners(normalized[i], options.harris, harris_regions[i]);
     Eigen::Matrix2Xd q(2, corners[i].size());
     for (size_t k = 0; k < corners[i].size(); ++k) q.col(k) = corners[i][k].pixel.cast<double>();
     corner_rays[i] = unproject(q);
@@ -572,7 +637,7 @@ TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
     pair.usable = pair.num_inliers + pair.num_tag_corners >= options.min_pair_matches;
     if (!pair.usable) pair_matches[p].clear();
   }
-  result.matching_seconds = SecondsSince(t0);
+  result.matching_seconds = prepared.matching_seconds + SecondsSince(t0);
 
   // A tile without a usable pair is placed by nothing but table.csv: only
   // acceptable when its image does not contradict it.

@@ -222,17 +222,53 @@ struct TileRegistration {
   std::vector<Eigen::Vector2d> table_adjustment_mm;  // adjusted minus commanded, per tile
   double plane_tilt_deg = 0.0;
   // Wall time of steps 1 (normalisation, blur, tags), 2-3 (image motion,
-  // Harris corners once A is known, matching) and 4-5.
+  // Harris corners once A is known, matching) and 4-5; PrepareTiles' part
+  // may have run beside the calibration.
   double features_seconds = 0.0, matching_seconds = 0.0, adjustment_seconds = 0.0;
 };
 
-// Registers `tiles` (gray, all camera.width_px x camera.height_px) taken at
-// `commanded_table_pos_mm` (table.csv; sigma per axis `table_sigma_mm`) with
-// the calibrated `camera`. Throws InputError for invalid options or input
-// (sizes); data failures come back in the result (usable, brief).
-// sift_matches (used unless options.features is kHarris): COLMAP's verified
-// SIFT matches between the tiles (ColmapSiftMatches on the tile files), pairs
-// by tile index.
+// The registration's work that needs no camera: step 1, the image motion A,
+// the pairs it predicts to overlap and their Harris corners. `omm run`
+// prepares the tiles while the camera is calibrated (its solves leave a core
+// idle), RegisterTiles then takes them over.
+struct PreparedTiles {
+  RegisterTilesOptions options;  // what they were prepared with, and RegisterTiles runs with
+  std::vector<Eigen::Vector2d> commanded_table_pos_mm;
+  int width_px = 0, height_px = 0;  // of every tile
+  // Per tile: the matching image (normalised, blurred), its cubic B-spline
+  // coefficients, the probe search's downsampled image, its tags and its
+  // Harris corners.
+  std::vector<ImageF> normalized, spline, coarse_probe;
+  std::vector<std::vector<TagDetection>> tags;
+  std::vector<std::vector<Corner>> corners;
+  ImageMotionEstimate motion;
+  std::vector<PairRegistration> pairs;  // predicted to overlap (none unless motion.ok)
+  double features_seconds = 0.0;        // step 1
+  double matching_seconds = 0.0;        // A, the pairs, the corners
+};
+
+// Step 1, A, the pairs and their corners of `tiles` (gray, all one size)
+// taken at `commanded_table_pos_mm`. Throws InputError for invalid options or
+// input (sizes); a failure to find A comes back in motion (RegisterTiles
+// then reports it).
+PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
+                           const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                           const RegisterTilesOptions& options);
+
+// The rest of the registration of `prepared` (with prepared.options), with
+// the table's sigma per axis `table_sigma_mm` and the calibrated `camera`.
+// Throws InputError for invalid input (the tiles' size not the camera's);
+// data failures come back in the result (usable, brief). sift_matches (used
+// unless the options' features is kHarris): COLMAP's verified SIFT matches
+// between the tiles (ColmapSiftMatches on the tile files), pairs by tile
+// index.
+TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma_mm,
+                               const CameraModel& camera,
+                               const std::vector<ColmapPairMatches>& sift_matches = {});
+
+// PrepareTiles, then RegisterTiles: registers `tiles` (gray, all
+// camera.width_px x camera.height_px) taken at `commanded_table_pos_mm`
+// (table.csv) with the calibrated `camera`.
 TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,
                                const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
                                double table_sigma_mm, const CameraModel& camera,

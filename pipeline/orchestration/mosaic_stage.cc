@@ -538,6 +538,30 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
 
 }  // namespace
 
+RegisterTilesOptions MosaicRegistrationOptions(const StageContext& context) {
+  RegisterTilesOptions options;
+  options.compute_covariance = false;  // the final adjustment's
+  options.num_threads = context.num_threads;
+  options.bundle.num_threads = context.num_threads;
+  options.features = context.mosaic_features;
+  return options;
+}
+
+MosaicTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOptions& options,
+                               int num_threads) {
+  MosaicTiles tiles;
+  tiles.images = std::make_shared<const std::vector<ImageF>>(TileImages(project, num_threads));
+  const std::vector<ImageF>& images = *tiles.images;
+  const bool one_size = std::all_of(images.begin(), images.end(), [&](const ImageF& image) {
+    return image.cols() == images.front().cols() && image.rows() == images.front().rows();
+  });
+  if (!one_size) return tiles;
+  std::vector<Eigen::Vector2d> commanded_mm;
+  for (const TilePosition& tile : project.tiles) commanded_mm.push_back(tile.table_pos_mm);
+  tiles.prepared = PrepareTiles(images, commanded_mm, options);
+  return tiles;
+}
+
 void RunMosaicStage(StageContext& context) {
   const Project& project = context.project;
   const auto stage_start = std::chrono::steady_clock::now();
@@ -551,9 +575,14 @@ void RunMosaicStage(StageContext& context) {
   std::vector<Vector6d> rt_cam_from_plates;
   const IntrinsicsPrior prior = CalibrationPrior(context, &camera, &rt_cam_from_plates);
   const double prior_seconds = SecondsSince(prior_start);
-  const auto tile_images =
-      std::make_shared<const std::vector<ImageF>>(TileImages(project, camera, context.num_threads));
+  const RegisterTilesOptions register_options = MosaicRegistrationOptions(context);
+  MosaicTiles prepared_tiles =
+      context.mosaic_tiles.valid()
+          ? context.mosaic_tiles.get()
+          : PrepareMosaicTiles(project, register_options, context.num_threads);
+  const std::shared_ptr<const std::vector<ImageF>> tile_images = prepared_tiles.images;
   const std::vector<ImageF>& tiles = *tile_images;
+  CheckTileSizes(project, tiles, camera);  // then all one size: prepared
   const double read_seconds = SecondsSince(stage_start);
 
   std::vector<Eigen::Vector2d> commanded_mm;
@@ -564,11 +593,6 @@ void RunMosaicStage(StageContext& context) {
   }
   const int num_tiles = static_cast<int>(tiles.size());
   if (context.progress) context.progress(num_tiles, num_tiles + 4, "register tiles");
-  RegisterTilesOptions register_options;
-  register_options.compute_covariance = false;  // the final adjustment's
-  register_options.num_threads = context.num_threads;
-  register_options.bundle.num_threads = context.num_threads;
-  register_options.features = context.mosaic_features;
   std::vector<ColmapPairMatches> sift_matches;
   if (context.mosaic_features != FeatureSource::kHarris) {
     std::vector<fs::path> tile_paths;
@@ -581,8 +605,8 @@ void RunMosaicStage(StageContext& context) {
     if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
     sift_matches = sift.matches.pairs;
   }
-  TileRegistration registration = RegisterTiles(tiles, commanded_mm, project.table_sigma_mm, camera,
-                                                register_options, sift_matches);
+  TileRegistration registration =
+      RegisterTiles(*prepared_tiles.prepared, project.table_sigma_mm, camera, sift_matches);
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 

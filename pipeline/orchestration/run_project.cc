@@ -167,6 +167,8 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
                          options.calibration_study,
                          options.mosaic_features,
                          options.num_threads > 0 ? options.num_threads : HardwareThreads()};
+    context.mosaic_follows = std::find(options.stages.begin(), options.stages.end(),
+                                       Stage::kMosaic) != options.stages.end();
     for (const Stage stage : options.stages) {
       spdlog::info("{}: starting", StageName(stage));
       options.runner(stage, context);

@@ -23,19 +23,13 @@ const char* StageName(Stage stage) {
 
 std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stage::kMeasure}; }
 
-std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera, int num_threads) {
+std::vector<ImageF> TileImages(const Project& project, int num_threads) {
   const int num_tiles = static_cast<int>(project.tiles.size());
   std::vector<ImageF> tiles(num_tiles);
   ParallelFor(num_tiles, num_threads, [&](int i) {
     const std::filesystem::path path = project.TilePath(project.tiles[i].image);
     GrayImage image =
         project.images ? ToGrayImage(project.images->tiles[i].image) : ReadGrayImage(path);
-    if (image.width() != camera.width_px || image.height() != camera.height_px) {
-      throw InputError(path.string(), fmt::format("{}x{} px, but the calibrated camera's imager "
-                                                  "is {}x{} px",
-                                                  image.width(), image.height(), camera.width_px,
-                                                  camera.height_px));
-    }
     if (const std::optional<double> level = BlankImageLevel(image.pixels)) {
       throw InputError(path.string(),
                        fmt::format("blank: almost every pixel is {:.1f} % of full scale, no "
@@ -44,6 +38,24 @@ std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera
     }
     tiles[i] = std::move(image.pixels);
   });
+  return tiles;
+}
+
+void CheckTileSizes(const Project& project, const std::vector<ImageF>& tiles,
+                    const CameraModel& camera) {
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    if (tiles[i].cols() != camera.width_px || tiles[i].rows() != camera.height_px) {
+      throw InputError(
+          project.TilePath(project.tiles[i].image).string(),
+          fmt::format("{}x{} px, but the calibrated camera's imager is {}x{} px", tiles[i].cols(),
+                      tiles[i].rows(), camera.width_px, camera.height_px));
+    }
+  }
+}
+
+std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera, int num_threads) {
+  std::vector<ImageF> tiles = TileImages(project, num_threads);
+  CheckTileSizes(project, tiles, camera);
   return tiles;
 }
 

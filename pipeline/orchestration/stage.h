@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <future>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -47,6 +48,14 @@ class StageFailedError : public std::runtime_error {
   Stage stage_;
 };
 
+// The mosaic's tiles as gray images, in the project's tile order, and their
+// registration's camera-independent part (PrepareTiles; none if the tiles
+// differ in size, which CheckTileSizes then reports).
+struct MosaicTiles {
+  std::shared_ptr<const std::vector<ImageF>> images;
+  std::optional<PreparedTiles> prepared;
+};
+
 struct StageContext {
   const Project& project;
   // Where this run's outputs go, named as they will be in out/.
@@ -71,6 +80,12 @@ struct StageContext {
   // mosaic stage; null if it did not run): the measure stage takes them from
   // here instead of converting them again.
   std::shared_ptr<const std::vector<ImageF>> tiles;
+  // The mosaic stage runs later in this run (set by RunProject).
+  bool mosaic_follows = false;
+  // The mosaic's tiles, prepared on other threads while the camera is
+  // calibrated (started by the calibrate stage when the mosaic follows;
+  // invalid otherwise): the mosaic stage takes them from here.
+  std::future<MosaicTiles> mosaic_tiles;
   // Output files still being written on other threads (the mosaic's):
   // RunProject waits for them, and rethrows their errors, before it commits
   // out/; destroying the context waits for them too.
@@ -85,11 +100,23 @@ struct StageContext {
 };
 
 // The project's tiles as gray images, in its tile order, num_threads at a
-// time: converted from those LoadProject decoded, else read from the files. Throws
-// InputError for a tile whose size is not the camera's, or that is blank
-// (BlankImageLevel): held by its table position alone it would show a
-// uniform square in the mosaic, and its holes would fail as poor fits.
+// time: converted from those LoadProject decoded, else read from the files.
+// Throws InputError for a tile that is blank (BlankImageLevel): held by its
+// table position alone it would show a uniform square in the mosaic, and its
+// holes would fail as poor fits.
+std::vector<ImageF> TileImages(const Project& project, int num_threads);
+// Throws InputError for a tile whose size is not the camera's.
+void CheckTileSizes(const Project& project, const std::vector<ImageF>& tiles,
+                    const CameraModel& camera);
+// Both.
 std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera, int num_threads);
+
+// How the mosaic stage registers the tiles (stage options from the context).
+RegisterTilesOptions MosaicRegistrationOptions(const StageContext& context);
+// TileImages, and PrepareTiles on them with `options` if they are all one
+// size. Throws as they do.
+MosaicTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOptions& options,
+                               int num_threads);
 
 // Where a calibration measured the lens: the convex hull of its solve's inlier
 // mark centres, px (CameraModel::valid_region_px; empty if they span no area).
