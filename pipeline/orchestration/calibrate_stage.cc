@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <functional>
 #include <future>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -131,14 +132,17 @@ std::vector<PlateObservation> DetectCalibPlates(const Project& project,
                                                 int* width_px, int* height_px) {
   const int num_images = static_cast<int>(project.calib_images.size());
   std::vector<PlateObservation> detections(num_images);
+  std::mutex progress_mutex;
+  int num_done = 0;
   ParallelFor(num_images, num_threads, [&](int i) {
     const GrayImage image = project.images ? ToGrayImage(project.images->calib[i].image)
                                            : ReadGrayImage(project.calib_images[i]);
     if (i == 0) *width_px = image.width(), *height_px = image.height();
     detections[i] = DetectPlate(image, *project.board, options);
     detections[i].image = project.calib_images[i].filename().string();
+    const std::lock_guard lock(progress_mutex);
+    if (progress) progress(++num_done, num_images, "plate search in " + detections[i].image);
   });
-  if (progress) progress(num_images, num_images, "detect the plate in the calibration images");
   return detections;
 }
 
