@@ -361,6 +361,30 @@ TEST_F(MosaicStageTest, BlankTileIsRefusedByName) {
   EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
 }
 
+// Tiles of another size than the calibrated imager (out/'s camera from
+// another camera or mode) are refused by name before any work on them.
+TEST_F(MosaicStageTest, TilesOfAnotherSizeThanTheCameraAreRefusedByName) {
+  const fs::path dir = dir_->path() / "other_imager";
+  testing::CopyProject(sim_->project_dir, dir);
+  fs::create_directories(dir / "out");
+  CameraModel camera = Truth().camera.model;
+  camera.width_px /= 2;
+  camera.height_px /= 2;
+  WriteCameraModel(dir / "out" / "camera.cameramodel", camera);
+  RunOptions mosaic_only;
+  mosaic_only.stages = {Stage::kMosaic};
+  try {
+    RunProject(LoadProject(dir), mosaic_only);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.where(), (dir / "tiles" / Truth().tiles[0].image).string());
+    EXPECT_NE(std::string(e.what()).find("but the calibrated camera's imager is 800x600 px"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "out" / "mosaic.png"));
+}
+
 // A tile recorded far too dark (a 16-bit capture at 2.5 % of the exposure:
 // the texture is there, so it registers) is below the exposure fit's floor
 // everywhere: the mosaic stage fails and names it.

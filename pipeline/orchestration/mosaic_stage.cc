@@ -551,14 +551,9 @@ MosaicTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOption
                                int num_threads) {
   MosaicTiles tiles;
   tiles.images = std::make_shared<const std::vector<ImageF>>(TileImages(project, num_threads));
-  const std::vector<ImageF>& images = *tiles.images;
-  const bool one_size = std::all_of(images.begin(), images.end(), [&](const ImageF& image) {
-    return image.cols() == images.front().cols() && image.rows() == images.front().rows();
-  });
-  if (!one_size) return tiles;
   std::vector<Eigen::Vector2d> commanded_mm;
   for (const TilePosition& tile : project.tiles) commanded_mm.push_back(tile.table_pos_mm);
-  tiles.prepared = PrepareTiles(images, commanded_mm, options);
+  tiles.prepared = PrepareTiles(*tiles.images, commanded_mm, options);
   return tiles;
 }
 
@@ -582,7 +577,7 @@ void RunMosaicStage(StageContext& context) {
           : PrepareMosaicTiles(project, register_options, context.num_threads);
   const std::shared_ptr<const std::vector<ImageF>> tile_images = prepared_tiles.images;
   const std::vector<ImageF>& tiles = *tile_images;
-  CheckTileSizes(project, tiles, camera);  // then all one size: prepared
+  CheckTileSizes(project, tiles, camera);
   const double read_seconds = SecondsSince(stage_start);
 
   std::vector<Eigen::Vector2d> commanded_mm;
@@ -606,8 +601,8 @@ void RunMosaicStage(StageContext& context) {
     sift_matches = sift.matches.pairs;
   }
   TileRegistration registration =
-      RegisterTiles(*prepared_tiles.prepared, project.table_sigma_mm, camera, sift_matches);
-  prepared_tiles.prepared.reset();  // its matching images (the demo's: 143 MB) serve no later step
+      RegisterTiles(prepared_tiles.prepared, project.table_sigma_mm, camera, sift_matches);
+  prepared_tiles.prepared = {};  // its matching images (the demo's: 143 MB) serve no later step
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 

@@ -11,7 +11,6 @@
 #include <filesystem>
 #include <future>
 #include <memory>
-#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -49,11 +48,10 @@ class StageFailedError : public std::runtime_error {
 };
 
 // The mosaic's tiles as gray images, in the project's tile order, and their
-// registration's camera-independent part (PrepareTiles; none if the tiles
-// differ in size, which CheckTileSizes then reports).
+// registration's camera-independent part (PrepareTiles).
 struct MosaicTiles {
   std::shared_ptr<const std::vector<ImageF>> images;
-  std::optional<PreparedTiles> prepared;
+  PreparedTiles prepared;
 };
 
 struct StageContext {
@@ -113,8 +111,7 @@ std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera
 
 // How the mosaic stage registers the tiles (stage options from the context).
 RegisterTilesOptions MosaicRegistrationOptions(const StageContext& context);
-// TileImages, and PrepareTiles on them with `options` if they are all one
-// size. Throws as they do.
+// TileImages, and PrepareTiles on them with `options`. Throws as they do.
 MosaicTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOptions& options,
                                int num_threads);
 
