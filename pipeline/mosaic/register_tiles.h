@@ -2,7 +2,8 @@
 // estimation, tracks and the planar bundle adjustment, from images and values
 // (no file I/O).
 //
-// Pipeline (design.md, "Planar mosaic"; the paper's Harris + NCC method):
+// Pipeline (design.md, "Planar mosaic"; the paper's Harris + NCC method;
+// steps 1-2 and the corners of step 3 need no camera: PrepareTiles):
 // 1. Each tile is normalised (NormalizeTileIntensity) and blurred for
 //    matching; AprilTag 36h11 markers are detected if enabled.
 // 2. The image motion per table millimetre, A (2 x 2, px/mm: it holds the
