@@ -173,7 +173,7 @@ struct RegisterTilesOptions {
   // (bundle.function_tolerance if larger), and a scene they leave is solved
   // again before it is returned. The first solve still carries the outliers,
   // and the robust loss converges linearly on them: lens-mismatch seed 284
-  // took 13 iterations to 1e-12, 5 to 1e-6.
+  // took 13 iterations to 1e-12, 4 to 1e-6.
   double screening_function_tolerance = 1e-6;
 
   int num_threads = 2;  // features and matching run on this many threads (motion.num_threads too)
