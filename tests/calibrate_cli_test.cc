@@ -75,6 +75,14 @@ TEST_F(CalibrateCliTest, WritesTheCameraSolveRecordPlotAndReport) {
   }
 }
 
+// Progress as each calibration image's plate is searched, from the first to
+// the last of the demo's 20 (the log shows every tenth of them).
+TEST_F(CalibrateCliTest, ReportsProgressPerCalibrationImage) {
+  ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
+  EXPECT_THAT(calibrate_->output, HasSubstr("(1/20) plate search in calib_"));
+  EXPECT_THAT(calibrate_->output, HasSubstr("(20/20) plate search in calib_"));
+}
+
 // The uncertainty map is the grid the report's worst_px summarises (same
 // distance, same maximum), and report.html inlines it and the residual plot.
 TEST_F(CalibrateCliTest, UncertaintyMapMatchesTheReportAndThePageInlinesIt) {

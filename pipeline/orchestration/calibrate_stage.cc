@@ -124,12 +124,10 @@ ReportValue StudyReport(const ImageCountStudy& study) {
 // The plate in every calib image, num_threads at a time, each image
 // converted to gray (from the one LoadProject decoded, else read from its
 // file) where it is detected and dropped after: held together, the demo's 20
-// took 154 MB through the solves. *width_px, *height_px: the first image's
-// size.
+// took 154 MB through the solves.
 std::vector<PlateObservation> DetectCalibPlates(const Project& project,
                                                 const PlateDetectionOptions& options,
-                                                const ProgressCallback& progress, int num_threads,
-                                                int* width_px, int* height_px) {
+                                                const ProgressCallback& progress, int num_threads) {
   const int num_images = static_cast<int>(project.calib_images.size());
   std::vector<PlateObservation> detections(num_images);
   std::mutex progress_mutex;
@@ -137,7 +135,6 @@ std::vector<PlateObservation> DetectCalibPlates(const Project& project,
   ParallelFor(num_images, num_threads, [&](int i) {
     const GrayImage image = project.images ? ToGrayImage(project.images->calib[i].image)
                                            : ReadGrayImage(project.calib_images[i]);
-    if (i == 0) *width_px = image.width(), *height_px = image.height();
     detections[i] = DetectPlate(image, *project.board, options);
     detections[i].image = project.calib_images[i].filename().string();
     const std::lock_guard lock(progress_mutex);
@@ -217,12 +214,12 @@ void CalibrateFromImages(StageContext& context) {
   CalibrationStageOptions options;
   options.num_threads = context.num_threads;
   const auto detection_start = std::chrono::steady_clock::now();
-  int width_px = 0, height_px = 0;
-  const std::vector<PlateObservation> detections = DetectCalibPlates(
-      project, options.detection, context.progress, context.num_threads, &width_px, &height_px);
+  const std::vector<PlateObservation> detections =
+      DetectCalibPlates(project, options.detection, context.progress, context.num_threads);
   const double detection_seconds = SecondsSince(detection_start);
-  CalibrationStageSummary summary = CalibrateFromDetections(
-      detections, *project.board, project.camera, width_px, height_px, options);
+  CalibrationStageSummary summary =
+      CalibrateFromDetections(detections, *project.board, project.camera, project.image_width_px,
+                              project.image_height_px, options);
   summary.detection_seconds = detection_seconds;
   summary.total_seconds = SecondsSince(detection_start);
 
