@@ -12,6 +12,8 @@ packages=(
   libmrcal-dev python3-mrcal libsuitesparse-dev libopencv-dev libceres-dev libeigen3-dev libapriltag-dev colmap
   # files, command line, logging
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev libsqlite3-dev libssl-dev libdeflate-dev
+  # image files: PNG of other kinds, TIFF, JPEG
+  libspng-dev libtiff-dev libturbojpeg0-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # GDAL's gdalinfo: a test reads the mosaic's placement (its world file) as GIS tools do

@@ -104,6 +104,16 @@ fs::path SharedDataDir() {
   return fs::path(source ? source : ".") / ".." / "shared" / "data";
 }
 
+std::vector<fs::path> SharedDataFiles(const std::string& extension) {
+  std::vector<fs::path> files;
+  if (!fs::is_directory(SharedDataDir())) return files;
+  for (const auto& entry : fs::recursive_directory_iterator(SharedDataDir())) {
+    if (entry.path().extension() == extension) files.push_back(entry.path());
+  }
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
 double RawPxMm(const SimulationTruth& truth) {
   const Eigen::Isometry3d part_from_cam = truth.cam_from_part.inverse();
   const double distance_mm = part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();

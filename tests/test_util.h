@@ -59,6 +59,9 @@ CommandResult RunOmm(const std::string& arguments);
 // repository (OMM_SOURCE_DIR, set by omm_test; read in place, never copied).
 std::filesystem::path SharedDataDir();
 
+// Its files of one extension (".tif"), sorted; none if it is not there.
+std::vector<std::filesystem::path> SharedDataFiles(const std::string& extension);
+
 // The report's feature centres against the truth's holes after the
 // least-squares similarity fit of all of them (Umeyama: the table's scale
 // and the origin gauge removed): each found hole's name and distance from

@@ -75,6 +75,48 @@ TEST_F(ImageIo, QuantisedSamplesMatchTheFileExactly) {
   }
 }
 
+// A TIFF, written or read, holds the same samples as a PNG: the file's
+// format does not change what a run sees.
+TEST_F(ImageIo, TiffRoundTripIsExact) {
+  for (const int bits : {8, 16}) {
+    ImageF pixels(19, 31);
+    for (int r = 0; r < 19; ++r)
+      for (int c = 0; c < 31; ++c) pixels(r, c) = static_cast<float>((r * 31 + c) % 97) / 96.f;
+    const StoredImage quantised = QuantizeImage(pixels, bits);
+    for (const char* name : {"x.tif", "x.TIFF"}) {
+      const auto path = TempDir() / name;
+      WriteStoredImage(path, quantised);
+      const StoredImage read = ReadStoredImage(path);
+      EXPECT_EQ(read.bit_depth, bits);
+      EXPECT_EQ(read.samples, quantised.samples) << name << ", " << bits << " bit";
+    }
+  }
+}
+
+// Files are told apart by their bytes, not their names; bytes of no format
+// read here, or a name of no format written here, say which ones are.
+TEST_F(ImageIo, FormatsAreToldByContentAndOthersNamed) {
+  const StoredImage image = QuantizeImage(ImageF::Constant(3, 4, 0.25f), 8);
+  WriteStoredImage(TempDir() / "real.tif", image);
+  std::filesystem::rename(TempDir() / "real.tif", TempDir() / "named.png");
+  EXPECT_EQ(ReadStoredImage(TempDir() / "named.png").samples, image.samples);
+  try {
+    DecodeImage("BM a bitmap", "tiles/t.bmp");
+    FAIL() << "a BMP decoded";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(),
+                 "tiles/t.bmp: cannot decode image: not a PNG, TIFF, JPEG, PGM or PPM file");
+  }
+  try {
+    WriteStoredImage(TempDir() / "x.jpg", image);
+    FAIL() << "a JPEG written";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("expected a .png, .tif or .tiff file"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(TempDir() / "x.jpg"));
+}
+
 TEST_F(ImageIo, CorruptBytesInMemoryNameTheFile) {
   try {
     DecodeImage("\x89PNG this is not an image", "tiles/broken.png");

@@ -1,6 +1,7 @@
 #include "adapters/png/png_codec.h"
 
 #include <libdeflate.h>
+#include <spng.h>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -196,6 +197,37 @@ std::optional<StoredImage> DecodeGrayPng(std::string_view bytes,
     prev = row + 1;
   }
   return image;
+}
+
+StoredImage DecodePng(std::string_view bytes, const std::filesystem::path& path) {
+  const std::unique_ptr<spng_ctx, decltype(&spng_ctx_free)> ctx(spng_ctx_new(0), spng_ctx_free);
+  if (!ctx) throw std::bad_alloc();
+  const auto fail = [&](int error) {
+    return InputError(path.string(), std::string("cannot decode image: corrupt PNG (") +
+                                         spng_strerror(error) + ")");
+  };
+  spng_ihdr ihdr{};
+  if (int e = spng_set_png_buffer(ctx.get(), bytes.data(), bytes.size()); e != 0) throw fail(e);
+  if (int e = spng_get_ihdr(ctx.get(), &ihdr); e != 0) throw fail(e);
+  // Formats libspng converts every colour type to (host-endian samples).
+  int format = SPNG_FMT_RGBA8, channels = 4;
+  if (ihdr.bit_depth == 16) {
+    format = SPNG_FMT_RGBA16;
+  } else if (ihdr.color_type == SPNG_COLOR_TYPE_GRAYSCALE) {
+    format = SPNG_FMT_G8;
+    channels = 1;
+  } else if (ihdr.color_type == SPNG_COLOR_TYPE_GRAYSCALE_ALPHA) {
+    format = SPNG_FMT_GA8;
+    channels = 2;
+  }
+  std::size_t size = 0;
+  if (int e = spng_decoded_image_size(ctx.get(), format, &size); e != 0) throw fail(e);
+  std::vector<std::uint8_t> decoded(size);
+  if (int e = spng_decode_image(ctx.get(), decoded.data(), size, format, 0); e != 0) throw fail(e);
+  const int bit_depth = ihdr.bit_depth == 16 ? 16 : 8;
+  const std::size_t stride = std::size_t{ihdr.width} * channels * (bit_depth / 8);
+  return GrayFromInterleaved(decoded.data(), stride, static_cast<int>(ihdr.width),
+                             static_cast<int>(ihdr.height), channels, bit_depth);
 }
 
 std::string PngWriteOptions::Check() const {

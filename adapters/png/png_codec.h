@@ -1,12 +1,12 @@
-// Gray PNG files (ISO/IEC 15948, "PNG Second Edition") read and written with
-// libdeflate's whole-buffer zlib streams and CRC-32 instead of libpng's
-// row-by-row path under OpenCV: decoding the demo's 8-bit 1600 x 1200 images
-// takes ~8 ms instead of ~18 ms (CPU), and a 16-bit mosaic is written without
-// libpng's per-row filter search.
+// PNG files (ISO/IEC 15948, "PNG Second Edition").
 //
-// Only the common kind is handled here: gray (colour type 0), 8 or 16 bits,
-// not interlaced, no transparency chunk; DecodeGrayPng returns nullopt for
-// any other PNG so the caller can decode it another way (adapters/opencv).
+// Gray ones, the usual camera image and every image omm writes, are read and
+// written with libdeflate's whole-buffer zlib streams and CRC-32 instead of a
+// PNG library's row-by-row path: decoding the demo's 8-bit 1600 x 1200 images
+// takes ~8 ms instead of ~18 ms (CPU), and a 16-bit mosaic is written without
+// a per-row filter search. Only the common kind is handled so (DecodeGrayPng):
+// gray (colour type 0), 8 or 16 bits, not interlaced, no transparency chunk.
+// Every other PNG goes through libspng (DecodePng).
 #pragma once
 
 #include <filesystem>
@@ -26,6 +26,13 @@ namespace omm {
 // a CRC mismatch, a zlib stream that does not inflate to exactly the rows,
 // an unknown filter type.
 std::optional<StoredImage> DecodeGrayPng(std::string_view bytes, const std::filesystem::path& path);
+
+// The image in any PNG file's bytes, through libspng, as gray samples: 8-bit
+// for files of 1 to 8 bits (palette expanded, gray of fewer bits scaled to 8),
+// 16-bit for 16-bit files; alpha and transparency ignored; colour converted
+// by GrayFromInterleaved (pipeline/core/image.h). Throws InputError naming
+// `path` if the bytes are not a PNG or it is corrupt.
+StoredImage DecodePng(std::string_view bytes, const std::filesystem::path& path);
 
 struct PngWriteOptions {
   // libdeflate's level: 0 stores the rows uncompressed (a 16-bit mosaic

@@ -1,6 +1,7 @@
 // A gray image as the pipeline sees it, whatever the file's format.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -34,5 +35,14 @@ struct StoredImage {
   // native-endian std::uint16_t.
   std::vector<std::uint8_t> samples;
 };
+
+// Interleaved samples, `channels` a pixel (1 gray, 2 gray + alpha, 3 RGB,
+// 4 RGBA) of `bit_depth` 8 or 16 (16-bit native-endian), rows
+// `row_stride_bytes` apart, as gray samples of the same depth: alpha dropped,
+// colour weighted by ITU-R BT.601's luma, 0.299 R + 0.587 G + 0.114 B, in
+// 15-bit fixed point, rounded. Those are OpenCV 4.6's cv::cvtColor RGB2GRAY
+// numbers: a colour file reads as it did when OpenCV decoded it.
+StoredImage GrayFromInterleaved(const std::uint8_t* rows, std::size_t row_stride_bytes, int width,
+                                int height, int channels, int bit_depth);
 
 }  // namespace omm

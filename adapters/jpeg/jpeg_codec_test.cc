@@ -1,0 +1,74 @@
+#include "adapters/jpeg/jpeg_codec.h"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "adapters/opencv/opencv_decode_testing.h"
+#include "pipeline/core/error.h"
+#include "tests/test_util.h"
+
+namespace omm {
+namespace {
+
+using testing::PatternMat;
+using testing::View;
+
+// OpenCV's gray read of a JPEG: libjpeg's own luma output, as ours.
+StoredImage OpenCvGrayJpeg(std::string_view bytes) {
+  const cv::Mat gray = cv::imdecode(
+      cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data())),
+      cv::IMREAD_GRAYSCALE);
+  StoredImage image;
+  image.width = gray.cols;
+  image.height = gray.rows;
+  image.samples.assign(gray.data, gray.data + gray.total());
+  return image;
+}
+
+TEST(JpegCodec, ColourAndGrayFilesReadAsOpenCvReadsThemGray) {
+  for (const int type : {CV_8UC1, CV_8UC3}) {
+    std::vector<uchar> bytes;
+    ASSERT_TRUE(cv::imencode(".jpg", PatternMat(67, 45, type), bytes));
+    const std::optional<StoredImage> ours = DecodeJpeg(View(bytes), "x.jpg");
+    ASSERT_TRUE(ours.has_value());
+    const StoredImage theirs = OpenCvGrayJpeg(View(bytes));
+    EXPECT_EQ(ours->bit_depth, 8);
+    EXPECT_EQ(ours->width, 67);
+    EXPECT_EQ(ours->height, 45);
+    EXPECT_EQ(ours->samples, theirs.samples) << type;
+  }
+}
+
+TEST(JpegCodec, OtherFilesAreLeftAndBadOnesSayWhy) {
+  EXPECT_FALSE(DecodeJpeg("\x89PNG not a jpeg", "x.png").has_value());
+  std::vector<uchar> bytes;
+  ASSERT_TRUE(cv::imencode(".jpg", PatternMat(67, 45, CV_8UC3), bytes));
+  for (const std::size_t size : {bytes.size() / 2, std::size_t{40}}) {
+    try {
+      DecodeJpeg(View(bytes).substr(0, size), "tiles/t.jpg");
+      ADD_FAILURE() << "a JPEG of " << size << " of its " << bytes.size() << " bytes decoded";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("tiles/t.jpg: cannot decode image"), std::string::npos)
+          << e.what();
+    }
+  }
+}
+
+// The real JPEGs of ../shared/data (calibration images of public data sets)
+// read as OpenCV reads them gray.
+TEST(JpegCodec, RealFilesReadAsOpenCvReadsThem) {
+  const std::vector<std::filesystem::path> files = testing::SharedDataFiles(".jpg");
+  if (files.empty()) GTEST_SKIP() << "no .jpg in " << testing::SharedDataDir();
+  for (const std::filesystem::path& path : files) {
+    const std::string bytes = testing::ReadTextFile(path);
+    const std::optional<StoredImage> ours = DecodeJpeg(bytes, path);
+    ASSERT_TRUE(ours.has_value()) << path;
+    EXPECT_TRUE(ours->samples == OpenCvGrayJpeg(bytes).samples) << path;
+  }
+}
+
+}  // namespace
+}  // namespace omm
