@@ -1,5 +1,6 @@
 #include "adapters/project_io/project_reader.h"
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -203,6 +204,23 @@ TEST_F(ProjectReaderTest, BoardMissingWhileCalibIsUsed) {
 TEST_F(ProjectReaderTest, MissingCalibDirectory) {
   fs::remove_all(File("calib"));
   ExpectError({"calib", "not found", "calibration.from"});
+}
+
+TEST_F(ProjectReaderTest, CalibImagesOfEveryFormatReadAreListed) {
+  // calib_02 as a TIFF, a third image as a PGM, and a README: every image
+  // format omm reads is listed, in name order; other files are not.
+  const StoredImage image = ReadStoredImage(File("calib") / "calib_02.png");
+  fs::remove(File("calib") / "calib_02.png");
+  WriteStoredImage(File("calib") / "calib_02.tif", image);
+  std::string pgm = fmt::format("P5\n{} {}\n255\n", image.width, image.height);
+  pgm.append(image.samples.begin(), image.samples.end());
+  testing::WriteTextFile(File("calib") / "calib_03.pgm", pgm);
+  testing::WriteTextFile(File("calib") / "README.txt", "not an image");
+  const Project read = LoadProject(project_.dir);
+  ASSERT_EQ(read.calib_images.size(), 3u);
+  EXPECT_EQ(read.calib_images[1].filename(), "calib_02.tif");
+  EXPECT_EQ(read.calib_images[2].filename(), "calib_03.pgm");
+  EXPECT_EQ(ReadStoredImage(read.calib_images[2]).samples, image.samples);
 }
 
 TEST_F(ProjectReaderTest, EmptyCalibDirectory) {
