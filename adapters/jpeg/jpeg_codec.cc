@@ -3,6 +3,7 @@
 #include <turbojpeg.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -25,6 +26,10 @@ std::optional<StoredImage> DecodeJpeg(std::string_view bytes, const std::filesys
   if (tjDecompressHeader3(handle.get(), data, bytes.size(), &width, &height, &subsampling,
                           &colorspace) != 0) {
     throw fail();
+  }
+  if (std::int64_t{width} * height > kMaxImagePixels) {
+    throw InputError(path.string(), "cannot decode image: too large (" + std::to_string(width) +
+                                        " x " + std::to_string(height) + " pixels)");
   }
   StoredImage image;
   image.width = width;

@@ -47,11 +47,19 @@ std::optional<StoredImage> DecodePnm(std::string_view bytes, const std::filesyst
   std::uint64_t width = 0, height = 0, maxval = 0;
   if (!NextNumber(bytes, &at, &width) || !NextNumber(bytes, &at, &height) ||
       !NextNumber(bytes, &at, &maxval) || width == 0 || height == 0 || maxval == 0 ||
-      maxval > 65535 || width * height > (std::uint64_t{1} << 32)) {
+      maxval > 65535) {
     throw corrupt("bad header");
+  }
+  if (width * height > static_cast<std::uint64_t>(kMaxImagePixels)) {
+    throw InputError(path.string(), "cannot decode image: too large (" + std::to_string(width) +
+                                        " x " + std::to_string(height) + " pixels)");
   }
   const int bit_depth = maxval < 256 ? 8 : 16;
   const std::size_t count = static_cast<std::size_t>(width * height) * channels;
+  // Each sample takes a byte at least (two in a plain file, with its
+  // separator): fewer bytes than that is a truncated file, not an
+  // allocation to attempt.
+  if (count > bytes.size() - at) throw corrupt("truncated");
   std::vector<std::uint16_t> wide(bit_depth == 16 ? count : 0);
   std::vector<std::uint8_t> narrow(bit_depth == 8 ? count : 0);
   const auto store = [&](std::size_t k, std::uint64_t v) {

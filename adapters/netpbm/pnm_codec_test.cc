@@ -71,6 +71,16 @@ TEST(PnmCodec, OtherFilesAreLeftAndBadOnesSayWhy) {
   }
 }
 
+// A header of more than 2^30 pixels is refused before anything is allocated.
+TEST(PnmCodec, AHugeHeaderIsRefused) {
+  try {
+    DecodePnm("P5 40000 40000 255\n", "tiles/huge.pgm");
+    ADD_FAILURE() << "a 1.6-gigapixel header was taken";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "tiles/huge.pgm: cannot decode image: too large (40000 x 40000 pixels)");
+  }
+}
+
 // The real PGMs of ../shared/data (ViSP's circle-grid images) read as OpenCV
 // reads them.
 TEST(PnmCodec, RealFilesReadAsOpenCvReadsThem) {

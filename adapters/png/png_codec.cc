@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "pipeline/core/error.h"
@@ -209,6 +210,11 @@ StoredImage DecodePng(std::string_view bytes, const std::filesystem::path& path)
   spng_ihdr ihdr{};
   if (int e = spng_set_png_buffer(ctx.get(), bytes.data(), bytes.size()); e != 0) throw fail(e);
   if (int e = spng_get_ihdr(ctx.get(), &ihdr); e != 0) throw fail(e);
+  if (std::int64_t{ihdr.width} * ihdr.height > kMaxImagePixels) {
+    throw InputError(path.string(), "cannot decode image: too large (" +
+                                        std::to_string(ihdr.width) + " x " +
+                                        std::to_string(ihdr.height) + " pixels)");
+  }
   // Formats libspng converts every colour type to (host-endian samples).
   int format = SPNG_FMT_RGBA8, channels = 4;
   if (ihdr.bit_depth == 16) {

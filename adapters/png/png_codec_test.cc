@@ -198,6 +198,24 @@ TEST(PngCodec, CorruptFilesThrow) {
   }
 }
 
+// A colour PNG whose header claims more than 2^30 pixels is refused before
+// anything is allocated.
+TEST(PngCodec, AHugeColourHeaderIsRefused) {
+  std::string png = EncodeGrayPng(QuantizeImage(ImageF::Constant(2, 2, 0.5f), 8));
+  // IHDR's data starts at 16: width, height (big-endian), depth, colour type.
+  const unsigned char header[13] = {0, 0, 0x9c, 0x40, 0, 0, 0x9c, 0x40, 8, 2, 0, 0, 0};
+  std::memcpy(png.data() + 16, header, 13);
+  const std::uint32_t crc = libdeflate_crc32(0, png.data() + 12, 17);
+  for (int i = 0; i < 4; ++i) png[29 + i] = static_cast<char>(crc >> (24 - 8 * i));
+  EXPECT_FALSE(DecodeGrayPng(png, "x.png").has_value());  // colour: not this reader's
+  try {
+    DecodePng(png, "tiles/huge.png");
+    ADD_FAILURE() << "a 1.6-gigapixel header was taken";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "tiles/huge.png: cannot decode image: too large (40000 x 40000 pixels)");
+  }
+}
+
 // The real PNGs of ../shared/data (calibration plates and microscope tiles
 // from public sources, written by other encoders) decode to OpenCV's samples
 // exactly, by this reader or, for the other kinds, by libspng.

@@ -4,10 +4,12 @@
 
 #include <algorithm>
 #include <cstdarg>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "pipeline/core/error.h"
@@ -52,7 +54,7 @@ toff_t SeekProc(thandle_t handle, toff_t offset, int whence) {
   toff_t base = 0;
   if (whence == SEEK_CUR) base = f->pos;
   if (whence == SEEK_END) base = Size(*f);
-  f->pos = base + offset;  // offsets are unsigned: a seek before 0 wraps past the end
+  f->pos = base + offset;  // toff_t is unsigned: a negative offset wraps, the sum does not
   return f->pos;
 }
 
@@ -149,6 +151,9 @@ std::optional<StoredImage> DecodeTiff(std::string_view bytes, const std::filesys
       !TIFFGetField(tif.get(), TIFFTAG_IMAGELENGTH, &height) || width == 0 || height == 0 ||
       width > 0x7fffffffu || height > 0x7fffffffu) {
     throw fail("corrupt TIFF (no image size)");
+  }
+  if (std::int64_t{width} * height > kMaxImagePixels) {
+    throw fail("too large (" + std::to_string(width) + " x " + std::to_string(height) + " pixels)");
   }
   TIFFGetFieldDefaulted(tif.get(), TIFFTAG_BITSPERSAMPLE, &bits);
   TIFFGetFieldDefaulted(tif.get(), TIFFTAG_SAMPLESPERPIXEL, &channels);

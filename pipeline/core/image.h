@@ -36,6 +36,11 @@ struct StoredImage {
   std::vector<std::uint8_t> samples;
 };
 
+// Image readers refuse a header of more pixels than this, as OpenCV's
+// imgcodecs does (CV_IO_MAX_IMAGE_PIXELS): a corrupt or hostile header, not
+// an allocation to attempt.
+inline constexpr std::int64_t kMaxImagePixels = std::int64_t{1} << 30;
+
 // Interleaved samples, `channels` a pixel (1 gray, 2 gray + alpha, 3 RGB,
 // 4 RGBA) of `bit_depth` 8 or 16 (16-bit native-endian), rows
 // `row_stride_bytes` apart, as gray samples of the same depth: alpha dropped,
