@@ -170,10 +170,11 @@ std::optional<StoredImage> DecodeTiff(std::string_view bytes, const std::filesys
   }
   const int w = static_cast<int>(width), h = static_cast<int>(height);
   if (bits <= 8) {
-    // libtiff renders every 8-bit kind as RGBA, top row first.
+    // libtiff renders every 8-bit kind as RGBA, top row first; it stops at
+    // the first strip or tile it cannot read (else it would skip it).
     std::vector<std::uint32_t> raster(static_cast<std::size_t>(width) * height);
     if (!TIFFReadRGBAImageOriented(tif.get(), width, height, raster.data(), ORIENTATION_TOPLEFT,
-                                   0)) {
+                                   /*stop_on_error=*/1)) {
       throw fail("cannot render this TIFF");
     }
     std::vector<std::uint8_t> rgba(raster.size() * 4);

@@ -110,6 +110,11 @@ TEST(TiffCodec, OtherFilesAreLeftAndBadOnesSayWhy) {
     EXPECT_NE(std::string(e.what()).find("tiles/t.tif: cannot decode image"), std::string::npos)
         << e.what();
   }
+  // An 8-bit file whose LZW data is garbled: the strip that fails to decode
+  // fails the image (libtiff would otherwise skip it).
+  ASSERT_TRUE(cv::imencode(".tiff", PatternMat(47, 31, CV_8UC1), bytes));
+  for (std::size_t k = 8; k < bytes.size() / 2; ++k) bytes[k] = 0xFF;
+  EXPECT_THROW(DecodeTiff(View(bytes), "tiles/t.tif"), InputError);
   cv::Mat floats(5, 7, CV_32F, cv::Scalar(0.5));
   ASSERT_TRUE(cv::imencode(".tiff", floats, bytes));
   try {
