@@ -43,11 +43,15 @@ std::optional<StoredImage> DecodeJpeg(std::string_view bytes, const std::filesys
   if (tail.find("\xFF\xD9") == std::string_view::npos) {
     throw InputError(path.string(), "cannot decode image: truncated JPEG (no end marker)");
   }
-  // Other warnings (extraneous bytes before a marker, as some cameras
-  // write) leave a whole image.
+  // libjpeg also only warns of damaged data, and decodes what it can. The
+  // one warning that leaves the image whole is extraneous bytes before a
+  // marker, which some cameras write (libjpeg's JWRN_EXTRANEOUS_DATA; the
+  // TurboJPEG API gives the message, not the code).
   if (tjDecompress2(handle.get(), data, bytes.size(), image.samples.data(), width, width, height,
                     TJPF_GRAY, TJFLAG_ACCURATEDCT) != 0 &&
-      tjGetErrorCode(handle.get()) != TJERR_WARNING) {
+      (tjGetErrorCode(handle.get()) != TJERR_WARNING ||
+       std::string_view(tjGetErrorStr2(handle.get())).find("extraneous bytes") ==
+           std::string_view::npos)) {
     throw fail();
   }
   return image;

@@ -46,6 +46,10 @@ TEST(JpegCodec, OtherFilesAreLeftAndBadOnesSayWhy) {
   EXPECT_FALSE(DecodeJpeg("\x89PNG not a jpeg", "x.png").has_value());
   std::vector<uchar> bytes;
   ASSERT_TRUE(cv::imencode(".jpg", PatternMat(67, 45, CV_8UC3), bytes));
+  // Half the data lost, the end marker kept: libjpeg warns and decodes.
+  std::vector<uchar> cut(bytes.begin(), bytes.begin() + bytes.size() / 2);
+  cut.insert(cut.end(), {0xFF, 0xD9});
+  EXPECT_THROW(DecodeJpeg(View(cut), "tiles/g.jpg"), InputError);
   for (const std::size_t size : {bytes.size() / 2, std::size_t{40}}) {
     try {
       DecodeJpeg(View(bytes).substr(0, size), "tiles/t.jpg");
