@@ -18,15 +18,22 @@ std::optional<StoredImage> DecodeJpeg(std::string_view bytes, const std::filesys
   }
   const std::unique_ptr<void, decltype(&tjDestroy)> handle(tjInitDecompress(), tjDestroy);
   if (!handle) throw std::bad_alloc();
-  const auto fail = [&] {
-    return InputError(path.string(), std::string("cannot decode image: corrupt JPEG (") +
-                                         tjGetErrorStr2(handle.get()) + ")");
+  // libjpeg only warns of damaged data, and decodes what it can. The one
+  // warning that leaves the image whole is extraneous bytes before a marker,
+  // which some cameras write (libjpeg's JWRN_EXTRANEOUS_DATA; the TurboJPEG
+  // API gives the message, not the code). Any other fails the image.
+  const auto check = [&](int status) {
+    if (status == 0) return;
+    const std::string message = tjGetErrorStr2(handle.get());
+    if (tjGetErrorCode(handle.get()) == TJERR_WARNING &&
+        message.find("extraneous bytes") != std::string::npos) {
+      return;
+    }
+    throw InputError(path.string(), "cannot decode image: corrupt JPEG (" + message + ")");
   };
   int width = 0, height = 0, subsampling = 0, colorspace = 0;
-  if (tjDecompressHeader3(handle.get(), data, bytes.size(), &width, &height, &subsampling,
-                          &colorspace) != 0) {
-    throw fail();
-  }
+  check(tjDecompressHeader3(handle.get(), data, bytes.size(), &width, &height, &subsampling,
+                            &colorspace));
   if (std::int64_t{width} * height > kMaxImagePixels) {
     throw InputError(path.string(), "cannot decode image: too large (" + std::to_string(width) +
                                         " x " + std::to_string(height) + " pixels)");
@@ -43,17 +50,8 @@ std::optional<StoredImage> DecodeJpeg(std::string_view bytes, const std::filesys
   if (tail.find("\xFF\xD9") == std::string_view::npos) {
     throw InputError(path.string(), "cannot decode image: truncated JPEG (no end marker)");
   }
-  // libjpeg also only warns of damaged data, and decodes what it can. The
-  // one warning that leaves the image whole is extraneous bytes before a
-  // marker, which some cameras write (libjpeg's JWRN_EXTRANEOUS_DATA; the
-  // TurboJPEG API gives the message, not the code).
-  if (tjDecompress2(handle.get(), data, bytes.size(), image.samples.data(), width, width, height,
-                    TJPF_GRAY, TJFLAG_ACCURATEDCT) != 0 &&
-      (tjGetErrorCode(handle.get()) != TJERR_WARNING ||
-       std::string_view(tjGetErrorStr2(handle.get())).find("extraneous bytes") ==
-           std::string_view::npos)) {
-    throw fail();
-  }
+  check(tjDecompress2(handle.get(), data, bytes.size(), image.samples.data(), width, width, height,
+                      TJPF_GRAY, TJFLAG_ACCURATEDCT));
   return image;
 }
 

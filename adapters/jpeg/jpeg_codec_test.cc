@@ -61,6 +61,44 @@ TEST(JpegCodec, OtherFilesAreLeftAndBadOnesSayWhy) {
   }
 }
 
+// Extraneous bytes before a marker, as some cameras write: libjpeg warns,
+// and the image is whole, so it is taken, sample for sample.
+TEST(JpegCodec, ExtraneousBytesBeforeAMarkerAreAccepted) {
+  std::vector<uchar> bytes;
+  ASSERT_TRUE(cv::imencode(".jpg", PatternMat(67, 45, CV_8UC3), bytes));
+  const std::optional<StoredImage> clean = DecodeJpeg(View(bytes), "x.jpg");
+  ASSERT_TRUE(clean.has_value());
+  std::vector<uchar> padded = bytes;
+  std::size_t sos = 2;  // the start-of-scan marker, FF DA
+  while (sos + 1 < padded.size() && !(padded[sos] == 0xFF && padded[sos + 1] == 0xDA)) ++sos;
+  ASSERT_LT(sos + 1, padded.size());
+  padded.insert(padded.begin() + static_cast<std::ptrdiff_t>(sos), {0x00, 0x00, 0x00});
+  const std::optional<StoredImage> ours = DecodeJpeg(View(padded), "x.jpg");
+  ASSERT_TRUE(ours.has_value());
+  EXPECT_EQ(ours->samples, clean->samples);
+}
+
+// A header of more than 2^30 pixels is refused before anything is allocated.
+TEST(JpegCodec, AHugeHeaderIsRefused) {
+  std::vector<uchar> bytes;
+  ASSERT_TRUE(cv::imencode(".jpg", PatternMat(67, 45, CV_8UC1), bytes));
+  // The frame header (SOF0, FF C0): length (2), precision (1), height and
+  // width (2 each, big-endian).
+  std::size_t sof = 2;
+  while (sof + 9 < bytes.size() && !(bytes[sof] == 0xFF && bytes[sof + 1] == 0xC0)) ++sof;
+  ASSERT_LT(sof + 9, bytes.size());
+  for (const std::size_t at : {sof + 5, sof + 7}) {
+    bytes[at] = 0x9C;  // 40000
+    bytes[at + 1] = 0x40;
+  }
+  try {
+    DecodeJpeg(View(bytes), "tiles/huge.jpg");
+    ADD_FAILURE() << "a 1.6-gigapixel header was taken";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "tiles/huge.jpg: cannot decode image: too large (40000 x 40000 pixels)");
+  }
+}
+
 // The real JPEGs of ../shared/data (calibration images of public data sets)
 // read as OpenCV reads them gray.
 TEST(JpegCodec, RealFilesReadAsOpenCvReadsThem) {

@@ -126,6 +126,40 @@ TEST(TiffCodec, OtherFilesAreLeftAndBadOnesSayWhy) {
   }
 }
 
+// A header of more than 2^30 pixels is refused before anything is allocated.
+TEST(TiffCodec, AHugeHeaderIsRefused) {
+  StoredImage image;
+  image.width = image.height = 2;
+  image.samples.assign(4, 7);
+  std::string tiff = EncodeGrayTiff(image);
+  ASSERT_EQ(tiff.substr(0, 4), std::string_view("II*\0", 4));  // little-endian
+  const auto read16 = [&](std::size_t at) {
+    return static_cast<unsigned>(static_cast<unsigned char>(tiff[at])) |
+           static_cast<unsigned>(static_cast<unsigned char>(tiff[at + 1])) << 8;
+  };
+  const std::size_t ifd = read16(4) | read16(6) << 16;
+  int patched = 0;
+  // Entries of 12 bytes: tag, type (3 short, 4 long), count, value.
+  for (unsigned k = 0; k < read16(ifd); ++k) {
+    const std::size_t entry = ifd + 2 + 12 * k;
+    if (read16(entry) != 256 && read16(entry) != 257) continue;  // ImageWidth, ImageLength
+    ASSERT_TRUE(read16(entry + 2) == 3 || read16(entry + 2) == 4);
+    const char value[4] = {'\x40', '\x9C', 0, 0};  // 40000
+    tiff.replace(entry + 8, read16(entry + 2) == 3 ? 2 : 4, value, read16(entry + 2) == 3 ? 2 : 4);
+    ++patched;
+  }
+  ASSERT_EQ(patched, 2);
+  try {
+    DecodeTiff(tiff, "tiles/huge.tif");
+    ADD_FAILURE() << "a 1.6-gigapixel header was taken";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(
+                  "tiles/huge.tif: cannot decode image: too large (40000 x 40000 pixels)"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // The real TIFFs of ../shared/data (16-bit microscope tiles) read as OpenCV
 // reads them.
 TEST(TiffCodec, RealFilesReadAsOpenCvReadsThem) {
