@@ -6,9 +6,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
+#include <stdexcept>
 #include <string_view>
 #include <vector>
 
+#include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -54,6 +57,27 @@ inline cv::Mat PatternMat(int width, int height, int type) {
     }
   }
   return mat;
+}
+
+// Whether a reader's image `ours` is OpenCV's `theirs` (OpenCvGrayDecode):
+// the same size, depth and samples; the failure says which differ.
+inline ::testing::AssertionResult SameImage(const StoredImage& ours, const StoredImage& theirs) {
+  if (ours.width != theirs.width || ours.height != theirs.height) {
+    return ::testing::AssertionFailure() << ours.width << " x " << ours.height << " px, OpenCV's "
+                                         << theirs.width << " x " << theirs.height;
+  }
+  if (ours.bit_depth != theirs.bit_depth) {
+    return ::testing::AssertionFailure() << ours.bit_depth << " bit, OpenCV's " << theirs.bit_depth;
+  }
+  if (ours.samples != theirs.samples) return ::testing::AssertionFailure() << "samples differ";
+  return ::testing::AssertionSuccess();
+}
+
+// The image of a reader that leaves other formats (nullopt); throws if it
+// left this one.
+inline StoredImage Taken(std::optional<StoredImage> image) {
+  if (!image) throw std::runtime_error("the reader did not take the file");
+  return std::move(*image);
 }
 
 inline std::string_view View(const std::vector<uchar>& bytes) {

@@ -332,9 +332,6 @@ TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma
   const int h = options.patch.half_size_px;
   const bool use_harris = options.features != FeatureSource::kSift;
   const int candidate_margin = CandidateMarginPx(options);
-  const auto pair_shift = [&](const PairRegistration& pair) {
-    return PairShiftPx(prepared, pair);
-  };
   std::vector<Eigen::Matrix2Xd> corner_rays(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
     Eigen::Matrix2Xd q(2, corners[i].size());
@@ -429,7 +426,7 @@ TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma
     std::mt19937_64 rng(options.ransac_seed + p);
     std::vector<Candidate> todo;
     if (use_harris) {
-      const Eigen::Vector2d shift = pair_shift(pair);
+      const Eigen::Vector2d shift = PairShiftPx(prepared, pair);
       std::vector<int> candidates;
       for (size_t k = 0; k < corners[ta].size(); ++k) {
         const Eigen::Vector2d q = corners[ta][k].pixel.cast<double>() + shift;
