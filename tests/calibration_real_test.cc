@@ -90,7 +90,9 @@ TEST(CalibrationOnRealImages, OpenCvChessboard9x6AgreesWithOpenCvWithinOurUncert
 }
 
 // BoofCV's regular 10 x 8 circle grid (Sony DSC-HX5V, 640 x 480 JPEG, 15 mm
-// dots at 25 mm): 4 of its 6 images show the whole grid. Both programs put
+// dots at 25 mm): 5 of its 6 images show the whole grid, and OpenCV's
+// detector finds it in 4 (not 00004, a steep view that ours finds:
+// plate_detector_test.cc), so both calibrate on the other 5. Both programs put
 // fx at ~455 px, where BoofCV's chessboard set of the same camera gives
 // ~707: the zoom lens was set differently, so the two targets cannot check
 // each other, and OpenCV is the reference again (its blob centroids are not
@@ -106,7 +108,7 @@ TEST(CalibrationOnRealImages, BoofCvCircleGridAgreesWithOpenCvWithinOurUncertain
   board.pitch_mm = 25.0;
   board.dot_diameter_mm = 15.0;
   std::vector<std::string> names;
-  for (int k = 0; k <= 5; ++k) names.push_back("image0000" + std::to_string(k) + ".jpg");
+  for (int k : {0, 1, 2, 3, 5}) names.push_back("image0000" + std::to_string(k) + ".jpg");
   const RealImages images = ReadImages(dir, names);
   // A nominal seed of 703 px, 55 % above the answer (the zoom is unknown).
   CameraSpec camera;
@@ -115,7 +117,7 @@ TEST(CalibrationOnRealImages, BoofCvCircleGridAgreesWithOpenCvWithinOurUncertain
   camera.lens_model = "LENSMODEL_OPENCV5";
   const CalibrationStageSummary ours = RunCalibration(images.named, board, camera, {});
   ASSERT_TRUE(ours.usable) << ours.brief;
-  // 00000 (the grid runs off the image) and 00004 are rejected, as by OpenCV.
+  // 00000 (the grid runs off the image) is rejected, as by OpenCV.
   EXPECT_EQ(ours.result.record.images.size(), 4u);
   OpenCvCalibrationOptions opencv_options;
   opencv_options.max_blob_area_fraction = 0.05;  // dots of up to ~50 px across

@@ -172,32 +172,86 @@ TEST(CalibrationOnSimulatedProjects, StatedUncertaintyCoversTheErrorOverTheImage
   }
 }
 
-// The chessboard is searched in the half-size image first (1600 x 1200 px
-// images): cornerSubPix at full size then takes the corners to where a
-// search of the whole image leads it. Partial and absent boards are refused
-// either way.
-TEST(CalibrationOnSimulatedProjects, ChessboardCornersFromTheHalfSizeSearchAreTheFullSizeOnes) {
+// The chessboard is searched in a reduced image first (1600 x 1200 px
+// images: a quarter, by default, or at the scale expected_pitch_px gives):
+// cornerSubPix at full size then takes the corners to where a search of the
+// whole image leads it (up to the board's 180-degree turn, which SB may
+// return at one scale and not at another; the calibration takes either).
+// Partial and absent boards are refused either way.
+TEST(CalibrationOnSimulatedProjects, ChessboardCornersFromAReducedSearchAreTheFullSizeOnes) {
   const testing::CachedProject sim =
       testing::SimulatedProject("demo", 2, 20, false, {}, BoardType::kChessboard);
   const Project project = LoadProject(sim.project_dir);
-  PlateDetectionOptions half, whole;
-  half.chessboard_half_size_from_px = 1;
-  whole.chessboard_half_size_from_px = 1 << 30;
-  int num_full = 0;
+  PlateDetectionOptions coarse, at_pitch, whole;
+  at_pitch.chessboard_min_square_px = 7.0;
+  whole.chessboard_min_search_side_px = 1 << 30;
+  // Largest corner difference, the turned order (corner i is n - 1 - i) too.
+  const auto difference = [](const Eigen::Matrix2Xd& a, const Eigen::Matrix2Xd& b) {
+    return std::min((a - b).cwiseAbs().maxCoeff(),
+                    (a - b.rowwise().reverse()).cwiseAbs().maxCoeff());
+  };
+  int num_full = 0, num_at_an_eighth = 0;
   for (const CalibImageTruth& image : sim.truth.calib_images) {
     const GrayImage pixels = ReadGrayImage(sim.project_dir / "calib" / image.image);
-    const PlateObservation a = DetectPlate(pixels, *project.board, half);
     const PlateObservation b = DetectPlate(pixels, *project.board, whole);
-    if (image.kind != CalibImageTruth::Kind::kFull) {
-      EXPECT_FALSE(a.usable) << image.image;
-      EXPECT_FALSE(b.usable) << image.image;
-      continue;
+    // The squares' size on this image (~50-70 px on the demo), from the
+    // whole-image search: with a 7 px minimum the search at that pitch is at
+    // an eighth where they are 56 px or more, else at a quarter.
+    if (b.usable) {
+      at_pitch.expected_pitch_px = (b.q_px.col(1) - b.q_px.col(0)).norm();
+      num_at_an_eighth += at_pitch.expected_pitch_px >= 56.0;
     }
-    ASSERT_TRUE(a.usable && b.usable) << image.image << ": " << a.why_rejected << b.why_rejected;
-    EXPECT_LT((a.q_px - b.q_px).cwiseAbs().maxCoeff(), 1e-3) << image.image;
-    ++num_full;
+    for (const PlateDetectionOptions& options : {coarse, at_pitch}) {
+      const PlateObservation a = DetectPlate(pixels, *project.board, options);
+      if (image.kind != CalibImageTruth::Kind::kFull) {
+        EXPECT_FALSE(a.usable) << image.image;
+        EXPECT_FALSE(b.usable) << image.image;
+        continue;
+      }
+      ASSERT_TRUE(a.usable && b.usable) << image.image << ": " << a.why_rejected << b.why_rejected;
+      EXPECT_LT(difference(a.q_px, b.q_px), 1e-3) << image.image;
+    }
+    num_full += b.usable;
   }
   EXPECT_EQ(num_full, 18);
+  EXPECT_GT(num_at_an_eighth, 0);
+}
+
+// The plate lying on the part (the demo preset's), searched for in every tile
+// at the pitch the part's distance gives (as the mosaic stage does,
+// plate_on_part.cc): found in the same tiles, at the same marks, as by a
+// search without it (the whole tile too, for the chessboard), and refused in
+// the others, with a chessboard and a circles grid.
+TEST(CalibrationOnSimulatedProjects, PlateOnThePartAtItsExpectedPitchIsFoundAsWithout) {
+  for (BoardType board_type : {BoardType::kChessboard, BoardType::kCircles}) {
+    SCOPED_TRACE(BoardTypeName(board_type));
+    const testing::CachedProject sim =
+        testing::SimulatedProject("demo", 2, 20, false, {}, board_type);
+    const Project project = LoadProject(sim.project_dir);
+    const BoardSpec& board = *project.board;
+    // The optical axis meets the part plane at distance z: f / z px per mm.
+    const Eigen::Vector3d axis = sim.truth.cam_from_part.rotation().col(2);
+    const double z = axis.dot(sim.truth.cam_from_part.translation()) / axis.z();
+    PlateDetectionOptions at_pitch, without;
+    at_pitch.expected_pitch_px = board.pitch_mm * sim.truth.camera.model.intrinsics(0) / z;
+    without.chessboard_min_search_side_px = 1 << 30;
+    int num_found = 0;
+    for (const TilePosition& tile : project.tiles) {
+      const GrayImage pixels = ReadGrayImage(project.TilePath(tile.image));
+      const PlateObservation a = DetectPlate(pixels, board, at_pitch);
+      const PlateObservation b = DetectPlate(pixels, board, without);
+      ASSERT_EQ(a.usable, b.usable) << tile.image << ": " << a.why_rejected << " / "
+                                    << b.why_rejected;
+      if (!a.usable) continue;
+      ++num_found;
+      const Eigen::Matrix2Xd& q = b.q_px;
+      EXPECT_LT(std::min((a.q_px - q).cwiseAbs().maxCoeff(),
+                         (a.q_px - q.rowwise().reverse()).cwiseAbs().maxCoeff()),
+                1e-3)
+          << tile.image;
+    }
+    EXPECT_GE(num_found, 1);
+  }
 }
 
 // On a lens OPENCV8 cannot represent, the corners' scatter about the

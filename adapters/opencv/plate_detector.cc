@@ -336,20 +336,49 @@ PlateObservation DetectCaltab(const GrayImage& image, const BoardSpec& board, co
   return RefineMarks(image, board, rough, options);
 }
 
+// Candidate dots for cv::findCirclesGrid: the centres of the dark blobs
+// (even depth in the contour tree: not holes) that look like filled
+// ellipses, within the area range.
+std::vector<cv::Point2f> DotCandidates(const Coarse& coarse, double min_area_px, double max_area_px,
+                                       const PlateDetectionOptions& options) {
+  std::vector<cv::Point2f> centres;
+  for (size_t i = 0; i < coarse.contours.size(); ++i) {
+    const int parent = coarse.hierarchy[i][3];
+    if (parent >= 0 && coarse.hierarchy[static_cast<size_t>(parent)][3] < 0) continue;
+    const double area = cv::contourArea(coarse.contours[i]);
+    if (area < min_area_px || area > max_area_px) continue;
+    if (const std::optional<Blob> blob = AsBlob(coarse.contours[i], coarse.gray8.size(), options)) {
+      centres.emplace_back(static_cast<float>(blob->centre_px.x()), static_cast<float>(blob->centre_px.y()));
+    }
+  }
+  return centres;
+}
+
 PlateObservation DetectCircles(const GrayImage& image, const BoardSpec& board, const PlateDetectionOptions& options) {
   const int n = board.rows * board.cols;
-  const cv::Mat gray8 = ToGray8(image);
+  const Coarse coarse = Threshold(image, options);
+  const cv::Mat& gray8 = coarse.gray8;
   const cv::Size size = gray8.size();
-  cv::SimpleBlobDetector::Params params;
-  params.minArea = static_cast<float>(options.min_mark_area_px);
-  params.maxArea = static_cast<float>(0.05 * size.area());
-  const cv::Ptr<cv::FeatureDetector> detector = cv::SimpleBlobDetector::create(params);
-  std::vector<cv::Point2f> centres;
-  if (!cv::findCirclesGrid(gray8, cv::Size(board.cols, board.rows), centres, cv::CALIB_CB_SYMMETRIC_GRID,
-                           detector) ||
-      static_cast<int>(centres.size()) != n) {
-    return Rejected(n, "plate not found");
+  double min_area_px = options.min_mark_area_px, max_area_px = 0.05 * size.area();
+  if (options.expected_pitch_px > 0.0 && board.dot_diameter_mm > 0.0 && board.pitch_mm > 0.0) {
+    const double radius_px = 0.5 * board.dot_diameter_mm / board.pitch_mm * options.expected_pitch_px;
+    min_area_px = std::max(min_area_px, 0.5 * kPi * radius_px * radius_px);
+    max_area_px = std::min(max_area_px, 2.0 * kPi * radius_px * radius_px);
   }
+  const cv::Size pattern(board.cols, board.rows);
+  const std::vector<cv::Point2f> candidates = DotCandidates(coarse, min_area_px, max_area_px, options);
+  if (static_cast<int>(candidates.size()) < n) return Rejected(n, "plate not found");
+  std::vector<cv::Point2f> centres;
+  bool found = cv::findCirclesGrid(candidates, pattern, centres, cv::CALIB_CB_SYMMETRIC_GRID,
+                                   cv::Ptr<cv::FeatureDetector>());
+  if (!found) {
+    cv::SimpleBlobDetector::Params params;
+    params.minArea = static_cast<float>(min_area_px);
+    params.maxArea = static_cast<float>(max_area_px);
+    found = cv::findCirclesGrid(gray8, pattern, centres, cv::CALIB_CB_SYMMETRIC_GRID,
+                                cv::SimpleBlobDetector::create(params));
+  }
+  if (!found || static_cast<int>(centres.size()) != n) return Rejected(n, "plate not found");
   MakeProper(board, &centres);
 
   // Each grid point's rough ellipse: the dark blob around it, thresholded
@@ -369,23 +398,37 @@ PlateObservation DetectCircles(const GrayImage& image, const BoardSpec& board, c
   return RefineMarks(image, board, rough, options);
 }
 
+// The reductions of the image (factors 2^k) that a chessboard is searched
+// in, coarsest first (PlateDetectionOptions).
+std::vector<int> ChessboardSearchFactors(const cv::Size& size, const PlateDetectionOptions& options) {
+  if (options.expected_pitch_px > 0.0) {
+    int factor = 1;
+    while (options.expected_pitch_px / (2 * factor) >= options.chessboard_min_square_px) factor *= 2;
+    return {factor};
+  }
+  std::vector<int> factors = {1};
+  while (std::max(size.width, size.height) / (2 * factors.back()) >= options.chessboard_min_search_side_px) {
+    factors.push_back(2 * factors.back());
+  }
+  std::reverse(factors.begin(), factors.end());
+  return factors;
+}
+
 PlateObservation DetectChessboard(const GrayImage& image, const BoardSpec& board, const PlateDetectionOptions& options) {
   const int n = board.rows * board.cols;
   const cv::Mat gray8 = ToGray8(image);
   const cv::Size pattern(board.cols, board.rows);
   std::vector<cv::Point2f> corners;
   bool found = false;
-  // Half size first: 4x faster, and squares of ~10 px or more there are
-  // found; the whole image finds a small board in a large image too.
-  if (std::max(gray8.cols, gray8.rows) >= options.chessboard_half_size_from_px) {
-    cv::Mat half;
-    cv::resize(gray8, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
-    found = cv::findChessboardCornersSB(half, pattern, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
-    // Half-size pixel i covers full-size pixels 2i and 2i + 1.
-    for (cv::Point2f& corner : corners) corner = 2.0f * corner + cv::Point2f(0.5f, 0.5f);
-  }
-  if (!found) {
-    found = cv::findChessboardCornersSB(gray8, pattern, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
+  for (const int factor : ChessboardSearchFactors(gray8.size(), options)) {
+    cv::Mat reduced = gray8;
+    if (factor > 1) cv::resize(gray8, reduced, cv::Size(), 1.0 / factor, 1.0 / factor, cv::INTER_AREA);
+    found = cv::findChessboardCornersSB(reduced, pattern, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
+    if (!found) continue;
+    // Reduced pixel i covers full-size pixels factor i .. factor i + factor - 1.
+    const float offset = 0.5f * static_cast<float>(factor - 1);
+    for (cv::Point2f& corner : corners) corner = static_cast<float>(factor) * corner + cv::Point2f(offset, offset);
+    break;
   }
   if (!found || static_cast<int>(corners.size()) != n) return Rejected(n, "plate not found");
   // Search window: well inside one square.
@@ -430,7 +473,9 @@ std::string PlateDetectionOptions::Check() const {
   if (!(nominal_sigma_px > 0.0)) return "nominal_sigma_px must be > 0";
   if (!(min_weight > 0.0 && min_weight <= max_weight)) return "need 0 < min_weight <= max_weight";
   if (!(chessboard_sigma_px > 0.0)) return "chessboard_sigma_px must be > 0";
-  if (chessboard_half_size_from_px < 1) return "chessboard_half_size_from_px must be >= 1";
+  if (chessboard_min_search_side_px < 1) return "chessboard_min_search_side_px must be >= 1";
+  if (!(chessboard_min_square_px > 0.0)) return "chessboard_min_square_px must be > 0";
+  if (!(expected_pitch_px >= 0.0)) return "expected_pitch_px must be >= 0 (0: unknown)";
   return {};
 }
 

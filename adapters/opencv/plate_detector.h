@@ -9,13 +9,20 @@
 //   plate->image homographies, one per rotation; the one that finds the
 //   triangle dark at its centroid fixes the orientation, and its homography
 //   orders the dots. Every rotation 0-360 deg and tilts past 45 deg.
-// - circles: a symmetric grid of dark dots (cv::findCirclesGrid orders them).
-// - chessboard: rows x cols INNER corners (cv::findChessboardCornersSB, on a
-//   half-size image first when the image is large, + cv::cornerSubPix at full
-//   size). Not cv::findChessboardCorners: on rendered 1600 x 1200 images it
-//   took 62 s where the board was partly outside the image and 147 s where
-//   there was none (FAST_CHECK rejected the latter only); SB takes ~0.05 s on
-//   the half-size image and ~0.2 s on the whole one, found or not.
+// - circles: a symmetric grid of dark dots. cv::findCirclesGrid orders the
+//   dark filled-ellipse blobs of the caltab's coarse stage; where that fails
+//   and there are at least rows x cols of them, it tries again with OpenCV's
+//   SimpleBlobDetector, whose 17 thresholds took 40-110 ms per 1600 x 1200
+//   image where the blobs take ~8 ms (ViSP's grid36-02 needs it: labels
+//   beside its dots).
+// - chessboard: rows x cols INNER corners (cv::findChessboardCornersSB on a
+//   reduced image, coarsest first, + cv::cornerSubPix at full size). Not
+//   cv::findChessboardCorners: on rendered 1600 x 1200 images it took 62 s
+//   where the board was partly outside the image and 147 s where there was
+//   none (FAST_CHECK rejected the latter only). SB's time grows with the
+//   pixels searched, found or not: ~0.35 s on the whole image, ~0.07 s at
+//   half size and ~0.02 s at a quarter, where the rendered plate's 73 px
+//   squares are still found at an eighth.
 //
 // Sub-pixel centres of dots (caltab, circles): mid-level edge points along
 // rays and an ellipse fit (pipeline/core/subpixel_edges.h); the centre is the
@@ -66,9 +73,20 @@ struct PlateDetectionOptions {
   // stage replaces it by the corners' scatter about its solve; a chessboard
   // lying on the part (pipeline/mosaic/plate_on_part.h) keeps it.
   double chessboard_sigma_px = 0.1;
-  // A chessboard is searched in a half-size image first when the image's
-  // longer side has at least this many pixels (then in the whole image).
-  int chessboard_half_size_from_px = 1200;
+  // A chessboard is searched first in the coarsest power-of-2 reduction of
+  // the image (1/2, 1/4, ...) whose longer side keeps at least this many
+  // pixels, then in each finer one up to the whole image, until found.
+  int chessboard_min_search_side_px = 400;
+  // With expected_pitch_px, only in the coarsest reduction whose squares keep
+  // at least this many pixels.
+  double chessboard_min_square_px = 12.0;
+
+  // The marks' spacing in the image when it is known beforehand (a plate
+  // lying on the part, seen at the tiles' scale), px; 0: unknown. A
+  // chessboard is then searched at one scale (chessboard_min_square_px), a
+  // circles grid's dots must be within a factor 2 of the area the board's
+  // dot_diameter_mm gives.
+  double expected_pitch_px = 0.0;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;

@@ -118,15 +118,16 @@ TEST(PlateDetector, VispGrid6x6IsFoundInProperOrder) {
   }
 }
 
-// BoofCV's 10x8 grid: found where OpenCV finds it; 00000 runs off the image
-// and 00004 is not found by OpenCV either.
+// BoofCV's 10x8 grid: 00000 runs off the image; the others are found, 00004
+// too: a steep view where cv::findCirclesGrid fails on the 80 blobs of
+// OpenCV's SimpleBlobDetector and orders those of our coarse stage.
 TEST(PlateDetector, BoofCvCircleRegular) {
   SKIP_WITHOUT_DATA();
   const BoardSpec board = Board(BoardType::kCircles, 8, 10);
   const auto dir = SharedDataDir() / "boofcv_mono_calibration" / "Sony_DSC-HX5V_CircleRegular";
   for (int k = 0; k <= 5; ++k) {
     const PlateObservation o = DetectPlate(ReadGrayImage(dir / ("image0000" + std::to_string(k) + ".jpg")), board);
-    if (k == 0 || k == 4) {
+    if (k == 0) {
       EXPECT_FALSE(o.usable) << k;
       EXPECT_FALSE(o.why_rejected.empty());
       continue;

@@ -17,6 +17,7 @@
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/mosaic/plane_seed.h"
+#include "pipeline/mosaic/working_distance.h"
 
 namespace omm {
 
@@ -112,12 +113,19 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
   result.marks.mark_uv_mm = BoardPoints(board).topRows<2>();
   result.marks_per_tile.assign(num_tiles, 0);
 
-  // 1. Whole plates.
+  // 1. Whole plates, at the scale the registered scene gives a plate lying
+  // on the part (a chessboard is then searched at one scale: where it is
+  // absent, as it mostly is, the whole image took 0.35 s per tile).
+  PlateDetectionOptions detection = options.detection;
+  if (const std::optional<double> distance_mm =
+          AxisDistanceMm(registered_scene.cam_from_part_r, registered_scene.cam_from_part_t_mm)) {
+    detection.expected_pitch_px = board.pitch_mm * std::abs(camera.intrinsics(0)) / *distance_mm;
+  }
   std::vector<PlateObservation> whole(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
     GrayImage image;
     image.pixels = tiles[i];
-    whole[i] = DetectPlate(image, board, options.detection);
+    whole[i] = DetectPlate(image, board, detection);
   });
   const int num_marks = static_cast<int>(result.marks.mark_uv_mm.cols());
   // Per tile and mark: the located centre and its sigma (sigma 0: not seen).
