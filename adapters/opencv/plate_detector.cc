@@ -403,7 +403,10 @@ PlateObservation DetectCircles(const GrayImage& image, const BoardSpec& board, c
 std::vector<int> ChessboardSearchFactors(const cv::Size& size, const PlateDetectionOptions& options) {
   if (options.expected_pitch_px > 0.0) {
     int factor = 1;
-    while (options.expected_pitch_px / (2 * factor) >= options.chessboard_min_square_px) factor *= 2;
+    while (2 * factor <= std::max(size.width, size.height) &&
+           options.expected_pitch_px / (2 * factor) >= options.chessboard_min_square_px) {
+      factor *= 2;
+    }
     return {factor};
   }
   std::vector<int> factors = {1};
@@ -475,7 +478,9 @@ std::string PlateDetectionOptions::Check() const {
   if (!(chessboard_sigma_px > 0.0)) return "chessboard_sigma_px must be > 0";
   if (chessboard_min_search_side_px < 1) return "chessboard_min_search_side_px must be >= 1";
   if (!(chessboard_min_square_px > 0.0)) return "chessboard_min_square_px must be > 0";
-  if (!(expected_pitch_px >= 0.0)) return "expected_pitch_px must be >= 0 (0: unknown)";
+  if (!(expected_pitch_px >= 0.0 && std::isfinite(expected_pitch_px))) {
+    return "expected_pitch_px must be finite and >= 0 (0: unknown)";
+  }
   return {};
 }
 

@@ -1,6 +1,8 @@
 #include "adapters/opencv/plate_detector.h"
 
+#include <cmath>
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -79,6 +81,11 @@ TEST(PlateDetector, OptionsCheck) {
   PlateDetectionOptions bad;
   bad.match_radius_pitch = 0.7;
   EXPECT_NE(bad.Check(), "");
+  for (const double pitch : {-1.0, std::numeric_limits<double>::infinity(), std::nan("")}) {
+    PlateDetectionOptions bad_pitch;
+    bad_pitch.expected_pitch_px = pitch;
+    EXPECT_NE(bad_pitch.Check(), "") << pitch;
+  }
 }
 
 // OpenCV's 7x7 dot plate: every image found, centres in proper order and
