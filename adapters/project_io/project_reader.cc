@@ -175,7 +175,7 @@ class YamlReader {
 };
 
 CameraSpec ReadCamera(const YamlReader& yaml, const YAML::Node& node) {
-  yaml.CheckKeys(node, "camera", {"pixel_pitch_um", "focal_length_mm", "lens_model"});
+  yaml.CheckKeys(node, "camera", {"pixel_pitch_um", "focal_length_mm", "lens_model", "gamma"});
   CameraSpec camera;
   camera.pixel_pitch_um =
       yaml.Positive(yaml.Required(node, "camera", "pixel_pitch_um"), "camera.pixel_pitch_um");
@@ -189,6 +189,14 @@ CameraSpec ReadCamera(const YamlReader& yaml, const YAML::Node& node) {
                             model));
     }
     camera.lens_model = model;
+  }
+  if (const YAML::Node gamma = node["gamma"]; gamma.IsDefined() && !gamma.IsNull()) {
+    camera.gamma = yaml.Double(gamma, "camera.gamma");
+    if (!(camera.gamma >= 0.2 && camera.gamma <= 5.0)) {
+      yaml.Fail(
+          gamma, "camera.gamma",
+          fmt::format("expected the camera's gamma in [0.2, 5] (1: linear), got {}", camera.gamma));
+    }
   }
   return camera;
 }

@@ -175,6 +175,18 @@ TEST_F(ProjectReaderTest, MissingRequiredKey) {
   ExpectError({"camera.pixel_pitch_um", "required key is missing"});
 }
 
+TEST_F(ProjectReaderTest, CameraGammaIsReadAndWritten) {
+  EXPECT_EQ(LoadProject(project_.dir).camera.gamma, 1.0);  // absent: linear
+  project_.camera.gamma = 0.45;
+  WriteProjectFiles(project_);
+  EXPECT_EQ(LoadProject(project_.dir).camera.gamma, 0.45);
+}
+
+TEST_F(ProjectReaderTest, CameraGammaOutOfRangeIsRejected) {
+  Replace("project.yaml", "focal_length_mm: 12", "focal_length_mm: 12\n  gamma: 0");
+  ExpectError({"camera.gamma", "[0.2, 5]"});
+}
+
 TEST_F(ProjectReaderTest, LensModelMustBeAMrcalName) {
   Replace("project.yaml", "focal_length_mm: 12", "focal_length_mm: 12\n  lens_model: OPENCV8");
   ExpectError({"camera.lens_model", "LENSMODEL_"});

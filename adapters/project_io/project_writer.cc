@@ -31,6 +31,9 @@ std::string ProjectYaml(const Project& project) {
   if (project.camera.lens_model) {
     out << YAML::Key << "lens_model" << YAML::Value << *project.camera.lens_model;
   }
+  if (project.camera.gamma != 1.0) {
+    out << YAML::Key << "gamma" << YAML::Value << Number(project.camera.gamma);
+  }
   out << YAML::EndMap;
 
   if (project.calibration_from) {

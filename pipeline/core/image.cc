@@ -4,6 +4,12 @@
 #include <cstring>
 
 namespace omm {
+
+void LinearizeResponse(double gamma, ImageF* pixels) {
+  if (gamma == 1.0) return;
+  const float exponent = static_cast<float>(1.0 / gamma);
+  *pixels = pixels->array().max(0.0f).pow(exponent).matrix();
+}
 namespace {
 
 template <typename Sample>

@@ -50,4 +50,10 @@ inline constexpr std::int64_t kMaxImagePixels = std::int64_t{1} << 30;
 StoredImage GrayFromInterleaved(const std::uint8_t* rows, std::size_t row_stride_bytes, int width,
                                 int height, int channels, int bit_depth);
 
+// Undoes a camera's gamma (GenICam's Gamma: pixel = linear^gamma, both in
+// [0, 1] of full scale): every pixel becomes pixel^(1 / gamma), so that the
+// edges' mid-level crossings, the exposure gains and the noise model see
+// linear intensities. gamma > 0; 1 leaves the image as it is.
+void LinearizeResponse(double gamma, ImageF* pixels);
+
 }  // namespace omm

@@ -40,6 +40,25 @@ TEST(GrayFromInterleaved, GrayStaysGrayAndAlphaIsDropped) {
   EXPECT_EQ(narrow.samples, expected8);
 }
 
+// pixel^(1 / gamma): gamma 0.5 squares, 2 takes the square root; 1 and 0 stay.
+TEST(LinearizeResponse, UndoesThePowerLaw) {
+  ImageF pixels(1, 4);
+  pixels << 0.0f, 0.25f, 0.81f, 1.0f;
+  ImageF squared = pixels;
+  LinearizeResponse(0.5, &squared);
+  EXPECT_FLOAT_EQ(squared(0, 1), 0.0625f);
+  EXPECT_FLOAT_EQ(squared(0, 2), 0.6561f);
+  EXPECT_FLOAT_EQ(squared(0, 3), 1.0f);
+  EXPECT_FLOAT_EQ(squared(0, 0), 0.0f);
+  ImageF rooted = pixels;
+  LinearizeResponse(2.0, &rooted);
+  EXPECT_FLOAT_EQ(rooted(0, 1), 0.5f);
+  EXPECT_FLOAT_EQ(rooted(0, 2), 0.9f);
+  ImageF same = pixels;
+  LinearizeResponse(1.0, &same);
+  EXPECT_EQ(same, pixels);
+}
+
 // BT.601's weights: pure red, green and blue, and rows read at their stride.
 TEST(GrayFromInterleaved, ColourIsWeightedByLuma) {
   const std::uint8_t rgb[] = {255, 0, 0, 0,   255, 0,  0, 0, 255, 99,  // row 0, then padding

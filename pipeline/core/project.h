@@ -19,6 +19,9 @@ struct CameraSpec {
   double pixel_pitch_um = 0.0;           // nominal sensor pixel pitch
   double focal_length_mm = 0.0;          // nominal lens focal length
   std::optional<std::string> lens_model;  // forced mrcal lens model, if given
+  // The camera's response, pixel = linear^gamma (GenICam's Gamma; 1: linear,
+  // as metrology wants it). Every image is linearized with it when read.
+  double gamma = 1.0;
 };
 
 // `calibration.from`: reuse an earlier calibration instead of calib/.

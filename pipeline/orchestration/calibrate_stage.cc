@@ -133,8 +133,9 @@ std::vector<PlateObservation> DetectCalibPlates(const Project& project,
   std::mutex progress_mutex;
   int num_done = 0;
   ParallelFor(num_images, num_threads, [&](int i) {
-    const GrayImage image = project.images ? ToGrayImage(project.images->calib[i].image)
-                                           : ReadGrayImage(project.calib_images[i]);
+    GrayImage image = project.images ? ToGrayImage(project.images->calib[i].image)
+                                     : ReadGrayImage(project.calib_images[i]);
+    LinearizeResponse(project.camera.gamma, &image.pixels);
     detections[i] = DetectPlate(image, *project.board, options);
     detections[i].image = project.calib_images[i].filename().string();
     const std::lock_guard lock(progress_mutex);

@@ -36,6 +36,7 @@ std::vector<ImageF> TileImages(const Project& project, int num_threads) {
                                    "picture of the part (a failed capture?)",
                                    100.0 * *level));
     }
+    LinearizeResponse(project.camera.gamma, &image.pixels);
     tiles[i] = std::move(image.pixels);
   });
   return tiles;
