@@ -217,43 +217,6 @@ TEST(CalibrationOnSimulatedProjects, ChessboardCornersFromAReducedSearchAreTheFu
   EXPECT_GT(num_at_an_eighth, 0);
 }
 
-// The plate lying on the part (the demo preset's), searched for in every tile
-// at the pitch the part's distance gives (as the mosaic stage does,
-// plate_on_part.cc): found in the same tiles, at the same marks, as by a
-// search without it (the whole tile too, for the chessboard), and refused in
-// the others, with a chessboard and a circles grid.
-TEST(CalibrationOnSimulatedProjects, PlateOnThePartAtItsExpectedPitchIsFoundAsWithout) {
-  for (BoardType board_type : {BoardType::kChessboard, BoardType::kCircles}) {
-    SCOPED_TRACE(BoardTypeName(board_type));
-    const testing::CachedProject sim =
-        testing::SimulatedProject("demo", 2, 20, false, {}, board_type);
-    const Project project = LoadProject(sim.project_dir);
-    const BoardSpec& board = *project.board;
-    // The optical axis meets the part plane at distance z: f / z px per mm.
-    const Eigen::Vector3d axis = sim.truth.cam_from_part.rotation().col(2);
-    const double z = axis.dot(sim.truth.cam_from_part.translation()) / axis.z();
-    PlateDetectionOptions at_pitch, without;
-    at_pitch.expected_pitch_px = board.pitch_mm * sim.truth.camera.model.intrinsics(0) / z;
-    without.chessboard_min_search_side_px = 1 << 30;
-    int num_found = 0;
-    for (const TilePosition& tile : project.tiles) {
-      const GrayImage pixels = ReadGrayImage(project.TilePath(tile.image));
-      const PlateObservation a = DetectPlate(pixels, board, at_pitch);
-      const PlateObservation b = DetectPlate(pixels, board, without);
-      ASSERT_EQ(a.usable, b.usable) << tile.image << ": " << a.why_rejected << " / "
-                                    << b.why_rejected;
-      if (!a.usable) continue;
-      ++num_found;
-      const Eigen::Matrix2Xd& q = b.q_px;
-      EXPECT_LT(std::min((a.q_px - q).cwiseAbs().maxCoeff(),
-                         (a.q_px - q.rowwise().reverse()).cwiseAbs().maxCoeff()),
-                1e-3)
-          << tile.image;
-    }
-    EXPECT_GE(num_found, 1);
-  }
-}
-
 // On a lens OPENCV8 cannot represent, the corners' scatter about the
 // working OPENCV8 solve is mostly its misfit (~1.6 px): they are weighed
 // again by their scatter about the splined model chosen, their noise.

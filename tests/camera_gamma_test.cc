@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Core>
+
 #include "adapters/opencv/image_io.h"
 #include "adapters/png/png_codec.h"
 #include "adapters/project_io/project_reader.h"
@@ -55,9 +57,7 @@ std::vector<double> DiameterErrorsRawPx(const fs::path& project_dir, const Simul
 }
 
 double Mean(const std::vector<double>& v) {
-  double sum = 0.0;
-  for (double x : v) sum += x;
-  return v.empty() ? 0.0 : sum / static_cast<double>(v.size());
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size())).mean();
 }
 
 TEST(CameraGamma, LinearizedImagesMeasureDiametersAsALinearCamera) {

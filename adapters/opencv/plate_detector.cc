@@ -81,6 +81,13 @@ std::optional<Blob> AsBlob(const std::vector<cv::Point>& contour, const cv::Size
   return blob;
 }
 
+// Whether contour i bounds a dark region (even depth in the contour tree),
+// not a hole in one.
+bool IsOuter(const Coarse& coarse, size_t i) {
+  const int parent = coarse.hierarchy[i][3];
+  return parent < 0 || coarse.hierarchy[static_cast<size_t>(parent)][3] >= 0;
+}
+
 std::vector<int> Children(const Coarse& coarse, int parent) {
   std::vector<int> children;
   for (int child = coarse.hierarchy[static_cast<size_t>(parent)][2]; child >= 0;
@@ -222,9 +229,7 @@ PlateObservation DetectCaltab(const GrayImage& image, const BoardSpec& board, co
   bool cut_dark_region = false;
   for (size_t i = 0; i < coarse.contours.size(); ++i) {
     const std::vector<cv::Point>& outer = coarse.contours[i];
-    const bool is_outer = coarse.hierarchy[i][3] < 0 ||
-                          coarse.hierarchy[static_cast<size_t>(coarse.hierarchy[i][3])][3] >= 0;
-    if (!is_outer) continue;
+    if (!IsOuter(coarse, i)) continue;
     const double area = cv::contourArea(outer);
     if (area < min_frame_area) continue;
     const bool cut = TouchesBorder(outer, size, options.border_margin_px);
@@ -337,14 +342,12 @@ PlateObservation DetectCaltab(const GrayImage& image, const BoardSpec& board, co
 }
 
 // Candidate dots for cv::findCirclesGrid: the centres of the dark blobs
-// (even depth in the contour tree: not holes) that look like filled
-// ellipses, within the area range.
+// (IsOuter) that look like filled ellipses, within the area range.
 std::vector<cv::Point2f> DotCandidates(const Coarse& coarse, double min_area_px, double max_area_px,
                                        const PlateDetectionOptions& options) {
   std::vector<cv::Point2f> centres;
   for (size_t i = 0; i < coarse.contours.size(); ++i) {
-    const int parent = coarse.hierarchy[i][3];
-    if (parent >= 0 && coarse.hierarchy[static_cast<size_t>(parent)][3] < 0) continue;
+    if (!IsOuter(coarse, i)) continue;
     const double area = cv::contourArea(coarse.contours[i]);
     if (area < min_area_px || area > max_area_px) continue;
     if (const std::optional<Blob> blob = AsBlob(coarse.contours[i], coarse.gray8.size(), options)) {

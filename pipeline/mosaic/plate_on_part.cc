@@ -99,6 +99,13 @@ PlaneBundleInput WithPlate(const PlaneBundleInput& registered, const PlateOnPart
 
 }  // namespace
 
+double PlatePitchOnPartPx(const BoardSpec& board, const CameraModel& camera,
+                          const PlaneScene& scene) {
+  const std::optional<double> distance_mm =
+      AxisDistanceMm(scene.cam_from_part_r, scene.cam_from_part_t_mm);
+  return distance_mm ? board.pitch_mm * std::abs(camera.intrinsics(0)) / *distance_mm : 0.0;
+}
+
 PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
                             const CameraModel& camera, const PlaneBundleInput& registered_input,
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options) {
@@ -117,10 +124,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
   // on the part (a chessboard is then searched at one scale: where it is
   // absent, as it mostly is, the whole image took 0.35 s per tile).
   PlateDetectionOptions detection = options.detection;
-  if (const std::optional<double> distance_mm =
-          AxisDistanceMm(registered_scene.cam_from_part_r, registered_scene.cam_from_part_t_mm)) {
-    detection.expected_pitch_px = board.pitch_mm * std::abs(camera.intrinsics(0)) / *distance_mm;
-  }
+  detection.expected_pitch_px = PlatePitchOnPartPx(board, camera, registered_scene);
   std::vector<PlateObservation> whole(num_tiles);
   ParallelFor(num_tiles, options.num_threads, [&](int i) {
     GrayImage image;

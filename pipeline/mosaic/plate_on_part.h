@@ -91,6 +91,13 @@ struct PlateOnPart {
   double seconds = 0.0;
 };
 
+// The spacing (px) of `board`'s marks lying on the part, as the camera sees
+// them where its optical axis meets the part plane (f / distance): what
+// DetectPlate is told to expect in the tiles (expected_pitch_px). 0 if the
+// axis does not meet the plane in front of the camera.
+double PlatePitchOnPartPx(const BoardSpec& board, const CameraModel& camera,
+                          const PlaneScene& scene);
+
 // Finds `board` lying on the part in `tiles` (gray, the camera's size), using
 // the registered scene (RegisterTiles' input and adjusted scene) to predict
 // marks where the plate is cut. found == false (brief says why) if no tile

@@ -270,5 +270,47 @@ TEST_F(PlateOnPartSim, IntrinsicsPriorAndJointCovarianceRoundTrip) {
   }
 }
 
+// The plate lying on the part (the demo preset's), searched for in every tile
+// at the pitch PlatePitchOnPartPx gives for the true scene, as
+// FindPlateOnPart does with the registered one: that pitch is the marks'
+// spacing the tile shows (within the tilt's and the lens's few percent), and
+// the plate is found in the same tiles, at the same marks, as by a search
+// without it (the whole tile too, for the chessboard), and refused in the
+// others, with a chessboard and a circles grid.
+TEST(PlateOnPartPitch, PlateAtItsExpectedPitchIsFoundAsWithout) {
+  for (BoardType board_type : {BoardType::kChessboard, BoardType::kCircles}) {
+    SCOPED_TRACE(BoardTypeName(board_type));
+    const testing::CachedProject sim =
+        testing::SimulatedProject("demo", 2, 20, false, {}, board_type);
+    const Project project = LoadProject(sim.project_dir);
+    const BoardSpec& board = *project.board;
+    PlaneScene scene;
+    const Eigen::AngleAxisd rotation(sim.truth.cam_from_part.rotation());
+    scene.cam_from_part_r = rotation.angle() * rotation.axis();
+    scene.cam_from_part_t_mm = sim.truth.cam_from_part.translation();
+    PlateDetectionOptions at_pitch, without;
+    at_pitch.expected_pitch_px = PlatePitchOnPartPx(board, sim.truth.camera.model, scene);
+    without.chessboard_min_search_side_px = 1 << 30;
+    int num_found = 0;
+    for (const TilePosition& tile : project.tiles) {
+      const GrayImage pixels = ReadGrayImage(project.TilePath(tile.image));
+      const PlateObservation a = DetectPlate(pixels, board, at_pitch);
+      const PlateObservation b = DetectPlate(pixels, board, without);
+      ASSERT_EQ(a.usable, b.usable)
+          << tile.image << ": " << a.why_rejected << " / " << b.why_rejected;
+      if (!a.usable) continue;
+      ++num_found;
+      const Eigen::Matrix2Xd& q = b.q_px;
+      EXPECT_NEAR((q.col(1) - q.col(0)).norm() / at_pitch.expected_pitch_px, 1.0, 0.05)
+          << tile.image;
+      EXPECT_LT(std::min((a.q_px - q).cwiseAbs().maxCoeff(),
+                         (a.q_px - q.rowwise().reverse()).cwiseAbs().maxCoeff()),
+                1e-3)
+          << tile.image;
+    }
+    EXPECT_GE(num_found, 1);
+  }
+}
+
 }  // namespace
 }  // namespace omm

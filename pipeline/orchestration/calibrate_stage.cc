@@ -22,7 +22,6 @@
 #include "adapters/mrcal/cameramodel_io.h"
 #include "adapters/mrcal/solve_record_json.h"
 #include "adapters/mrcal/uncertainty.h"
-#include "adapters/opencv/image_io.h"
 #include "adapters/opencv/plate_detector.h"
 #include "adapters/project_io/report_json.h"
 #include "adapters/project_io/text_file.h"
@@ -133,9 +132,9 @@ std::vector<PlateObservation> DetectCalibPlates(const Project& project,
   std::mutex progress_mutex;
   int num_done = 0;
   ParallelFor(num_images, num_threads, [&](int i) {
-    GrayImage image = project.images ? ToGrayImage(project.images->calib[i].image)
-                                     : ReadGrayImage(project.calib_images[i]);
-    LinearizeResponse(project.camera.gamma, &image.pixels);
+    const GrayImage image =
+        ProjectGrayImage(project, project.images ? &project.images->calib[i].image : nullptr,
+                         project.calib_images[i]);
     detections[i] = DetectPlate(image, *project.board, options);
     detections[i].image = project.calib_images[i].filename().string();
     const std::lock_guard lock(progress_mutex);

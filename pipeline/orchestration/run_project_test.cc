@@ -14,6 +14,7 @@
 #include "adapters/project_io/report_json.h"
 #include "pipeline/core/error.h"
 #include "pipeline/orchestration/input_hash.h"
+#include "pipeline/orchestration/stage.h"
 #include "pipeline/orchestration/version.h"
 #include "tests/test_util.h"
 
@@ -63,6 +64,23 @@ void FakeStage(Stage stage, StageContext& context, const std::string& content) {
     }
     case Stage::kMeasure: context.report.measurements = std::vector<MeasurementReport>{}; break;
   }
+}
+
+// Every image the stages see (calib/ and tiles/, decoded by LoadProject or
+// read from its file) is linearized with camera.gamma: the tiny project's
+// 128 / 255 gray at gamma 0.5 is its square.
+TEST_F(RunProjectTest, ProjectImagesAreLinearizedWithTheCameraGamma) {
+  const float stored = 128.0f / 255.0f;
+  const fs::path& calib = project_.calib_images.front();
+  const fs::path tile = project_.TilePath(project_.tiles.front().image);
+  EXPECT_FLOAT_EQ(ProjectGrayImage(project_, nullptr, calib).pixels(0, 0), stored);
+  project_.camera.gamma = 0.5;
+  EXPECT_FLOAT_EQ(ProjectGrayImage(project_, nullptr, calib).pixels(0, 0), stored * stored);
+  EXPECT_FLOAT_EQ(ProjectGrayImage(project_, nullptr, tile).pixels(0, 0), stored * stored);
+  ASSERT_TRUE(project_.images);
+  EXPECT_FLOAT_EQ(
+      ProjectGrayImage(project_, &project_.images->calib.front().image, calib).pixels(0, 0),
+      stored * stored);
 }
 
 TEST_F(RunProjectTest, FailedStageStopsTheRunAndLeavesNoOut) {

@@ -23,20 +23,26 @@ const char* StageName(Stage stage) {
 
 std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stage::kMeasure}; }
 
+GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
+                           const std::filesystem::path& path) {
+  GrayImage image = decoded ? ToGrayImage(*decoded) : ReadGrayImage(path);
+  LinearizeResponse(project.camera.gamma, &image.pixels);
+  return image;
+}
+
 std::vector<ImageF> TileImages(const Project& project, int num_threads) {
   const int num_tiles = static_cast<int>(project.tiles.size());
   std::vector<ImageF> tiles(num_tiles);
   ParallelFor(num_tiles, num_threads, [&](int i) {
     const std::filesystem::path path = project.TilePath(project.tiles[i].image);
     GrayImage image =
-        project.images ? ToGrayImage(project.images->tiles[i].image) : ReadGrayImage(path);
+        ProjectGrayImage(project, project.images ? &project.images->tiles[i].image : nullptr, path);
     if (const std::optional<double> level = BlankImageLevel(image.pixels)) {
       throw InputError(path.string(),
                        fmt::format("blank: almost every pixel is {:.1f} % of full scale, no "
                                    "picture of the part (a failed capture?)",
                                    100.0 * *level));
     }
-    LinearizeResponse(project.camera.gamma, &image.pixels);
     tiles[i] = std::move(image.pixels);
   });
   return tiles;

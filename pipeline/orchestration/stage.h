@@ -97,6 +97,12 @@ struct StageContext {
   std::filesystem::path Published(const std::filesystem::path& path) const;
 };
 
+// A project image (calib/ or tiles/) as the stages see it: the one
+// LoadProject decoded (`decoded`; null if it kept none), else read from
+// `path`, linearized with the camera's gamma (LinearizeResponse).
+GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
+                           const std::filesystem::path& path);
+
 // The project's tiles as gray images, in its tile order, num_threads at a
 // time: converted from those LoadProject decoded, else read from the files.
 // Throws InputError for a tile that is blank (BlankImageLevel): held by its
