@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <numeric>
 #include <optional>
 
@@ -22,6 +23,8 @@ std::string OrthoOptions::Check() const {
   if (!(gsd_mm > 0.0)) return "gsd_mm must be > 0";
   if (const std::string e = lens_table.Check(); !e.empty()) return "lens_table: " + e;
   if (!(blend_band_px > 0.0)) return "blend_band_px must be > 0";
+  if (!(whole_margin_px >= 0.0 && std::isfinite(whole_margin_px)))
+    return "whole_margin_px must be >= 0 and finite";
   if (const std::string e = exposure.Check(); !e.empty()) return "exposure: " + e;
   if (num_threads < 1) return "num_threads must be >= 1";
   return "";
@@ -219,9 +222,50 @@ OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& 
   return geometry;
 }
 
+int TileSeeingDiscBest(const OrthoGeometry& geometry, const Eigen::Vector2d& centre_px,
+                       double radius_px) {
+  // A rim point every ~4 px: the border is straight between them.
+  const int num_rim =
+      std::max(16, static_cast<int>(std::ceil(2.0 * std::numbers::pi * radius_px / 4.0)));
+  int best_tile = -1;
+  double best_least = 0.0;
+  for (int tile = 0; tile < static_cast<int>(geometry.tiles.size()); ++tile) {
+    double least = INFINITY;
+    for (int m = -1; m < num_rim && least > best_least; ++m) {
+      const double angle = 2.0 * std::numbers::pi * m / num_rim;
+      const Eigen::Vector2d p =
+          centre_px + (m < 0 ? 0.0 : radius_px) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
+      Eigen::Vector2d q;
+      least = geometry.TilePixel(tile, p.x(), p.y(), &q)
+                  ? std::min(least, geometry.BorderDistancePx(q))
+                  : -INFINITY;
+    }
+    if (least > best_least) {
+      best_least = least;
+      best_tile = tile;
+    }
+  }
+  return best_tile;
+}
+
+std::vector<WholeDisc> WholeDiscs(const OrthoGeometry& geometry,
+                                  const std::vector<OrthoDisc>& features,
+                                  const OrthoOptions& options) {
+  std::vector<WholeDisc> discs;
+  for (const OrthoDisc& feature : features) {
+    WholeDisc disc;
+    disc.centre_px = geometry.grid.MosaicFromPart(feature.centre_mm);
+    disc.radius_px = feature.radius_mm / geometry.grid.gsd_mm + options.whole_margin_px;
+    disc.band_px = options.blend_band_px;
+    disc.tile = TileSeeingDiscBest(geometry, disc.centre_px, disc.radius_px + disc.band_px);
+    if (disc.tile >= 0) discs.push_back(disc);
+  }
+  return discs;
+}
+
 ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles,
                       const std::vector<TileExposure>& exposure, const OrthoOptions& options,
-                      ResampleCounts* counts) {
+                      const std::vector<WholeDisc>& whole, ResampleCounts* counts) {
   const int num_tiles = static_cast<int>(tiles.size());
   assert(num_tiles == static_cast<int>(geometry.tiles.size()));
   assert(exposure.empty() || static_cast<int>(exposure.size()) == num_tiles);
@@ -255,6 +299,10 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
     std::vector<float> best(width);
     std::vector<double> sum_w(width), sum_wv(width);
     std::vector<int> active;
+    // The whole discs' share of a pixel (1 inside, falling across the band)
+    // and their tile; 0 outside every disc.
+    std::vector<float> share(width, 0.0f);
+    std::vector<int> share_tile(width, -1);
     for (int row = block * kRowsPerBlock; row < std::min(height, (block + 1) * kRowsPerBlock);
          ++row) {
       active.clear();
@@ -292,10 +340,39 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
           sum_wv[col0 + k] += w * v;
         }
       }
+      std::fill(share.begin(), share.end(), 0.0f);
+      for (const WholeDisc& disc : whole) {
+        const double reach = disc.radius_px + disc.band_px, dy = row - disc.centre_px.y();
+        if (std::abs(dy) >= reach) continue;
+        const double half = std::sqrt(reach * reach - dy * dy);
+        const int first = std::max(0, static_cast<int>(std::ceil(disc.centre_px.x() - half)));
+        const int last =
+            std::min(width - 1, static_cast<int>(std::floor(disc.centre_px.x() + half)));
+        for (int col = first; col <= last; ++col) {
+          const double beyond = std::hypot(col - disc.centre_px.x(), dy) - disc.radius_px;
+          // Smoothstep from 1 at the radius to 0 a band beyond.
+          const double t = std::clamp(1.0 - beyond / disc.band_px, 0.0, 1.0);
+          const float s = static_cast<float>(t * t * (3.0 - 2.0 * t));
+          if (s > share[col]) {
+            share[col] = s;
+            share_tile[col] = disc.tile;
+          }
+        }
+      }
       float* out = mosaic.data() + static_cast<std::ptrdiff_t>(row) * width;
       for (int col = 0; col < width; ++col) {
         if (!(best[col] > 0.0f)) continue;
-        const double v = sum_wv[col] / sum_w[col];
+        double v = sum_wv[col] / sum_w[col];
+        if (share[col] > 0.0f) {
+          const int t = share_tile[col];
+          const int k = col - geometry.tiles[t].min_px.x();
+          if (std::find(active.begin(), active.end(), t) != active.end() && k >= 0 &&
+              k < static_cast<int>(dist[t].size()) && dist[t][k] > 0.0f) {
+            double vt = SampleCubic(options.interpolator, sampled[t], q[t][k]);
+            if (!exposure.empty()) vt /= exposure[t].Factor(frame.Rho2(q[t][k]));
+            v = (1.0 - share[col]) * v + share[col] * vt;
+          }
+        }
         ++covered[block];
         if (v < 0.0 || v > 1.0) ++clipped[block];
         out[col] = static_cast<float>(std::clamp(v, 0.0, 1.0));
@@ -326,7 +403,8 @@ double TilePxPerMosaicPx(const OrthoGeometry& geometry) {
 }
 
 OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
-                         const std::vector<ImageF>& tiles, const OrthoOptions& options) {
+                         const std::vector<ImageF>& tiles, const OrthoOptions& options,
+                         const std::vector<OrthoDisc>& features) {
   const Clock::time_point start = Clock::now();
   if (tiles.size() != scene.table_pos_mm.size())
     throw InputError("tiles", std::to_string(tiles.size()) + " images for " +
@@ -357,7 +435,10 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
 
   const Clock::time_point resample_start = Clock::now();
   ResampleCounts counts;
-  ImageF pixels = ResampleMosaic(geometry, tiles, summary.exposure.tiles, options, &counts);
+  const std::vector<WholeDisc> whole = WholeDiscs(geometry, features, options);
+  summary.features_kept_whole = static_cast<int>(whole.size());
+  summary.features_blended = static_cast<int>(features.size() - whole.size());
+  ImageF pixels = ResampleMosaic(geometry, tiles, summary.exposure.tiles, options, whole, &counts);
   const std::int64_t covered = counts.covered_px, clipped = counts.clipped_px;
   summary.resample_seconds = SecondsSince(resample_start);
   summary.covered_fraction = pixels.size() > 0 ? static_cast<double>(covered) / pixels.size() : 0.0;
@@ -376,6 +457,10 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
                 summary.lens_table_max_error_px, options.compensate_exposure ? "; " : "",
                 options.compensate_exposure ? summary.exposure.brief.c_str() : "");
   summary.brief = line;
+  if (!features.empty()) {
+    summary.brief += "; " + std::to_string(summary.features_kept_whole) + " of " +
+                     std::to_string(features.size()) + " features each from one tile";
+  }
   result.mosaic.grid = geometry.grid;
   result.mosaic.pixels = std::move(pixels);
   return result;

@@ -25,7 +25,17 @@
 // few `blend_band_px` around the line where two tiles' border distances are
 // equal (the middle of their overlap): a feature is never cut, and far from
 // the seams the mosaic is one tile's pixels, not an average of two slightly
-// different blurs. Before blending, each tile's intensity is divided by its
+// different blurs.
+//
+// Features kept whole. The part's top surface is the same picture in every
+// tile, but a through-hole's bore wall is not: each tile sees it from its own
+// side. Where a seam crosses a hole (a third of the unseen projects' holes),
+// the mosaic showed both walls, or a ghost of one. A feature disc given to
+// Orthorectify is drawn from one tile alone, the one that sees it, grown by
+// whole_margin_px and a blend band, farthest from its border; the blend
+// returns to the rule above across that band, on the top surface outside the
+// rim. A disc no tile sees whole is blended by the rule. Before blending,
+// each tile's intensity is divided by its
 // exposure (exposure_compensation.h: gain and vignetting estimated from the
 // overlaps). Pixels no tile sees are 0; values are clamped to [0, 1].
 //
@@ -93,6 +103,10 @@ struct OrthoOptions {
   // Catmull-Rom within +-0.023 (ortho_sampling_test.cc); over 30 rendered
   // projects the diameters' RMS error fell from 0.025 to 0.020 raw px.
   OrthoInterpolator interpolator = OrthoInterpolator::kCubicBSpline;
+  // A feature disc kept whole (header) reaches this far beyond its radius,
+  // mosaic px: the rim's blur, and the scene's change since the feature was
+  // located. Its blend back to the rule spans blend_band_px more.
+  double whole_margin_px = 4.0;
   bool compensate_exposure = true;  // false: tiles are blended as recorded
   ExposureOptions exposure;
   // Rows, and the exposure fit's passes (exposure.num_threads is set from
@@ -155,6 +169,34 @@ OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& 
 // centres (0 if none projects).
 double TilePxPerMosaicPx(const OrthoGeometry& geometry);
 
+// A part-frame disc (a hole and where it may be) to draw from one tile.
+struct OrthoDisc {
+  Eigen::Vector2d centre_mm = Eigen::Vector2d::Zero();
+  double radius_mm = 0.0;
+};
+
+// A disc of mosaic pixels drawn from tile `tile` alone out to radius_px,
+// blended back to the rule over band_px beyond.
+struct WholeDisc {
+  Eigen::Vector2d centre_px = Eigen::Vector2d::Zero();
+  double radius_px = 0.0;
+  double band_px = 0.0;
+  int tile = -1;
+};
+
+// The tile that sees the whole mosaic disc (centre_px, radius_px) farthest
+// from its border (the least border distance over the centre and the rim,
+// sampled every few px), or -1 if none sees it whole.
+int TileSeeingDiscBest(const OrthoGeometry& geometry, const Eigen::Vector2d& centre_px,
+                       double radius_px);
+
+// The discs of `features` to draw from one tile (grown by the options'
+// whole_margin_px; their tile from TileSeeingDiscBest over that and the
+// blend band), in order; those no tile sees whole are left out.
+std::vector<WholeDisc> WholeDiscs(const OrthoGeometry& geometry,
+                                  const std::vector<OrthoDisc>& features,
+                                  const OrthoOptions& options);
+
 struct OrthoMosaic {
   OrthoGrid grid;
   ImageF pixels;  // grid.size_px.y() rows x grid.size_px.x() cols, [0, 1]; 0 where no tile sees
@@ -170,6 +212,8 @@ struct OrthoSummary {
   double covered_fraction = 0.0;       // of the mosaic's pixels, seen by a tile
   double clipped_fraction = 0.0;       // of the covered ones, clamped to 0 or 1
   ExposureSummary exposure;            // empty tiles vector if not compensated
+  int features_kept_whole = 0;         // of the feature discs given, drawn from one tile
+  int features_blended = 0;            // ... that no tile sees whole
   double geometry_seconds = 0.0;
   double exposure_seconds = 0.0;
   double resample_seconds = 0.0;
@@ -187,14 +231,17 @@ struct ResampleCounts {
 
 // Blends the tiles (gray, [0, 1], all camera.width_px x camera.height_px, in
 // the scene's tile order) into the mosaic `geometry` describes, each divided
-// by its exposure (`exposure` empty: as recorded). Pure.
+// by its exposure (`exposure` empty: as recorded), the `whole` discs each
+// from its tile. Pure.
 ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles,
                       const std::vector<TileExposure>& exposure, const OrthoOptions& options,
-                      ResampleCounts* counts = nullptr);
+                      const std::vector<WholeDisc>& whole = {}, ResampleCounts* counts = nullptr);
 
-// Geometry, exposure compensation and resampling. Throws InputError for
-// invalid options or tiles that do not fit the camera or the scene (count, size).
+// Geometry, exposure compensation and resampling, with the `features` discs
+// kept whole. Throws InputError for invalid options or tiles that do not fit
+// the camera or the scene (count, size).
 OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
-                         const std::vector<ImageF>& tiles, const OrthoOptions& options);
+                         const std::vector<ImageF>& tiles, const OrthoOptions& options,
+                         const std::vector<OrthoDisc>& features = {});
 
 }  // namespace omm

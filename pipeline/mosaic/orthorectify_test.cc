@@ -19,6 +19,7 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/subpixel_edges.h"
 #include "pipeline/mosaic/ortho_file.h"
+#include "pipeline/mosaic/synthetic_plane.h"
 #include "pipeline/simulate/simulation.h"
 
 namespace omm {
@@ -346,7 +347,108 @@ TEST(Orthorectify, HoleCentresMatchTheTruth) {
   std::filesystem::remove(path);
 }
 
-// (b) Exposure: on the `exposure` preset (gains 0.6 .. 1.15, vignetting
+// The tile a disc is drawn from: the one that sees it farthest from its
+// border, on the synthetic 3 x 3 grid (footprints ~234 x 176 mm, steps 140 x
+// 105 mm).
+TEST(WholeDisc, TileSeeingItFarthestFromItsBorder) {
+  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
+  PlaneScene scene = s.truth;
+  scene.intrinsics = s.camera.intrinsics;
+  OrthoOptions options;
+  options.gsd_mm = 0.25;
+  const OrthoGeometry geometry = ComputeOrthoGeometry(s.camera, scene, options);
+  const auto centre_px = [&](int tile) {
+    return geometry.grid.MosaicFromPart(geometry.tiles[tile].footprint_mm.rowwise().mean());
+  };
+  // The tile nearest the middle one, and a point a third of the way to it:
+  // both see a 10 mm disc there, the middle one farther from its border.
+  constexpr int kMiddle = 4;
+  int neighbour = -1;
+  for (int i = 0; i < 9; ++i) {
+    if (i != kMiddle && (neighbour < 0 || (centre_px(i) - centre_px(kMiddle)).norm() <
+                                              (centre_px(neighbour) - centre_px(kMiddle)).norm()))
+      neighbour = i;
+  }
+  const Eigen::Vector2d third =
+      centre_px(kMiddle) + (centre_px(neighbour) - centre_px(kMiddle)) / 3;
+  EXPECT_EQ(TileSeeingDiscBest(geometry, third, 20.0), kMiddle);
+  const Eigen::Vector2d two_thirds =
+      centre_px(kMiddle) + 2.0 * (centre_px(neighbour) - centre_px(kMiddle)) / 3;
+  EXPECT_EQ(TileSeeingDiscBest(geometry, two_thirds, 20.0), neighbour);
+  // Wider than any footprint (~700 px high), or beyond the grid: none.
+  EXPECT_EQ(TileSeeingDiscBest(geometry, centre_px(kMiddle), 400.0), -1);
+  EXPECT_EQ(TileSeeingDiscBest(geometry, Eigen::Vector2d(-2000.0, -2000.0), 10.0), -1);
+
+  // WholeDiscs grows the disc by the margin and leaves out what no tile sees.
+  const std::vector<WholeDisc> discs =
+      WholeDiscs(geometry,
+                 {OrthoDisc{geometry.grid.PartFromMosaic(third), 5.0},
+                  OrthoDisc{Eigen::Vector2d(1e4, 1e4), 5.0}},
+                 options);
+  ASSERT_EQ(discs.size(), 1u);
+  EXPECT_EQ(discs[0].tile, kMiddle);
+  EXPECT_NEAR(discs[0].radius_px, 5.0 / options.gsd_mm + options.whole_margin_px, 1e-12);
+  EXPECT_EQ(discs[0].band_px, options.blend_band_px);
+}
+
+// (b) Holes kept whole. A through-hole's bore wall shows on the side away
+// from each tile's nadir, so where the seam crosses a hole the blend showed
+// two walls. With the truth holes as discs, each disc is the picture of its
+// tile alone (exposure not compensated, so that the pixels compare exactly),
+// and beyond the blend band the mosaic is the rule's.
+TEST(Orthorectify, HolesAreDrawnWholeFromOneTile) {
+  const Rendered& r = Render("demo", 1);
+  const CameraModel& camera = r.plan.truth.camera.model;
+  OrthoOptions options;
+  options.gsd_mm = 0.15;
+  options.compensate_exposure = false;
+  const OrthoGeometry geometry =
+      ComputeOrthoGeometry(camera, TruthPlaneScene(r.plan.truth), options);
+  std::vector<OrthoDisc> holes;
+  for (const HoleTruth& hole : r.plan.truth.holes)
+    holes.push_back({hole.center_part_mm, hole.diameter_mm / 2});
+  const std::vector<WholeDisc> discs = WholeDiscs(geometry, holes, options);
+  const ImageF ruled = ResampleMosaic(geometry, r.tiles, {}, options);
+  const ImageF kept = ResampleMosaic(geometry, r.tiles, {}, options, discs);
+
+  std::map<int, ImageF> alone;  // the mosaic of one tile alone
+  int num_cut = 0;
+  std::vector<char> near_disc(kept.size(), 0);
+  for (const WholeDisc& disc : discs) {
+    if (!alone.count(disc.tile)) {
+      OrthoGeometry one = geometry;
+      one.tiles = {geometry.tiles[disc.tile]};
+      alone[disc.tile] = ResampleMosaic(one, {r.tiles[disc.tile]}, {}, options);
+    }
+    const ImageF& own = alone[disc.tile];
+    double ruled_change = 0.0, kept_change = 0.0;
+    for (Eigen::Index row = 0; row < kept.rows(); ++row) {
+      for (Eigen::Index col = 0; col < kept.cols(); ++col) {
+        const double rho = (Eigen::Vector2d(col, row) - disc.centre_px).norm();
+        if (rho < disc.radius_px + disc.band_px + 1.0) near_disc[row * kept.cols() + col] = 1;
+        if (rho > disc.radius_px) continue;
+        ruled_change =
+            std::max(ruled_change, static_cast<double>(std::abs(ruled(row, col) - own(row, col))));
+        kept_change =
+            std::max(kept_change, static_cast<double>(std::abs(kept(row, col) - own(row, col))));
+      }
+    }
+    std::printf("disc at (%.0f, %.0f) r %.1f px from tile %d: the rule's mosaic %.4f from it\n",
+                disc.centre_px.x(), disc.centre_px.y(), disc.radius_px, disc.tile, ruled_change);
+    EXPECT_LT(kept_change, 1e-6) << disc.centre_px.transpose();
+    if (ruled_change > 0.05) ++num_cut;  // another tile's wall showed
+  }
+  EXPECT_EQ(discs.size(), holes.size());  // the demo's holes are all seen whole
+  EXPECT_GE(num_cut, 1) << "no seam crosses a hole here: the test proves nothing";
+  double beyond_change = 0.0;
+  for (Eigen::Index i = 0; i < kept.size(); ++i) {
+    if (!near_disc[i])
+      beyond_change = std::max(beyond_change, static_cast<double>(std::abs(kept(i) - ruled(i))));
+  }
+  EXPECT_EQ(beyond_change, 0.0);
+}
+
+// (c) Exposure: on the `exposure` preset (gains 0.6 .. 1.15, vignetting
 // 0.1 .. 0.45 per tile) the fitted exposures match the truth and the tiles
 // agree in their overlaps to the noise level; without compensation they do not.
 TEST(Orthorectify, ExposureCompensationRemovesSeams) {

@@ -380,6 +380,10 @@ struct FinalOutcome {
   // Table priors left out (registration->input.tiles_without_table_prior),
   // each as it was found, and the bound it exceeded.
   std::vector<std::pair<TablePriorTest, double>> table_priors_left_out;
+  // The features' holes for the mosaic to keep whole (orthorectify.h): a
+  // tie's fitted centre, else where near_px puts it, within a quarter of the
+  // diameter (project-format.md).
+  std::vector<OrthoDisc> holes_to_keep_whole;
   double fit_seconds = 0.0;      // the ties' hole fits
   double overlap_seconds = 0.0;  // the held tiles' overlap alignments
   double solve_seconds = 0.0;    // the final adjustment's solves
@@ -419,6 +423,13 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   tie_options.num_threads = num_threads;
   const std::vector<HoleTie> ties = FindHoleTies(in, holes, tie_options);
   FinalOutcome result;
+  for (size_t i = 0; i < holes.size(); ++i) {
+    const auto tie = std::find_if(ties.begin(), ties.end(),
+                                  [&](const HoleTie& t) { return t.hole == static_cast<int>(i); });
+    result.holes_to_keep_whole.push_back(
+        tie != ties.end() ? OrthoDisc{tie->centre_mm, holes[i].radius_mm}
+                          : OrthoDisc{holes[i].near_part_mm, 1.5 * holes[i].radius_mm});
+  }
   result.fit_seconds = SecondsSince(start);
 
   // Tiles that no match placed, or that matches and holes tie to one
@@ -699,7 +710,8 @@ void RunMosaicStage(StageContext& context) {
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
   ortho_options.num_threads = context.num_threads;
-  OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options);
+  OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options,
+                                   final_outcome.holes_to_keep_whole);
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) {
     // Name the tiles the exposure fit found nothing in, and the likely cause.
@@ -800,7 +812,9 @@ void RunMosaicStage(StageContext& context) {
                              {"covered_fraction", ortho.summary.covered_fraction},
                              {"clipped_fraction", ortho.summary.clipped_fraction},
                              {"tile_px_per_mosaic_px", ortho.summary.tile_px_per_mosaic_px},
-                             {"lens_table_max_error_px", ortho.summary.lens_table_max_error_px}}},
+                             {"lens_table_max_error_px", ortho.summary.lens_table_max_error_px},
+                             {"features_kept_whole", ortho.summary.features_kept_whole},
+                             {"features_blended", ortho.summary.features_blended}}},
       {"world_file", WorldFilePath(kMosaicName).string()},
       {"scene_file", kSceneName},
       {"colmap", ReportObject{{"dir", kColmapDirName},
