@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <sstream>
 
@@ -106,6 +107,73 @@ double PlatePitchOnPartPx(const BoardSpec& board, const CameraModel& camera,
   return distance_mm ? board.pitch_mm * std::abs(camera.intrinsics(0)) / *distance_mm : 0.0;
 }
 
+std::vector<std::vector<int>> BoardMarkOrders(const BoardSpec& board) {
+  const int rows = board.rows, cols = board.cols;
+  const auto order = [&](const std::function<int(int, int)>& detected_of) {
+    std::vector<int> o(static_cast<size_t>(rows * cols));
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) o[static_cast<size_t>(r * cols + c)] = detected_of(r, c);
+    }
+    return o;
+  };
+  std::vector<std::vector<int>> orders = {order([&](int r, int c) { return r * cols + c; })};
+  if (board.type == BoardType::kCaltab) return orders;  // its triangle fixes the order
+  orders.push_back(order([&](int r, int c) { return (rows - 1 - r) * cols + (cols - 1 - c); }));
+  if (rows == cols) {
+    orders.push_back(order([&](int r, int c) { return c * cols + (rows - 1 - r); }));
+    orders.push_back(order([&](int r, int c) { return (cols - 1 - c) * cols + r; }));
+  }
+  return orders;
+}
+
+int AlignMarkOrder(const BoardSpec& board, const CameraModel& camera, const PlaneScene& scene,
+                   int reference_tile, const PlateObservation& reference, int tile,
+                   PlateObservation* observation) {
+  // The reference's marks on the part plane Z = 0 (the plate's height
+  // neglected), then in `tile`.
+  const Eigen::Matrix3d rot = RotationFromAngleAxis(scene.cam_from_part_r);
+  const Eigen::Vector3d& t = scene.cam_from_part_t_mm;
+  Eigen::Matrix3Xd rays;
+  if (!UnprojectPixels(camera, reference.q_px, &rays)) return 0;
+  const Eigen::Vector3d shift(scene.table_pos_mm[tile].x() - scene.table_pos_mm[reference_tile].x(),
+                              scene.table_pos_mm[tile].y() - scene.table_pos_mm[reference_tile].y(),
+                              0.0);
+  Eigen::Matrix3Xd p_cam(3, rays.cols());
+  for (Eigen::Index m = 0; m < rays.cols(); ++m) {
+    // p = lambda ray with (R' (p - t)).z = 0, moved by the tables' difference.
+    const Eigen::Vector3d ray_part = rot.transpose() * rays.col(m);
+    const double lambda = (rot.transpose() * t).z() / ray_part.z();
+    p_cam.col(m) = lambda * rays.col(m) + rot * shift;
+  }
+  Eigen::Matrix2Xd predicted;
+  if (!ProjectPoints(camera, p_cam, &predicted)) return 0;
+
+  const std::vector<std::vector<int>> orders = BoardMarkOrders(board);
+  int best = 0;
+  double best_cost = INFINITY;
+  for (size_t k = 0; k < orders.size(); ++k) {
+    double cost = 0.0;
+    for (Eigen::Index m = 0; m < predicted.cols(); ++m) {
+      const int d = orders[k][static_cast<size_t>(m)];
+      if (reference.weight(m) > 0 && observation->weight(d) > 0)
+        cost += (observation->q_px.col(d) - predicted.col(m)).squaredNorm();
+    }
+    if (cost < best_cost) {
+      best_cost = cost;
+      best = static_cast<int>(k);
+    }
+  }
+  if (best == 0) return 0;
+  const PlateObservation detected = *observation;
+  for (Eigen::Index m = 0; m < detected.q_px.cols(); ++m) {
+    const int d = orders[static_cast<size_t>(best)][static_cast<size_t>(m)];
+    observation->q_px.col(m) = detected.q_px.col(d);
+    observation->weight(m) = detected.weight(d);
+    observation->sigma_px(m) = detected.sigma_px(d);
+  }
+  return best;
+}
+
 PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
                             const CameraModel& camera, const PlaneBundleInput& registered_input,
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options) {
@@ -131,6 +199,16 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     image.pixels = tiles[i];
     whole[i] = DetectPlate(image, board, detection);
   });
+  // One numbering of the marks in every tile: the first whole plate's.
+  int num_reordered = 0;
+  const auto first_whole =
+      std::find_if(whole.begin(), whole.end(), [](const PlateObservation& o) { return o.usable; });
+  for (int i = static_cast<int>(first_whole - whole.begin()) + 1; i < num_tiles; ++i) {
+    if (!whole[i].usable) continue;
+    const int reference = static_cast<int>(first_whole - whole.begin());
+    if (AlignMarkOrder(board, camera, registered_scene, reference, *first_whole, i, &whole[i]) != 0)
+      ++num_reordered;
+  }
   const int num_marks = static_cast<int>(result.marks.mark_uv_mm.cols());
   // Per tile and mark: the located centre and its sigma (sigma 0: not seen).
   std::vector<Eigen::Matrix2Xd> q_px(num_tiles, Eigen::Matrix2Xd::Zero(2, num_marks));
@@ -261,6 +339,8 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
   brief << "plate on the part: whole in " << result.whole_in_tiles.size() << " tile(s), "
         << result.observations.size() << " marks in " << num_seen << " tile(s); height "
         << result.height_source;
+  if (num_reordered > 0)
+    brief << "; the marks renumbered in " << num_reordered << " tile(s) to match the first's";
   result.brief = brief.str();
   result.seconds = SecondsSince(start);
   return result;

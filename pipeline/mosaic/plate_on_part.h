@@ -98,6 +98,27 @@ struct PlateOnPart {
 double PlatePitchOnPartPx(const BoardSpec& board, const CameraModel& camera,
                           const PlaneScene& scene);
 
+// The orders in which DetectPlate may return one board's marks: the board's
+// turns that map its mark grid onto itself (the identity; a half turn unless
+// the board has an orientation mark, as the caltab's triangle; quarter turns
+// too for a square grid). Mirror images are not among them: DetectPlate
+// returns proper orders. Each order o lists, for every board mark m, the
+// detected index o[m] that is mark m under that turn.
+std::vector<std::vector<int>> BoardMarkOrders(const BoardSpec& board);
+
+// `observation`, the whole plate found in tile `tile`, in the order of
+// `reference`, the same plate found in tile `reference_tile`: of
+// BoardMarkOrders, the one under which its marks fall where the reference's,
+// carried through the part plane of `scene` into tile `tile`, predict them
+// (the plate's height neglected: it shifts all marks alike, by a few px,
+// where a turn moves them by up to the plate's size). Two tiles see the
+// plate turned alike, but a symmetric board's detector may still number
+// it from either end in each. Returns the order applied (0: the identity,
+// also when no mark can be carried).
+int AlignMarkOrder(const BoardSpec& board, const CameraModel& camera, const PlaneScene& scene,
+                   int reference_tile, const PlateObservation& reference, int tile,
+                   PlateObservation* observation);
+
 // Finds `board` lying on the part in `tiles` (gray, the camera's size), using
 // the registered scene (RegisterTiles' input and adjusted scene) to predict
 // marks where the plate is cut. found == false (brief says why) if no tile

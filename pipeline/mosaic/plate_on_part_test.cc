@@ -68,6 +68,80 @@ PlateOnPart PlateOf(const SyntheticPlane& s) {
   return plate;
 }
 
+// The orders a board's marks may be numbered in: the caltab's triangle fixes
+// one; a symmetric grid may be numbered from the far end, a square one from
+// any corner.
+TEST(PlateMarkOrder, BoardTurnsThatMapTheGridOntoItself) {
+  EXPECT_EQ(BoardMarkOrders(BoardSpec{}).size(), 1u);
+  BoardSpec chessboard;
+  chessboard.type = BoardType::kChessboard;
+  chessboard.rows = 7;
+  chessboard.cols = 9;
+  const std::vector<std::vector<int>> half = BoardMarkOrders(chessboard);
+  ASSERT_EQ(half.size(), 2u);
+  EXPECT_EQ(half[1][0], 62);  // the first corner is the last, numbered from the far end
+  EXPECT_EQ(half[1][8], 54);
+  BoardSpec circles;
+  circles.type = BoardType::kCircles;
+  const std::vector<std::vector<int>> quarter = BoardMarkOrders(circles);
+  ASSERT_EQ(quarter.size(), 4u);
+  for (const std::vector<int>& order : quarter) {  // each a permutation
+    std::vector<int> sorted = order;
+    std::sort(sorted.begin(), sorted.end());
+    for (int m = 0; m < 49; ++m) EXPECT_EQ(sorted[static_cast<size_t>(m)], m);
+  }
+}
+
+// A symmetric board seen whole in two neighbouring tiles and numbered from
+// another corner in the second: renumbered as in the first, each of the four
+// ways, though the plate lies 3 mm above the part (its height is neglected).
+TEST(PlateMarkOrder, SecondTileIsRenumberedAsTheFirst) {
+  const Registered r = Register(PlateScene());
+  const SyntheticPlane& s = r.s;
+  // Two tiles side by side (the grid's x step apart).
+  int a = -1, b = -1;
+  for (int i = 0; i < static_cast<int>(s.truth.table_pos_mm.size()) && a < 0; ++i) {
+    for (int j = 0; j < static_cast<int>(s.truth.table_pos_mm.size()); ++j) {
+      const Eigen::Vector2d d = s.truth.table_pos_mm[j] - s.truth.table_pos_mm[i];
+      if (std::abs(d.x() - 140.0) < 1.0 && std::abs(d.y()) < 1.0) a = i, b = j;
+    }
+  }
+  ASSERT_GE(a, 0);
+  // The plate in their overlap: the optical axis meets the part at -T
+  // (the gauge), so midway between the tiles' axes.
+  BoardSpec circles;
+  circles.type = BoardType::kCircles;
+  const Eigen::Matrix3Xd board = BoardPoints(circles);
+  const Eigen::Vector2d middle = -0.5 * (s.truth.table_pos_mm[a] + s.truth.table_pos_mm[b]);
+  const double c = std::cos(0.4), sn = std::sin(0.4), height_mm = 3.0;
+  const auto seen_in = [&](int tile) {
+    PlateObservation o;
+    o.q_px.resize(2, board.cols());
+    for (Eigen::Index m = 0; m < board.cols(); ++m) {
+      const Eigen::Vector3d p(middle.x() + c * board(0, m) + sn * board(1, m),
+                              middle.y() + sn * board(0, m) - c * board(1, m), height_mm);
+      o.q_px.col(m) = ProjectPartPoint(s.camera, s.truth, p, s.truth.table_pos_mm[tile]);
+      EXPECT_TRUE(o.q_px(0, m) > 0 && o.q_px(0, m) < s.camera.width_px && o.q_px(1, m) > 0 &&
+                  o.q_px(1, m) < s.camera.height_px)
+          << "mark " << m << " outside tile " << tile;
+    }
+    o.weight = Eigen::VectorXd::Ones(board.cols());
+    o.sigma_px = Eigen::VectorXd::Constant(board.cols(), 0.02);
+    o.usable = true;
+    return o;
+  };
+  const PlateObservation first = seen_in(a), second = seen_in(b);
+  const std::vector<std::vector<int>> orders = BoardMarkOrders(circles);
+  for (size_t k = 0; k < orders.size(); ++k) {
+    PlateObservation turned = second;  // the detector's index orders[k][m] is mark m
+    for (Eigen::Index m = 0; m < board.cols(); ++m)
+      turned.q_px.col(orders[k][static_cast<size_t>(m)]) = second.q_px.col(m);
+    EXPECT_EQ(AlignMarkOrder(circles, s.camera, r.scene, a, first, b, &turned),
+              static_cast<int>(k));
+    EXPECT_EQ(turned.q_px, second.q_px) << "order " << k;
+  }
+}
+
 TEST(IntrinsicsPrior, InformationIsTheInverseCovariance) {
   std::mt19937 rng(3);
   std::normal_distribution<double> normal;
