@@ -351,8 +351,8 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
         for (int col = first; col <= last; ++col) {
           const double beyond = std::hypot(col - disc.centre_px.x(), dy) - disc.radius_px;
           // Smoothstep from 1 at the radius to 0 a band beyond.
-          const double t = std::clamp(1.0 - beyond / disc.band_px, 0.0, 1.0);
-          const float s = static_cast<float>(t * t * (3.0 - 2.0 * t));
+          const double x = std::clamp(1.0 - beyond / disc.band_px, 0.0, 1.0);
+          const float s = static_cast<float>(x * x * (3.0 - 2.0 * x));
           if (s > share[col]) {
             share[col] = s;
             share_tile[col] = disc.tile;
