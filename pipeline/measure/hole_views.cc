@@ -59,7 +59,10 @@ HoleFit FitInTile(const HoleViewInputs& in, int tile, const Eigen::Vector2d& exp
 
 // The bore's bottom rim shows scaled about the nadir of the tile the mosaic
 // takes the hole from (bore_view.h); where tiles blend there are two such
-// rims and the kernel fits one free circle.
+// rims and the kernel fits one free circle. RenderingTile follows the seam
+// rule, not the features the mosaic keeps whole (orthorectify.h): those are
+// seen whole by a tile, so they reach this fit only when that tile's fit
+// failed.
 HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_mm,
                         double radius_mm) {
   const OrthoGrid& grid = in.mosaic_grid ? *in.mosaic_grid : in.geometry.grid;

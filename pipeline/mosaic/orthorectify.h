@@ -186,7 +186,9 @@ struct WholeDisc {
 
 // The tile that sees the whole mosaic disc (centre_px, radius_px) farthest
 // from its border (the least border distance over the centre and the rim,
-// sampled every few px), or -1 if none sees it whole.
+// sampled every few px), or -1 if none sees it whole. The measure stage
+// orders its views by the same rule through the lens (TilesSeeingDisc,
+// pipeline/measure/bore_view.h).
 int TileSeeingDiscBest(const OrthoGeometry& geometry, const Eigen::Vector2d& centre_px,
                        double radius_px);
 
