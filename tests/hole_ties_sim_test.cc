@@ -3,7 +3,8 @@
 // r0c2 only weak rescued pairs (0.27 and 0.41 px RMS) tied to its
 // neighbours (slow: needs a render).
 //  - Each tie's views, fitted on the TRUE scene, are the image of the true
-//    hole centre in their tiles, within their stated covariance.
+//    hole centre in their tiles, within their stated covariance; every hole
+//    a tile sees whole is located at its true centre.
 //  - `omm run`: the hole seen by r0c2 and r1c2 ties them and the tile's
 //    weak pairs count by their own scatter; every hole centre then sits
 //    within 0.05 raw px of the truth after a similarity fit (the table's
@@ -13,6 +14,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -65,8 +67,21 @@ TEST(HoleTiesSim, ViewsAreTheTrueCentresInTheirTiles) {
   for (const HoleTruth& hole : truth.holes)
     holes.push_back(
         {hole.center_part_mm + Eigen::Vector2d(0.3, -0.2), 0.5 * hole.nominal_diameter_mm});
-  const std::vector<HoleTie> ties = FindHoleTies(in, holes, HoleTieOptions{});
+  std::vector<std::optional<Eigen::Vector2d>> located_mm;
+  const std::vector<HoleTie> ties = FindHoleTies(in, holes, HoleTieOptions{}, &located_mm);
   ASSERT_GE(ties.size(), 6u);
+  // Every hole a tile sees whole is located where it is, those one tile
+  // sees (no tie) too: the mosaic keeps each whole about that centre.
+  ASSERT_EQ(located_mm.size(), holes.size());
+  int num_located = 0;
+  for (size_t k = 0; k < holes.size(); ++k) {
+    if (!located_mm[k]) continue;
+    ++num_located;
+    EXPECT_LT((*located_mm[k] - truth.holes[k].center_part_mm).norm(), 0.01) << truth.holes[k].name;
+  }
+  std::printf("%d of %zu holes located, %zu of them ties\n", num_located, holes.size(),
+              ties.size());
+  EXPECT_GT(num_located, static_cast<int>(ties.size()));
   double sum_chi2 = 0.0, max_error_px = 0.0;
   int num_views = 0;
   bool r0c2_r1c2 = false;

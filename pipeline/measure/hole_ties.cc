@@ -34,7 +34,8 @@ std::string HoleTieOptions::Check() const {
 }
 
 std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<TieHole>& holes,
-                                  const HoleTieOptions& options) {
+                                  const HoleTieOptions& options,
+                                  std::vector<std::optional<Eigen::Vector2d>>* located_mm) {
   if (const std::string why = options.Check(); !why.empty())
     throw InputError("HoleTieOptions", why);
   HoleViewInputs tile_inputs = in;
@@ -58,6 +59,7 @@ std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<Ti
   }
 
   std::vector<HoleTie> ties;
+  if (located_mm) located_mm->assign(holes.size(), std::nullopt);
   for (int i = 0; i < num_holes; ++i) {
     HoleTie tie;
     tie.hole = i;
@@ -71,9 +73,10 @@ std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<Ti
       tie.covariance_px2.push_back(covariance);
       sum_mm += in.geometry.grid.PartFromMosaic(view.circle.centre_px);
     }
-    if (static_cast<int>(tie.tiles.size()) < options.min_views) continue;
+    if (tie.tiles.empty()) continue;
     tie.centre_mm = sum_mm / static_cast<double>(tie.tiles.size());
-    ties.push_back(std::move(tie));
+    if (located_mm) (*located_mm)[static_cast<size_t>(i)] = tie.centre_mm;
+    if (static_cast<int>(tie.tiles.size()) >= options.min_views) ties.push_back(std::move(tie));
   }
   return ties;
 }

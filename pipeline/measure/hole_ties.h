@@ -79,10 +79,14 @@ struct HoleTie {
 
 // Fits every hole in the tiles that see it whole (FitHoleViews; the views
 // that resolve no wall near a nadir again with the pooled BorePrior) and
-// returns those seen by min_views tiles or more as ties. in.mosaic is not
-// used. Pure; throws InputError for invalid options.
-std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<TieHole>& holes,
-                                  const HoleTieOptions& options);
+// returns those seen by min_views tiles or more as ties. If `located_mm` is
+// given, it receives every hole's centre as its views put it (their mean,
+// part frame), nullopt where no tile sees it whole: where the mosaic keeps
+// it whole (orthorectify.h). in.mosaic is not used. Pure; throws InputError
+// for invalid options.
+std::vector<HoleTie> FindHoleTies(
+    const HoleViewInputs& in, const std::vector<TieHole>& holes, const HoleTieOptions& options,
+    std::vector<std::optional<Eigen::Vector2d>>* located_mm = nullptr);
 
 // A view's pixel and covariance in its tile: q = pixel(x) for the mosaic
 // position x, and Cov(q) = J C J' + min_sigma_px^2 I, C the covariance of

@@ -380,8 +380,8 @@ struct FinalOutcome {
   // Table priors left out (registration->input.tiles_without_table_prior),
   // each as it was found, and the bound it exceeded.
   std::vector<std::pair<TablePriorTest, double>> table_priors_left_out;
-  // The features' holes for the mosaic to keep whole (orthorectify.h): a
-  // tie's fitted centre, else where near_px puts it, within a quarter of the
+  // The features' holes for the mosaic to keep whole (orthorectify.h): where
+  // their views put them, else where near_px does, within a quarter of the
   // diameter (project-format.md).
   std::vector<OrthoDisc> holes_to_keep_whole;
   double fit_seconds = 0.0;      // the ties' hole fits
@@ -421,14 +421,13 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
                           tile_px_per_mosaic_px > 0.0 ? 1.0 / tile_px_per_mosaic_px : 1.0};
   HoleTieOptions tie_options;
   tie_options.num_threads = num_threads;
-  const std::vector<HoleTie> ties = FindHoleTies(in, holes, tie_options);
+  std::vector<std::optional<Eigen::Vector2d>> located_mm;
+  const std::vector<HoleTie> ties = FindHoleTies(in, holes, tie_options, &located_mm);
   FinalOutcome result;
   for (size_t i = 0; i < holes.size(); ++i) {
-    const auto tie = std::find_if(ties.begin(), ties.end(),
-                                  [&](const HoleTie& t) { return t.hole == static_cast<int>(i); });
     result.holes_to_keep_whole.push_back(
-        tie != ties.end() ? OrthoDisc{tie->centre_mm, holes[i].radius_mm}
-                          : OrthoDisc{holes[i].near_part_mm, 1.5 * holes[i].radius_mm});
+        located_mm[i] ? OrthoDisc{*located_mm[i], holes[i].radius_mm}
+                      : OrthoDisc{holes[i].near_part_mm, 1.5 * holes[i].radius_mm});
   }
   result.fit_seconds = SecondsSince(start);
 
