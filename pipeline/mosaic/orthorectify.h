@@ -23,21 +23,20 @@
 //     w_i = min(d_i / band, 1) exp((d_i - max_j d_j) / band),
 // so each pixel comes from essentially one tile except in a smooth band of a
 // few `blend_band_px` around the line where two tiles' border distances are
-// equal (the middle of their overlap): a feature is never cut, and far from
-// the seams the mosaic is one tile's pixels, not an average of two slightly
-// different blurs.
+// equal (the middle of their overlap): a flat feature is never cut, and far
+// from the seams the mosaic is one tile's pixels, not an average of two
+// slightly different blurs. Before blending, each tile's intensity is divided
+// by its exposure (exposure_compensation.h: gain and vignetting estimated from
+// the overlaps). Pixels no tile sees are 0; values are clamped to [0, 1].
 //
 // Features kept whole. The part's top surface is the same picture in every
 // tile, but a through-hole's bore wall is not: each tile sees it from its own
 // side. Where a seam crosses a hole (a third of the unseen projects' holes),
 // the mosaic showed both walls, or a ghost of one. A feature disc given to
-// Orthorectify is drawn from one tile alone, the one that sees it, grown by
-// whole_margin_px and a blend band, farthest from its border; the blend
+// Orthorectify, grown by whole_margin_px and a blend band, is drawn from one
+// tile alone: the one that sees it farthest from its border. The blend
 // returns to the rule above across that band, on the top surface outside the
-// rim. A disc no tile sees whole is blended by the rule. Before blending,
-// each tile's intensity is divided by its
-// exposure (exposure_compensation.h: gain and vignetting estimated from the
-// overlaps). Pixels no tile sees are 0; values are clamped to [0, 1].
+// rim. A disc no tile sees whole is blended by the rule.
 //
 // Sampling. The cubic interpolators are not low-pass filters: at a gsd
 // well above the tiles' ground pixel size (summary.tile_px_per_mosaic_px > ~1.5)
