@@ -420,6 +420,17 @@ std::vector<int> ChessboardSearchFactors(const cv::Size& size, const PlateDetect
   return factors;
 }
 
+// cornerSubPix's half window for corners spacing_px apart: well inside one
+// square.
+int CornerHalfWindow(double spacing_px) { return std::clamp(static_cast<int>(0.3 * spacing_px), 2, 11); }
+
+void RefineCorners(const ImageF& image, int half_window, std::vector<cv::Point2f>* corners) {
+  const cv::Mat as_float(static_cast<int>(image.rows()), static_cast<int>(image.cols()), CV_32F,
+                         const_cast<float*>(image.data()));
+  cv::cornerSubPix(as_float, *corners, cv::Size(half_window, half_window), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-4));
+}
+
 PlateObservation DetectChessboard(const GrayImage& image, const BoardSpec& board, const PlateDetectionOptions& options) {
   const int n = board.rows * board.cols;
   const cv::Mat gray8 = ToGray8(image);
@@ -437,7 +448,6 @@ PlateObservation DetectChessboard(const GrayImage& image, const BoardSpec& board
     break;
   }
   if (!found || static_cast<int>(corners.size()) != n) return Rejected(n, "plate not found");
-  // Search window: well inside one square.
   double spacing = 1e30;
   for (int r = 0; r < board.rows; ++r) {
     for (int c = 0; c + 1 < board.cols; ++c) {
@@ -445,10 +455,8 @@ PlateObservation DetectChessboard(const GrayImage& image, const BoardSpec& board
                                                    corners[static_cast<size_t>(r * board.cols + c)]));
     }
   }
-  const int half_window = std::clamp(static_cast<int>(0.3 * spacing), 2, 11);
-  const cv::Mat as_float(image.height(), image.width(), CV_32F, const_cast<float*>(image.pixels.data()));
-  cv::cornerSubPix(as_float, corners, cv::Size(half_window, half_window), cv::Size(-1, -1),
-                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-4));
+  const int half_window = CornerHalfWindow(spacing);
+  RefineCorners(image.pixels, half_window, &corners);
   MakeProper(board, &corners);
   PlateObservation observation = Rejected(n, "");
   for (int i = 0; i < n; ++i) {
@@ -465,6 +473,35 @@ PlateObservation DetectChessboard(const GrayImage& image, const BoardSpec& board
 }
 
 }  // namespace
+
+void RefineChessboardCorners(const ImageF& image, const Eigen::Matrix2Xd& rough_px, double spacing_px,
+                             double margin_px, double max_shift_px, Eigen::Matrix2Xd* refined_px,
+                             std::vector<bool>* found) {
+  const int half_window = CornerHalfWindow(spacing_px);
+  const double reach = half_window + margin_px;
+  *refined_px = rough_px;
+  found->assign(static_cast<size_t>(rough_px.cols()), false);
+  std::vector<cv::Point2f> corners;
+  std::vector<Eigen::Index> index;
+  for (Eigen::Index k = 0; k < rough_px.cols(); ++k) {
+    const Eigen::Vector2d q = rough_px.col(k);
+    if (q.x() - reach < 0 || q.y() - reach < 0 || q.x() + reach > image.cols() - 1 ||
+        q.y() + reach > image.rows() - 1)
+      continue;
+    corners.emplace_back(static_cast<float>(q.x()), static_cast<float>(q.y()));
+    index.push_back(k);
+  }
+  if (corners.empty()) return;
+  RefineCorners(image, half_window, &corners);
+  for (size_t j = 0; j < corners.size(); ++j) {
+    const Eigen::Vector2d q(corners[j].x, corners[j].y);
+    if ((q - rough_px.col(index[j])).norm() > max_shift_px || q.x() - reach < 0 || q.y() - reach < 0 ||
+        q.x() + reach > image.cols() - 1 || q.y() + reach > image.rows() - 1)
+      continue;
+    refined_px->col(index[j]) = q;
+    (*found)[static_cast<size_t>(index[j])] = true;
+  }
+}
 
 std::string PlateDetectionOptions::Check() const {
   if (!(threshold_window_fraction > 0.0 && threshold_window_fraction < 1.0)) {

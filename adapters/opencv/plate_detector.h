@@ -96,6 +96,15 @@ struct PlateDetectionOptions {
 // clamped to [min_weight, max_weight].
 double MarkWeight(double sigma_px, const PlateDetectionOptions& options);
 
+// Chessboard corners refined by cv::cornerSubPix in `image` (gray, [0, 1])
+// from rough positions (2 x N; a plate lying on the part predicts them where
+// a tile cuts it), with the window DetectPlate uses for corners spacing_px
+// apart. found[k] is false where the window leaves the image (with
+// margin_px) or the corner moved more than max_shift_px: not that corner.
+void RefineChessboardCorners(const ImageF& image, const Eigen::Matrix2Xd& rough_px,
+                             double spacing_px, double margin_px, double max_shift_px,
+                             Eigen::Matrix2Xd* refined_px, std::vector<bool>* found);
+
 // Detects `board` in `image`. q_px, weight and sigma_px are filled (size
 // rows*cols, BoardPoints' order) only when usable. image name is left empty.
 // Throws InputError if the options or the board are invalid.

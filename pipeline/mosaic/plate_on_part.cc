@@ -253,12 +253,12 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     result.initial_pose = seeded.plates[0];
   }
 
-  // 3. Marks predicted where the plate is cut (dots only: a chessboard's
-  // corners have no ellipse to fit).
+  // 3. Marks predicted where the plate is cut: a dot's ellipse fitted, a
+  // chessboard's corner refined as DetectPlate refines it.
   const bool dots = board.type != BoardType::kChessboard;
   const Eigen::Matrix3d rot = RotationFromAngleAxis(registered_scene.cam_from_part_r);
   const double radius_mm = 0.5 * board.dot_diameter_mm;
-  for (int i = 0; i < num_tiles && dots; ++i) {
+  for (int i = 0; i < num_tiles; ++i) {
     if (whole[i].usable) continue;
     const Eigen::Isometry3d cam_from_plate =
         CamFromPlate(registered_scene, result.initial_pose, registered_scene.table_pos_mm[i]);
@@ -267,6 +267,21 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     Eigen::Matrix2Xd predicted;
     Eigen::MatrixXd dq_dp, dq_dintrinsics;
     if (!ProjectPoints(camera, p_cam, &predicted, &dq_dp, &dq_dintrinsics)) continue;
+    if (!dots) {
+      // The corners' spacing: the image of one pitch along the plate's x.
+      const double spacing_px =
+          (dq_dp.block<2, 3>(0, 0) * cam_from_plate.linear().col(0) * board.pitch_mm).norm();
+      Eigen::Matrix2Xd refined;
+      std::vector<bool> found;
+      RefineChessboardCorners(tiles[i], predicted, spacing_px, options.border_margin_px,
+                              options.max_offset_px, &refined, &found);
+      for (int m = 0; m < num_marks; ++m) {
+        if (!found[static_cast<size_t>(m)]) continue;
+        q_px[i].col(m) = refined.col(m);
+        sigma_px[i](m) = std::max(options.detection.chessboard_sigma_px, options.min_mark_sigma_px);
+      }
+      continue;
+    }
     for (int m = 0; m < num_marks; ++m) {
       // The dot's image: the circle through the local affine of the plane.
       const Eigen::Matrix2d j =

@@ -14,10 +14,12 @@
 // seed's Procrustes fit (plane_seed.h) of those marks; through the registered
 // scene every mark is then predicted in every other tile, and marks that lie
 // wholly inside a tile where the plate is cut by the border are located there:
-// the centroid of the dark pixels around the prediction (a few passes), then
-// the sub-pixel ellipse fit (pipeline/core/subpixel_edges.h). Every centre is
-// corrected for the perspective bias of a circle's image (pipeline/
-// calibration/perspective_bias.h) with the tile's plate pose.
+// a dot by the centroid of the dark pixels around the prediction (a few
+// passes), then the sub-pixel ellipse fit (pipeline/core/subpixel_edges.h); a
+// chessboard's corner by cv::cornerSubPix from the prediction, with the
+// detector's window (RefineChessboardCorners). Every dot's centre is corrected
+// for the perspective bias of a circle's image (pipeline/calibration/
+// perspective_bias.h) with the tile's plate pose.
 //
 // Height of the marks above the top surface (the plate's thickness). Given
 // (PlateOnPartOptions::height_mm, project.yaml mosaic.plate_height_mm), it is

@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <memory>
 #include <stdexcept>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -50,10 +51,12 @@ struct Case {
   FinalAdjustment with_given_height;
 };
 
-Case RunCase(int seed) {
+Case RunCase(int seed, BoardType board = BoardType::kCaltab) {
   Case c;
   c.seed = seed;
-  const testing::CachedProject cached = testing::SimulatedProject("demo", seed);
+  const testing::CachedProject cached =
+      board == BoardType::kCaltab ? testing::SimulatedProject("demo", seed)
+                                  : testing::SimulatedProject("demo", seed, 20, false, {}, board);
   c.truth = cached.truth;
   const Project project = LoadProject(cached.project_dir);
   std::vector<NamedImage> calib;
@@ -115,30 +118,34 @@ class PlateOnPartSim : public ::testing::Test {
 };
 std::vector<Case>* PlateOnPartSim::cases_ = nullptr;
 
+// The located marks' errors against their true pixels (the truth camera,
+// the actual table position, part_from_plate): rms and largest, px.
+std::pair<double, double> MarkErrorsPx(const Case& c) {
+  double sum_sq = 0, max_px = 0;
+  for (const PlateMarkObservation& obs : c.plate.observations) {
+    Eigen::Isometry3d part_at_table = Eigen::Isometry3d::Identity();
+    part_at_table.translation().head<2>() = c.truth.tiles[obs.tile].actual_mm;
+    const Eigen::Vector3d p_cam = c.truth.cam_from_part * part_at_table * *c.truth.part_from_plate *
+                                  Eigen::Vector3d(c.plate.marks.mark_uv_mm(0, obs.mark),
+                                                  c.plate.marks.mark_uv_mm(1, obs.mark), 0);
+    Eigen::Matrix2Xd q;
+    EXPECT_TRUE(ProjectPoints(c.truth.camera.model, Eigen::Matrix3Xd(p_cam), &q));
+    const double e = (obs.q_px - q.col(0)).norm();
+    sum_sq += e * e;
+    max_px = std::max(max_px, e);
+  }
+  return {std::sqrt(sum_sq / c.plate.observations.size()), max_px};
+}
+
 // Every located mark (whole plates and marks predicted where the plate is
-// cut, perspective bias corrected) against its true pixel: the truth camera,
-// the actual table position, part_from_plate.
+// cut, perspective bias corrected) against its true pixel.
 TEST_F(PlateOnPartSim, MarksAgreeWithTheTruth) {
   for (const Case& c : Cases()) {
     SCOPED_TRACE("seed " + std::to_string(c.seed));
     ASSERT_TRUE(c.plate.found) << c.plate.brief;
     ASSERT_TRUE(c.truth.part_from_plate.has_value());
     EXPECT_GE(c.plate.whole_in_tiles.size(), 1u);
-    double sum_sq = 0, max_px = 0;
-    for (const PlateMarkObservation& obs : c.plate.observations) {
-      Eigen::Isometry3d part_at_table = Eigen::Isometry3d::Identity();
-      part_at_table.translation().head<2>() = c.truth.tiles[obs.tile].actual_mm;
-      const Eigen::Vector3d p_cam = c.truth.cam_from_part * part_at_table *
-                                    *c.truth.part_from_plate *
-                                    Eigen::Vector3d(c.plate.marks.mark_uv_mm(0, obs.mark),
-                                                    c.plate.marks.mark_uv_mm(1, obs.mark), 0);
-      Eigen::Matrix2Xd q;
-      ASSERT_TRUE(ProjectPoints(c.truth.camera.model, Eigen::Matrix3Xd(p_cam), &q));
-      const double e = (obs.q_px - q.col(0)).norm();
-      sum_sq += e * e;
-      max_px = std::max(max_px, e);
-    }
-    const double rms = std::sqrt(sum_sq / c.plate.observations.size());
+    const auto [rms, max_px] = MarkErrorsPx(c);
     std::printf(
         "seed %d: %zu marks in %zu tiles (whole in %zu): error rms %.4f px, max %.4f px; "
         "largest bias correction %.4f px\n",
@@ -268,6 +275,34 @@ TEST_F(PlateOnPartSim, IntrinsicsPriorAndJointCovarianceRoundTrip) {
     EXPECT_EQ(back.scene.plates[0].height_mm, a.scene.plates[0].height_mm);
     EXPECT_TRUE(back.intrinsics_refined);
   }
+}
+
+// A chessboard on the part, whole in one tile: its corners are followed into
+// the tiles that cut it (cornerSubPix from the registered scene's
+// prediction), so that its height is estimated and its pitch sets the scale;
+// whole in one tile alone it could only check the table's (demo seed 2 with
+// a chessboard, rendered as the caltab's demo).
+TEST(PlateOnPartChessboard, CornersFollowedWhereTilesCutItSetTheScale) {
+  const Case c = RunCase(2, BoardType::kChessboard);
+  ASSERT_TRUE(c.plate.found) << c.plate.brief;
+  ASSERT_EQ(c.plate.whole_in_tiles.size(), 1u);
+  EXPECT_GE(c.plate.seen_in_tiles.size(), 2u);
+  EXPECT_TRUE(c.plate.scale_reference);
+  const auto [rms, max_px] = MarkErrorsPx(c);
+  std::printf("%zu corners in %zu tiles: error rms %.4f px, max %.4f px\n",
+              c.plate.observations.size(), c.plate.seen_in_tiles.size(), rms, max_px);
+  // Well inside the corners' assumed sigma (PlateDetectionOptions::
+  // chessboard_sigma_px, 0.1 px), which weighs them.
+  EXPECT_LT(rms, 0.05);
+  EXPECT_LT(max_px, 0.1);
+  ASSERT_TRUE(c.with_plate.summary.usable) << c.with_plate.summary.brief;
+  std::vector<Eigen::Vector2d> actual;
+  for (const TileTruth& tile : c.truth.tiles) actual.push_back(tile.actual_mm);
+  const double with = ScaleErrorPpm(c.with_plate.scene.table_pos_mm, actual);
+  std::printf("scale error with the chessboard %.2f +- %.2f ppm, without %.2f ppm sigma\n", with,
+              c.with_plate.scale_sigma_ppm, c.without_plate.scale_sigma_ppm);
+  EXPECT_LT(std::abs(with), 3 * c.with_plate.scale_sigma_ppm);
+  EXPECT_LT(c.with_plate.scale_sigma_ppm, c.without_plate.scale_sigma_ppm);
 }
 
 // The plate lying on the part (the demo preset's), searched for in every tile
