@@ -187,6 +187,13 @@ TEST_F(MosaicStageTest, ReportHasTheContractFields) {
   // Demo tiles all overlap their neighbours: none is held by its prior.
   EXPECT_TRUE(
       std::get<ReportValue::Array>(Member(mosaic.extra, "tiles_held_by_prior")->data()).empty());
+  // Every feature's hole is drawn from one tile (orthorectify.h): the demo's
+  // holes are all seen whole by a tile.
+  const ReportObject* ortho = AsObject(Member(mosaic.extra, "ortho"));
+  ASSERT_NE(ortho, nullptr);
+  const std::optional<double> kept = AsNumber(Member(*ortho, "features_kept_whole"));
+  ASSERT_TRUE(kept.has_value());
+  EXPECT_EQ(*kept, static_cast<double>(LoadProject(ProjectDir()).features.size()));
 
   const SavedScene scene = ReadSceneJson(Out() / "mosaic" / "scene.json");
   ASSERT_EQ(scene.scene.table_pos_mm.size(), Truth().tiles.size());
