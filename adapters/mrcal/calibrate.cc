@@ -61,9 +61,17 @@ CalibrationProblem StageProblem(bool core, bool distortions, bool regularization
   return problem;
 }
 
-// One mrcal_optimize on the record, in place.
+// One mrcal_optimize on the record, in place. A splined lens's solve is
+// brought to mrcal's optimum first (ConvergeByGaussNewton): there
+// mrcal_optimize's Gauss-Newton steps along the poses' weakly determined
+// translations shrink by ~0.85 each, and on lens-mismatch seed 284 its three
+// solves took 116, 64 and 56 iterations (0.55 s) while the cost changed in
+// its sixth digit. Searched along, the steps get there in 35, 24 and 14
+// (0.17 s), and mrcal_optimize then stops within 4 ms; the reports'
+// values moved by at most 0.04 sigma.
 void Solve(SolveRecord* record) {
   mrcal_internal::Problem problem = mrcal_internal::ToProblem(*record);
+  if (IsSplined(record->camera.lens_model)) mrcal_internal::ConvergeByGaussNewton(&problem);
   mrcal_internal::Optimize(&problem);
   mrcal_internal::UpdateRecord(problem, record);
 }

@@ -180,6 +180,94 @@ bool EvaluateCallback(const Problem& p, Eigen::VectorXd* x,
   return true;
 }
 
+namespace {
+
+// Where the optimised values sit in mrcal's state vector; < 0 if not
+// optimised. One camera at the reference: no extrinsics, no points.
+struct StateLayout {
+  int intrinsics, first_intrinsic, num_intrinsics, frames, calobject_warp;
+};
+
+StateLayout Layout(const Problem& p) {
+  StateLayout layout;
+  const int n_frames = NumFrames(p), n_obs = NumObs(p);
+  layout.intrinsics = mrcal_state_index_intrinsics(0, 1, 0, n_frames, 0, 0, n_obs, p.selections,
+                                                   &p.lensmodel);
+  layout.num_intrinsics = mrcal_num_states_intrinsics(1, p.selections, &p.lensmodel);
+  // Every lens model here has a core (fx, fy, cx, cy) ahead of its other
+  // parameters; the state holds the core only if it is optimised.
+  layout.first_intrinsic = p.selections.do_optimize_intrinsics_core ? 0 : 4;
+  layout.frames =
+      mrcal_state_index_frames(0, 1, 0, n_frames, 0, 0, n_obs, p.selections, &p.lensmodel);
+  layout.calobject_warp =
+      mrcal_state_index_calobject_warp(1, 0, n_frames, 0, 0, n_obs, p.selections, &p.lensmodel);
+  return layout;
+}
+
+}  // namespace
+
+Eigen::VectorXd PackedState(const Problem& p) {
+  const StateLayout layout = Layout(p);
+  Eigen::VectorXd b(p.NumStates());
+  if (layout.intrinsics >= 0) {
+    for (int k = 0; k < layout.num_intrinsics; ++k) {
+      b(layout.intrinsics + k) = p.intrinsics[layout.first_intrinsic + k];
+    }
+  }
+  if (layout.frames >= 0) {
+    for (int f = 0; f < NumFrames(p); ++f) {
+      for (int k = 0; k < 3; ++k) {
+        b(layout.frames + 6 * f + k) = p.frames_toref[f].r.xyz[k];
+        b(layout.frames + 6 * f + 3 + k) = p.frames_toref[f].t.xyz[k];
+      }
+    }
+  }
+  if (layout.calobject_warp >= 0) {
+    b(layout.calobject_warp) = p.calobject_warp.x2;
+    b(layout.calobject_warp + 1) = p.calobject_warp.y2;
+  }
+  return b.cwiseQuotient(UnpackScale(p));
+}
+
+void SetPackedState(const Eigen::VectorXd& packed, Problem* p) {
+  const StateLayout layout = Layout(*p);
+  const Eigen::VectorXd b = packed.cwiseProduct(UnpackScale(*p));
+  if (layout.intrinsics >= 0) {
+    for (int k = 0; k < layout.num_intrinsics; ++k) {
+      p->intrinsics[layout.first_intrinsic + k] = b(layout.intrinsics + k);
+    }
+  }
+  if (layout.frames >= 0) {
+    for (int f = 0; f < NumFrames(*p); ++f) {
+      for (int k = 0; k < 3; ++k) {
+        p->frames_toref[f].r.xyz[k] = b(layout.frames + 6 * f + k);
+        p->frames_toref[f].t.xyz[k] = b(layout.frames + 6 * f + 3 + k);
+      }
+    }
+  }
+  if (layout.calobject_warp >= 0) {
+    p->calobject_warp.x2 = b(layout.calobject_warp);
+    p->calobject_warp.y2 = b(layout.calobject_warp + 1);
+  }
+}
+
+GaussNewtonSummary ConvergeByGaussNewton(Problem* p, bool line_search) {
+  GaussNewtonOptions options;
+  options.step_tolerance = kMrcalUpdateThreshold;
+  options.line_search = line_search;
+  Problem trial = *p;
+  Eigen::VectorXd state = PackedState(*p);
+  const GaussNewtonSummary summary = MinimizeByGaussNewton(
+      [&trial](const Eigen::VectorXd& s, Eigen::VectorXd* x,
+               Eigen::SparseMatrix<double, Eigen::RowMajor>* J) {
+        SetPackedState(s, &trial);
+        return EvaluateCallback(trial, x, J);
+      },
+      options, &state);
+  SetPackedState(state, p);
+  return summary;
+}
+
 Eigen::VectorXd UnpackScale(const Problem& p) {
   Eigen::VectorXd d = Eigen::VectorXd::Ones(p.NumStates());
   mrcal_unpack_solver_state_vector(d.data(), 1, 0, NumFrames(p), 0, 0, p.selections,

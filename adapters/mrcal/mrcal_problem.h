@@ -15,6 +15,7 @@
 
 #include "adapters/mrcal/mrcal_c.h"
 #include "pipeline/core/calibration_result.h"
+#include "pipeline/core/gauss_newton.h"
 
 namespace omm::mrcal_internal {
 
@@ -58,6 +59,24 @@ bool EvaluateCallback(const Problem& problem, Eigen::VectorXd* x,
 // D: the factors mrcal_unpack_solver_state_vector multiplies a packed state by
 // (b = D b*), size NumStates().
 Eigen::VectorXd UnpackScale(const Problem& problem);
+
+// The optimised values (intrinsics, frames, board warp, as the selections
+// say) in mrcal's packed state vector b*, and back.
+Eigen::VectorXd PackedState(const Problem& problem);
+void SetPackedState(const Eigen::VectorXd& packed, Problem* problem);
+
+// mrcal_optimize's convergence test: it stops when no component of a step in
+// the packed state exceeds this (libdogleg's update threshold, as mrcal 2.2
+// sets it; not settable through its API).
+constexpr double kMrcalUpdateThreshold = 1e-6;
+
+// The problem brought to mrcal_optimize's convergence, in place, by
+// Gauss-Newton with a line search (gauss_newton.h) on
+// mrcal_optimizer_callback: the same measurements, weights, regularization
+// and outliers, so the same optimum. Used ahead of mrcal_optimize where its
+// steps converge slowly; outlier rejection stays mrcal_optimize's.
+// `line_search` false: Gauss-Newton's steps as they are.
+GaussNewtonSummary ConvergeByGaussNewton(Problem* problem, bool line_search = true);
 
 Vector6d RtMrcalFromOurs(const Vector6d& rt_cam_from_plate, const BoardSpec& board);
 Vector6d RtOursFromMrcal(const Vector6d& rt_cam_from_board, const BoardSpec& board);
