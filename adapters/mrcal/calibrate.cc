@@ -63,8 +63,9 @@ CalibrationProblem StageProblem(bool core, bool distortions, bool regularization
 
 // One mrcal_optimize on the record, in place. A splined lens's solve is
 // brought to mrcal's optimum first (ConvergeByGaussNewton): there
-// mrcal_optimize's Gauss-Newton steps along the poses' weakly determined
-// translations shrink by ~0.85 each, and on lens-mismatch seed 284 its three
+// mrcal_optimize's Gauss-Newton steps along a weakly determined direction
+// (the plate poses turning together about the camera while the spline
+// follows) shrink by ~0.85 each, and on lens-mismatch seed 284 its three
 // solves took 116, 64 and 56 iterations (0.55 s) while the cost changed in
 // its sixth digit. Searched along, the steps get there in 35, 24 and 14
 // (0.17 s), and mrcal_optimize then stops within 4 ms; the reports'
