@@ -19,6 +19,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <numeric>
 #include <optional>
 #include <string>
 #include <vector>
@@ -364,7 +365,16 @@ void RunMeasureStage(StageContext& context) {
   std::vector<LocatedFeature> located(num_features);
   std::mutex progress_mutex;
   int num_located = 0;
-  ParallelFor(num_features, context.num_threads, [&](int i) {
+  // Largest first: a hole's fits take time with its rim (0.006 s for 12 mm,
+  // 0.04-0.08 s for 50-60 mm on lens-mismatch seed 284), and a large one
+  // started last kept one thread busy alone.
+  std::vector<int> largest_first(num_features);
+  std::iota(largest_first.begin(), largest_first.end(), 0);
+  std::stable_sort(largest_first.begin(), largest_first.end(), [&](int a, int b) {
+    return project.features[a].diameter_mm > project.features[b].diameter_mm;
+  });
+  ParallelFor(num_features, context.num_threads, [&](int n) {
+    const int i = largest_first[n];
     const FeatureSpec& spec = project.features[i];
     located[i] = LocateFeature(spec, inputs, saved);
     const std::lock_guard lock(progress_mutex);
