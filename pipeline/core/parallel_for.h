@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <atomic>
 #include <exception>
+#include <numeric>
 #include <thread>
 #include <vector>
 
@@ -57,6 +58,17 @@ void ParallelFor(int n, int num_threads, Fn fn) {
   for (const std::exception_ptr& error : errors) {
     if (error) std::rethrow_exception(error);
   }
+}
+
+// The indices of `costs` from the largest to the smallest (equal ones in
+// index order): the order to hand ParallelFor items of uneven cost in, so
+// that no costly one starts last and keeps one thread busy alone.
+inline std::vector<int> CostliestFirst(const std::vector<double>& costs) {
+  std::vector<int> order(costs.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return costs[a] > costs[b]; });
+  return order;
 }
 
 }  // namespace omm

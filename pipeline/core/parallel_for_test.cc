@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -34,6 +35,11 @@ TEST(ParallelFor, RethrowsTheLowestIndexsErrorAfterAllItemsRan) {
     }
     EXPECT_EQ(ran.load(), 100);
   }
+}
+
+TEST(CostliestFirst, OrdersByCostDescendingEqualOnesByIndex) {
+  EXPECT_EQ(CostliestFirst({12.0, 50.0, 40.0, 50.0, 0.0}), (std::vector<int>{1, 3, 2, 0, 4}));
+  EXPECT_TRUE(CostliestFirst({}).empty());
 }
 
 // The CPUs the caller may run on, not the machine's: a thread limited to

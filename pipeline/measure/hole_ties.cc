@@ -45,7 +45,11 @@ std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<Ti
   const auto fit = [&](int i) {
     views[i] = FitHoleViews(tile_inputs, holes[i].near_part_mm, holes[i].radius_mm);
   };
-  ParallelFor(num_holes, options.num_threads, fit);
+  // Largest first: a hole's fits take time with its rim.
+  std::vector<double> radii_mm;
+  for (const TieHole& hole : holes) radii_mm.push_back(hole.radius_mm);
+  const std::vector<int> largest_first = CostliestFirst(radii_mm);
+  ParallelFor(num_holes, options.num_threads, [&](int n) { fit(largest_first[n]); });
   std::vector<BoreEvidence> bores;
   for (const HoleViews& hole : views) bores.push_back(BoreEvidenceOf(hole.fits));
   tile_inputs.bore_prior = PoolBorePrior(bores, options.min_bore_prior_views);
