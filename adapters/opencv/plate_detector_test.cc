@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "adapters/opencv/image_io.h"
 #include "pipeline/core/statistics.h"
@@ -75,6 +76,72 @@ std::vector<double> DistancesToReference(const PlateObservation& o, const Eigen:
 
 #define SKIP_WITHOUT_DATA() \
   if (!std::filesystem::is_directory(SharedDataDir())) GTEST_SKIP() << "no " << SharedDataDir()
+
+// A chessboard of 24 px squares, 6 x 5 of them, turned by 10 deg, each
+// pixel the mean of 8 x 8 samples of its area (pixel centres at integers),
+// blurred by a Gaussian of 0.7 px: its 5 x 4 inner corners are known
+// exactly.
+ImageF RenderedChessboard(Eigen::Matrix2Xd* corners_px) {
+  const double angle = 10.0 * M_PI / 180.0, square_px = 24.0;
+  const Eigen::Vector2d origin(40.0, 30.0), u(std::cos(angle), std::sin(angle)),
+      v(-std::sin(angle), std::cos(angle));
+  ImageF image(200, 240);
+  constexpr int kSamples = 8;
+  for (int y = 0; y < image.rows(); ++y) {
+    for (int x = 0; x < image.cols(); ++x) {
+      double sum = 0.0;
+      for (int sy = 0; sy < kSamples; ++sy) {
+        for (int sx = 0; sx < kSamples; ++sx) {
+          const Eigen::Vector2d p(x - 0.5 + (sx + 0.5) / kSamples, y - 0.5 + (sy + 0.5) / kSamples);
+          const double a = (p - origin).dot(u) / square_px, b = (p - origin).dot(v) / square_px;
+          const bool on_board = a >= 0 && b >= 0 && a < 6 && b < 5;
+          sum += !on_board ? 0.5 : (static_cast<int>(a) + static_cast<int>(b)) % 2 ? 0.9 : 0.1;
+        }
+      }
+      image(y, x) = static_cast<float>(sum / (kSamples * kSamples));
+    }
+  }
+  cv::Mat as_mat(static_cast<int>(image.rows()), static_cast<int>(image.cols()), CV_32F,
+                 image.data());  // row-major, as ImageF
+  cv::GaussianBlur(as_mat.clone(), as_mat, cv::Size(0, 0), 0.7);  // the simulator's lens blur
+  corners_px->resize(2, 20);
+  for (int j = 1, k = 0; j <= 4; ++j)
+    for (int i = 1; i <= 5; ++i, ++k) corners_px->col(k) = origin + square_px * (i * u + j * v);
+  return image;
+}
+
+// Rough corners up to 0.9 px off are refined to the drawn ones; one whose
+// window would leave the image, and one that moved more than allowed (3 px
+// off, 2 px allowed), are not found, and keep their rough position.
+TEST(RefineChessboardCorners, RoughCornersRefinedToTheTruthOrNotFound) {
+  Eigen::Matrix2Xd truth;
+  const ImageF image = RenderedChessboard(&truth);
+  Eigen::Matrix2Xd rough(2, truth.cols() + 2);
+  for (Eigen::Index k = 0; k < truth.cols(); ++k) {
+    rough.col(k) = truth.col(k) + 0.9 * Eigen::Vector2d(std::cos(k), std::sin(k));
+  }
+  rough.col(truth.cols()) << 6.0, 100.0;  // half window 7 px + margin 2 px reach past x = 0
+  rough.col(truth.cols() + 1) = truth.col(7) + Eigen::Vector2d(3.0, 0.0);
+  Eigen::Matrix2Xd refined;
+  std::vector<bool> found;
+  RefineChessboardCorners(image, rough, 24.0, 2.0, 2.0, &refined, &found);
+  ASSERT_EQ(found.size(), static_cast<size_t>(rough.cols()));
+  double worst_px = 0.0;
+  for (Eigen::Index k = 0; k < truth.cols(); ++k) {
+    ASSERT_TRUE(found[k]) << k;
+    worst_px = std::max(worst_px, (refined.col(k) - truth.col(k)).norm());
+  }
+  // cornerSubPix's own error on these corners: 0.036 px at most, the same
+  // from any start within the pixel; the detector weighs corners as 0.1 px.
+  EXPECT_LT(worst_px, 0.05);
+  Eigen::Matrix2Xd from_truth;
+  RefineChessboardCorners(image, truth, 24.0, 2.0, 2.0, &from_truth, &found);
+  EXPECT_LT((from_truth - refined.leftCols(truth.cols())).cwiseAbs().maxCoeff(), 1e-3);
+  for (const Eigen::Index k : {truth.cols(), truth.cols() + 1}) {
+    EXPECT_FALSE(found[k]) << k;
+    EXPECT_EQ(refined.col(k), rough.col(k)) << k;
+  }
+}
 
 TEST(PlateDetector, OptionsCheck) {
   EXPECT_EQ(PlateDetectionOptions{}.Check(), "");
