@@ -232,10 +232,10 @@ bool SchurCovariance(ceres::Problem* problem,
       }
     }
     // u's upper triangle only (mirrored into s below): half the work.
-    for (size_t a = 0; a < scene_entries.size(); ++a) {
-      const auto [i, x] = scene_entries[a];
-      for (size_t b = a; b < scene_entries.size(); ++b) {
-        const auto [j, y] = scene_entries[b];
+    for (size_t e1 = 0; e1 < scene_entries.size(); ++e1) {
+      const auto [i, x] = scene_entries[e1];
+      for (size_t e2 = e1; e2 < scene_entries.size(); ++e2) {
+        const auto [j, y] = scene_entries[e2];
         u(std::min(i, j), std::max(i, j)) += x * y;
       }
     }
@@ -255,8 +255,8 @@ bool SchurCovariance(ceres::Problem* problem,
     v_inverse[k] = v[k].inverse();
     const Eigen::MatrixXd update = w[k].transpose() * v_inverse[k] * w[k];
     const std::vector<int>& cols = columns[k];  // ascending: the upper triangle
-    for (size_t b = 0; b < cols.size(); ++b)
-      for (size_t a = 0; a <= b; ++a) s(cols[a], cols[b]) -= update(a, b);
+    for (size_t c2 = 0; c2 < cols.size(); ++c2)
+      for (size_t c1 = 0; c1 <= c2; ++c1) s(cols[c1], cols[c2]) -= update(c1, c2);
   }
   s.triangularView<Eigen::StrictlyLower>() = s.transpose();
   // Rank: the Jacobi-scaled reduced system's eigenvalues.
