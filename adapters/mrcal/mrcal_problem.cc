@@ -251,10 +251,9 @@ void SetPackedState(const Eigen::VectorXd& packed, Problem* p) {
   }
 }
 
-GaussNewtonSummary ConvergeByGaussNewton(Problem* p, bool line_search) {
+GaussNewtonSummary ConvergeByGaussNewton(Problem* p) {
   GaussNewtonOptions options;
   options.step_tolerance = kMrcalUpdateThreshold;
-  options.line_search = line_search;
   Problem trial = *p;
   Eigen::VectorXd state = PackedState(*p);
   const GaussNewtonSummary summary = MinimizeByGaussNewton(

@@ -75,8 +75,7 @@ constexpr double kMrcalUpdateThreshold = 1e-6;
 // mrcal_optimizer_callback: the same measurements, weights, regularization
 // and outliers, so the same optimum. Used ahead of mrcal_optimize where its
 // steps converge slowly; outlier rejection stays mrcal_optimize's.
-// `line_search` false: Gauss-Newton's steps as they are.
-GaussNewtonSummary ConvergeByGaussNewton(Problem* problem, bool line_search = true);
+GaussNewtonSummary ConvergeByGaussNewton(Problem* problem);
 
 Vector6d RtMrcalFromOurs(const Vector6d& rt_cam_from_plate, const BoardSpec& board);
 Vector6d RtOursFromMrcal(const Vector6d& rt_cam_from_board, const BoardSpec& board);
