@@ -14,7 +14,10 @@
 
 #include <ceres/ceres.h>
 
+#include <Eigen/QR>
+
 #include "adapters/ceres/plane_costs.h"
+#include "pipeline/core/parallel_for.h"
 #include "pipeline/core/timing.h"
 
 namespace omm {
@@ -189,21 +192,23 @@ bool SchurCovariance(ceres::Problem* problem,
   ceres::CRSMatrix jacobian;
   if (!problem->Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return false;
 
-  // Per point, the scene columns its rows touch (ascending) and its block of
-  // W = J_point^T J_scene over those alone: a point is seen by a few tiles
-  // and, through a splined lens, depends on the knots near its pixels; with
-  // the upper triangles only, the reduced system took 0.066 s instead of
-  // 0.086 s on lens-mismatch seed 284 (m = 180, 2454 points).
-  std::vector<std::vector<int>> columns(num_points);
-  const auto point_of_row = [&](int row) {
-    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
-      if (jacobian.cols[e] < point_columns) return jacobian.cols[e] / 2;
-    }
-    return -1;
-  };
+  // Per point, its rows and the scene columns they touch (ascending): a point
+  // is seen by a few tiles and, through a splined lens, depends on the knots
+  // near its pixels. Its share of the reduced system, J_k' J_k - W_k' V_k^-1
+  // W_k (J_k its rows' scene columns, W_k = P_k' J_k, V_k = P_k' P_k, P_k
+  // their point columns), is formed densely over those columns, as a
+  // product of rank num_rows - 2, and added to S once.
+  std::vector<std::vector<int>> rows(num_points), columns(num_points);
+  std::vector<int> other_rows;  // rows of priors, which no point enters
   for (int row = 0; row < jacobian.num_rows; ++row) {
-    const int point = point_of_row(row);
-    if (point < 0) continue;
+    int point = -1;
+    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1] && point < 0; ++e)
+      if (jacobian.cols[e] < point_columns) point = jacobian.cols[e] / 2;
+    if (point < 0) {
+      other_rows.push_back(row);
+      continue;
+    }
+    rows[point].push_back(row);
     for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
       if (jacobian.cols[e] >= point_columns)
         columns[point].push_back(jacobian.cols[e] - point_columns);
@@ -213,51 +218,76 @@ bool SchurCovariance(ceres::Problem* problem,
     std::sort(c.begin(), c.end());
     c.erase(std::unique(c.begin(), c.end()), c.end());
   }
-  std::vector<Eigen::Matrix2d> v(num_points, Eigen::Matrix2d::Zero());
-  std::vector<Eigen::MatrixXd> w(num_points);  // 2 x columns[point].size()
-  for (int k = 0; k < num_points; ++k) w[k] = Eigen::MatrixXd::Zero(2, columns[k].size());
-  Eigen::MatrixXd u = Eigen::MatrixXd::Zero(m, m);
-  std::vector<std::pair<int, double>> scene_entries;  // of a row: (column - point_columns, value)
-  for (int row = 0; row < jacobian.num_rows; ++row) {
-    int point = -1;
-    double p[2] = {0, 0};
-    scene_entries.clear();
-    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
-      const int col = jacobian.cols[e];
-      if (col < point_columns) {
-        point = col / 2;
-        p[col % 2] = jacobian.values[e];
-      } else {
-        scene_entries.emplace_back(col - point_columns, jacobian.values[e]);
-      }
-    }
-    // u's upper triangle only (mirrored into s below): half the work.
-    for (size_t e1 = 0; e1 < scene_entries.size(); ++e1) {
-      const auto [i, x] = scene_entries[e1];
-      for (size_t e2 = e1; e2 < scene_entries.size(); ++e2) {
-        const auto [j, y] = scene_entries[e2];
-        u(std::min(i, j), std::max(i, j)) += x * y;
-      }
-    }
-    if (point < 0) continue;
-    v[point] += Eigen::Vector2d(p[0], p[1]) * Eigen::RowVector2d(p[0], p[1]);
-    const std::vector<int>& cols = columns[point];
-    for (const auto& [i, x] : scene_entries) {
-      const auto at = std::lower_bound(cols.begin(), cols.end(), i) - cols.begin();
-      w[point](0, at) += p[0] * x;
-      w[point](1, at) += p[1] * x;
-    }
-  }
+
+  // S's upper triangle, summed per chunk of points and the chunks then in
+  // order: a fixed number of chunks, so that the bits do not depend on the
+  // threads.
+  constexpr int kNumChunks = 8;
   std::vector<Eigen::Matrix2d> v_inverse(num_points);
-  Eigen::MatrixXd s = u;
-  for (int k = 0; k < num_points; ++k) {
-    if (!(v[k].determinant() > 0)) return false;
-    v_inverse[k] = v[k].inverse();
-    const Eigen::MatrixXd update = w[k].transpose() * v_inverse[k] * w[k];
-    const std::vector<int>& cols = columns[k];  // ascending: the upper triangle
-    for (size_t c2 = 0; c2 < cols.size(); ++c2)
-      for (size_t c1 = 0; c1 <= c2; ++c1) s(cols[c1], cols[c2]) -= update(c1, c2);
+  std::vector<Eigen::MatrixXd> w(num_points);  // 2 x columns[point].size()
+  std::vector<Eigen::MatrixXd> chunk_s(kNumChunks);
+  std::atomic<bool> singular{false};
+  ParallelFor(kNumChunks, num_threads, [&](int chunk) {
+    Eigen::MatrixXd& sum = chunk_s[chunk];
+    sum = Eigen::MatrixXd::Zero(m, m);
+    const int end = static_cast<int>(static_cast<long>(num_points) * (chunk + 1) / kNumChunks);
+    for (int k = static_cast<int>(static_cast<long>(num_points) * chunk / kNumChunks); k < end;
+         ++k) {
+      const std::vector<int>& cols = columns[k];
+      const int num_rows = static_cast<int>(rows[k].size());
+      Eigen::MatrixXd j_scene =
+          Eigen::MatrixXd::Zero(num_rows, static_cast<Eigen::Index>(cols.size()));
+      Eigen::Matrix<double, Eigen::Dynamic, 2> j_point =
+          Eigen::Matrix<double, Eigen::Dynamic, 2>::Zero(num_rows, 2);
+      for (int i = 0; i < num_rows; ++i) {
+        const int row = rows[k][i];
+        for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
+          const int col = jacobian.cols[e];
+          if (col < point_columns) {
+            j_point(i, col % 2) = jacobian.values[e];
+          } else {
+            const auto at = std::lower_bound(cols.begin(), cols.end(), col - point_columns);
+            j_scene(i, at - cols.begin()) = jacobian.values[e];
+          }
+        }
+      }
+      const Eigen::Matrix2d v = j_point.transpose() * j_point;
+      if (!(v.determinant() > 0)) {
+        singular = true;
+        return;
+      }
+      v_inverse[k] = v.inverse();
+      w[k] = j_point.transpose() * j_scene;
+      if (num_rows <= 2) continue;  // one view: its point absorbs it, no share of S
+      // J_k' J_k - W_k' V_k^-1 W_k = (Z' J_k)' (Z' J_k), Z an orthonormal
+      // basis of the rows' space orthogonal to P_k: the last num_rows - 2
+      // rows of Q' J_k, P_k = Q R.
+      const Eigen::HouseholderQR<Eigen::Matrix<double, Eigen::Dynamic, 2>> qr(j_point);
+      const Eigen::MatrixXd projected =
+          (qr.householderQ().adjoint() * j_scene).bottomRows(num_rows - 2);
+      for (Eigen::Index c2 = 0; c2 < projected.cols(); ++c2) {
+        double* column = &sum(0, cols[c2]);  // its upper part: rows up to cols[c2]
+        for (Eigen::Index c1 = 0; c1 <= c2; ++c1)
+          column[cols[c1]] += projected.col(c1).dot(projected.col(c2));
+      }
+    }
+  });
+  if (singular) return false;
+  Eigen::MatrixXd s = Eigen::MatrixXd::Zero(m, m);
+  std::vector<std::pair<int, double>> entries;  // of a row: (scene column, value)
+  for (const int row : other_rows) {
+    entries.clear();
+    for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e)
+      entries.emplace_back(jacobian.cols[e] - point_columns, jacobian.values[e]);
+    for (size_t e1 = 0; e1 < entries.size(); ++e1) {
+      const auto [i, x] = entries[e1];
+      for (size_t e2 = e1; e2 < entries.size(); ++e2) {
+        const auto [j, y] = entries[e2];
+        s(std::min(i, j), std::max(i, j)) += x * y;
+      }
+    }
   }
+  for (const Eigen::MatrixXd& sum : chunk_s) s += sum;
   s.triangularView<Eigen::StrictlyLower>() = s.transpose();
   // Rank: the Jacobi-scaled reduced system's eigenvalues.
   const Eigen::VectorXd d = s.diagonal();
