@@ -402,9 +402,18 @@ double TilePxPerMosaicPx(const OrthoGeometry& geometry) {
   return n > 0 ? px_per_px / n : 0.0;
 }
 
+ExposureSummary EstimateTileExposure(const OrthoGeometry& geometry,
+                                     const std::vector<ImageF>& tiles,
+                                     const OrthoOptions& options) {
+  ExposureOptions exposure_options = options.exposure;
+  exposure_options.num_threads = options.num_threads;
+  return EstimateExposure(CollectExposureObservations(geometry, tiles, options),
+                          static_cast<int>(tiles.size()), exposure_options);
+}
+
 OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
                          const std::vector<ImageF>& tiles, const OrthoOptions& options,
-                         const std::vector<OrthoDisc>& features) {
+                         const std::vector<OrthoDisc>& features, const ExposureSummary* exposure) {
   const Clock::time_point start = Clock::now();
   if (tiles.size() != scene.table_pos_mm.size())
     throw InputError("tiles", std::to_string(tiles.size()) + " images for " +
@@ -426,10 +435,8 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
 
   const Clock::time_point exposure_start = Clock::now();
   if (options.compensate_exposure) {
-    ExposureOptions exposure_options = options.exposure;
-    exposure_options.num_threads = options.num_threads;
-    summary.exposure = EstimateExposure(CollectExposureObservations(geometry, tiles, options),
-                                        static_cast<int>(tiles.size()), exposure_options);
+    summary.exposure =
+        exposure != nullptr ? *exposure : EstimateTileExposure(geometry, tiles, options);
   }
   summary.exposure_seconds = SecondsSince(exposure_start);
 

@@ -238,11 +238,19 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
                       const std::vector<TileExposure>& exposure, const OrthoOptions& options,
                       const std::vector<WholeDisc>& whole = {}, ResampleCounts* counts = nullptr);
 
+// The tiles' exposure (options.exposure) from their overlaps in `geometry`.
+ExposureSummary EstimateTileExposure(const OrthoGeometry& geometry,
+                                     const std::vector<ImageF>& tiles, const OrthoOptions& options);
+
 // Geometry, exposure compensation and resampling, with the `features` discs
-// kept whole. Throws InputError for invalid options or tiles that do not fit
-// the camera or the scene (count, size).
+// kept whole. The exposure is estimated here unless `exposure` gives it
+// (EstimateTileExposure on a geometry of the same tiles: gains and
+// vignetting do not move with a scene's hundredths of a pixel). Throws
+// InputError for invalid options or tiles that do not fit the camera or the
+// scene (count, size).
 OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
                          const std::vector<ImageF>& tiles, const OrthoOptions& options,
-                         const std::vector<OrthoDisc>& features = {});
+                         const std::vector<OrthoDisc>& features = {},
+                         const ExposureSummary* exposure = nullptr);
 
 }  // namespace omm

@@ -384,6 +384,9 @@ struct FinalOutcome {
   // their views put them, else where near_px does, within a quarter of the
   // diameter (project-format.md).
   std::vector<OrthoDisc> holes_to_keep_whole;
+  // The tiles' exposure, estimated on the registered scene during the
+  // solves (their single thread leaves a core free).
+  ExposureSummary exposure;
   double fit_seconds = 0.0;      // the ties' hole fits
   double overlap_seconds = 0.0;  // the held tiles' overlap alignments
   double solve_seconds = 0.0;    // the final adjustment's solves
@@ -456,6 +459,10 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
   result.overlap_seconds = SecondsSince(overlap_start);
 
+  OrthoOptions exposure_options = ortho_options;
+  exposure_options.num_threads = std::max(1, num_threads - 1);
+  std::future<ExposureSummary> exposure = std::async(
+      std::launch::async, [&] { return EstimateTileExposure(geometry, tiles, exposure_options); });
   TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
                                            options, ties, tie_options);
   // Table positions the features contradict (table_prior_check.h): every
@@ -500,6 +507,7 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
     }
   }
   result.adjusted = std::move(tied.adjusted);
+  result.exposure = exposure.get();
   result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
   result.overlap_report =
       OverlapTiesReport(project, overlap_ties, first_overlap_observation,
@@ -710,7 +718,7 @@ void RunMosaicStage(StageContext& context) {
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
   ortho_options.num_threads = context.num_threads;
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options,
-                                   final_outcome.holes_to_keep_whole);
+                                   final_outcome.holes_to_keep_whole, &final_outcome.exposure);
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) {
     // Name the tiles the exposure fit found nothing in, and the likely cause.
