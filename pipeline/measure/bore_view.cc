@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "pipeline/core/tile_pixels.h"
 #include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/orthorectify.h"
 

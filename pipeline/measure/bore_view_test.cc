@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/mrcal_lens_projection.h"
+#include "pipeline/core/tile_pixels.h"
 #include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/synthetic_plane.h"

@@ -5,7 +5,7 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
-#include "pipeline/measure/scene_sensitivity.h"
+#include "pipeline/core/tile_pixels.h"
 
 namespace omm {
 namespace {

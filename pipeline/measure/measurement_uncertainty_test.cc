@@ -12,6 +12,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "adapters/mrcal/mrcal_lens_projection.h"
+#include "pipeline/core/tile_pixels.h"
 #include "pipeline/measure/scene_sensitivity.h"
 #include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/plane_adjustment.h"
@@ -37,27 +38,6 @@ int DominantTile(const LensProjection& lens, const PlaneScene& scene,
     if (weight > 0.999) return tile;
   }
   return -1;
-}
-
-TEST(SceneSensitivity, PixelAndPartPointAreInverse) {
-  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
-  PlaneScene scene = s.truth;
-  scene.intrinsics = s.camera.intrinsics;
-  const MrcalLensProjection lens(s.camera);
-  for (int tile : {0, 4, 8}) {
-    const Eigen::Vector2d q(900.0, 500.0);
-    const auto part = PartPointOfTilePixel(lens, scene, tile, q);
-    ASSERT_TRUE(part.has_value());
-    const auto back = TilePixelOfPartPoint(lens, scene, tile, *part);
-    ASSERT_TRUE(back.has_value());
-    EXPECT_LT((*back - q).norm(), 1e-8);
-    // The same through the synthetic truth's own projection.
-    EXPECT_LT((ProjectPartPoint(s.camera, s.truth, {part->x(), part->y(), 0.0},
-                                s.truth.table_pos_mm[tile]) -
-               q)
-                  .norm(),
-              1e-8);
-  }
 }
 
 // S against central differences of the inverse map with the pixel held:

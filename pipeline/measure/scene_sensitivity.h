@@ -33,21 +33,9 @@
 
 #include "pipeline/core/lens_projection.h"
 #include "pipeline/core/plane_scene.h"
+#include "pipeline/core/tile_pixels.h"
 
 namespace omm {
-
-// Pixel of the part point P (Z = 0, mm) in tile `tile` under `scene`
-// (scene.intrinsics); nullopt where the lens cannot project it.
-std::optional<Eigen::Vector2d> TilePixelOfPartPoint(const LensProjection& lens,
-                                                    const PlaneScene& scene, int tile,
-                                                    const Eigen::Vector2d& part_mm);
-
-// The part point (Z = 0, mm) tile `tile` saw at q_px: the ray's intersection
-// with the top surface, refined by Gauss-Newton on the lens model to
-// 1e-9 px. nullopt if the ray misses the plane or the iteration fails.
-std::optional<Eigen::Vector2d> PartPointOfTilePixel(const LensProjection& lens,
-                                                    const PlaneScene& scene, int tile,
-                                                    const Eigen::Vector2d& q_px);
 
 // S = d P-hat / d theta (2 x PlaneSceneCovarianceSize(...)) of the part point
 // P seen by tile `tile` (header comment). nullopt where the lens cannot

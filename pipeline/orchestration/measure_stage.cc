@@ -32,6 +32,7 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/statistics.h"
+#include "pipeline/core/tile_pixels.h"
 #include "pipeline/core/timing.h"
 #include "pipeline/measure/circle_measure.h"
 #include "pipeline/measure/hole_views.h"
