@@ -13,34 +13,6 @@
 namespace omm {
 namespace {
 
-// The states the board rows of J depend on, and those H = J'J couples to
-// them, directly or in a chain.
-std::vector<bool> StatesTheBoardsReach(const Eigen::SparseMatrix<double, Eigen::RowMajor>& j_obs,
-                                       const Eigen::MatrixXd& h) {
-  const Eigen::Index n = h.rows();
-  std::vector<bool> reached(n, false);
-  std::vector<Eigen::Index> todo;
-  for (Eigen::Index row = 0; row < j_obs.outerSize(); ++row) {
-    for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(j_obs, row); it; ++it) {
-      if (it.value() != 0.0 && !reached[it.col()]) {
-        reached[it.col()] = true;
-        todo.push_back(it.col());
-      }
-    }
-  }
-  while (!todo.empty()) {
-    const Eigen::Index i = todo.back();
-    todo.pop_back();
-    for (Eigen::Index k = 0; k < n; ++k) {
-      if (h(k, i) != 0.0 && !reached[k]) {
-        reached[k] = true;
-        todo.push_back(k);
-      }
-    }
-  }
-  return reached;
-}
-
 }  // namespace
 
 std::optional<CalibrationUncertainty> CalibrationUncertainty::Compute(const SolveRecord& record,
@@ -103,13 +75,6 @@ std::optional<CalibrationUncertainty> CalibrationUncertainty::Compute(const Solv
   }
 
   // Var(b*) = sigma^2 H^-1 J*obs' J*obs H^-1, H = J*'J*; then Var(b) = D Var(b*) D.
-  // As H = J*obs' J*obs + J*reg' J*reg (the regularisation's rows),
-  //   H^-1 J*obs' J*obs H^-1 = H^-1 - (J*reg H^-1)' (J*reg H^-1),
-  // products of the regularisation's rows (160 for a splined lens) instead of
-  // the boards' (1764): 0.06 -> 0.008 s. A state the boards do not reach,
-  // directly or through H's couplings (a spline knot outside every view, held
-  // by its regularisation alone), has zero variance by the definition; the
-  // difference would leave rounding there, so it is set to zero.
   const Eigen::MatrixXd H = Eigen::MatrixXd(J_packed.transpose() * J_packed);
   const Eigen::LDLT<Eigen::MatrixXd> ldlt(H);
   if (ldlt.info() != Eigen::Success || !ldlt.isPositive() ||
@@ -117,21 +82,12 @@ std::optional<CalibrationUncertainty> CalibrationUncertainty::Compute(const Solv
     return fail("J'J is singular: the calibration does not constrain its state");
   }
   const int n_obs_rows = problem.NumMeasurementsBoards();
-  const Eigen::SparseMatrix<double, Eigen::RowMajor> J_reg =
-      J_packed.bottomRows(J_packed.rows() - n_obs_rows);
-  Eigen::MatrixXd covariance = ldlt.solve(Eigen::MatrixXd::Identity(n_state, n_state));
-  const Eigen::MatrixXd JregHinv = J_reg * covariance;
-  covariance.selfadjointView<Eigen::Lower>().rankUpdate(JregHinv.transpose(), -1.0);
-  covariance = covariance.selfadjointView<Eigen::Lower>();
-  const std::vector<bool> reached = StatesTheBoardsReach(J_packed.topRows(n_obs_rows), H);
-  for (int i = 0; i < n_state; ++i) {
-    if (reached[i]) continue;
-    covariance.row(i).setZero();
-    covariance.col(i).setZero();
-  }
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> J_obs = J_packed.topRows(n_obs_rows);
+  const Eigen::MatrixXd H_inv = ldlt.solve(Eigen::MatrixXd::Identity(n_state, n_state));
+  const Eigen::MatrixXd JobsHinv = J_obs * H_inv;
   const Eigen::VectorXd D = mrcal_internal::UnpackScale(problem);
-  u.state_covariance_ = u.observed_sigma_px_ * u.observed_sigma_px_ * D.asDiagonal() * covariance *
-                        D.asDiagonal();
+  u.state_covariance_ = u.observed_sigma_px_ * u.observed_sigma_px_ * D.asDiagonal() *
+                        (JobsHinv.transpose() * JobsHinv) * D.asDiagonal();
   return u;
 }
 
