@@ -21,6 +21,7 @@
 #include "pipeline/mosaic/ortho_file.h"
 #include "pipeline/mosaic/synthetic_plane.h"
 #include "pipeline/simulate/simulation.h"
+#include "tests/test_util.h"
 
 namespace omm {
 namespace {
@@ -503,12 +504,7 @@ TEST(Orthorectify, ExposureOfASceneOffByAFractionOfAPixelIsTheSame) {
   options.gsd_mm = 0.15;
   const PlaneScene scene = TruthPlaneScene(truth);
   PlaneScene moved = scene;
-  // A raw pixel on the part: pitch x axis distance / focal length.
-  const Eigen::Isometry3d part_from_cam = truth.cam_from_part.inverse();
-  const double distance_mm =
-      part_from_cam.translation().z() / -part_from_cam.linear().col(2).z();
-  const double step_mm =
-      0.2 * truth.camera.pixel_pitch_um * 1e-3 * distance_mm / truth.camera.focal_length_mm;
+  const double step_mm = 0.2 * testing::RawPxMm(truth);
   for (size_t i = 0; i < moved.table_pos_mm.size(); ++i)
     moved.table_pos_mm[i] += step_mm * Eigen::Vector2d(i % 2 ? 1.0 : -1.0, i % 3 ? -1.0 : 1.0);
   const ExposureSummary at_truth =
@@ -531,6 +527,16 @@ TEST(Orthorectify, ExposureOfASceneOffByAFractionOfAPixelIsTheSame) {
   // and final scenes gave 1.3e-4 and 5.3e-4.
   EXPECT_LT(gain_change, 0.0004);
   EXPECT_LT(vignetting_change, 0.001);
+
+  // Given an exposure, Orthorectify blends with it rather than its own.
+  const OrthoResult given = Orthorectify(camera, scene, r.tiles, options, {}, &at_moved);
+  const OrthoResult own = Orthorectify(camera, scene, r.tiles, options);
+  ASSERT_EQ(given.summary.exposure.tiles.size(), at_moved.tiles.size());
+  for (size_t i = 0; i < at_moved.tiles.size(); ++i) {
+    EXPECT_EQ(given.summary.exposure.tiles[i].gain, at_moved.tiles[i].gain) << i;
+    EXPECT_EQ(own.summary.exposure.tiles[i].gain, at_truth.tiles[i].gain) << i;
+  }
+  EXPECT_NE(given.mosaic.pixels, own.mosaic.pixels);
 }
 
 }  // namespace
