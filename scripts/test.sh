@@ -5,8 +5,9 @@
 #
 # CI=true turns warnings into errors (OMM_WERROR=ON). Budget: CI has 2 cores
 # and 30 minutes, so both builds use Ninja with -j2 (OMM_JOBS overrides) and the
-# sanitizer pass leaves out tests labelled "slow" (heavy simulator renders,
-# which run in the Release pass; `omm_test(... LABELS slow)` marks them).
+# sanitizer pass neither builds nor runs tests labelled "slow" (heavy simulator
+# renders, which run in the Release pass; `omm_test(... LABELS slow)` marks
+# them) or "acceptance".
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -26,7 +27,7 @@ ctest --test-dir build --output-on-failure -j "$jobs" -LE acceptance
 
 echo "== AddressSanitizer + UBSan build and tests (build-asan/)"
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DOMM_SANITIZE=ON \
-  -DOMM_WERROR=$werror -DOMM_BUILD_BENCHMARKS=OFF
+  -DOMM_WERROR=$werror -DOMM_BUILD_BENCHMARKS=OFF -DOMM_UNBUILT_TEST_LABELS="slow;acceptance"
 cmake --build build-asan -j "$jobs"
 # Memory errors, leaks and undefined behaviour are fatal. scripts/lsan.supp
 # lists the leaks inside prebuilt libraries (mrcal), each with its reason.
