@@ -104,13 +104,26 @@ Eigen::Matrix2Xd MeasuredRegion(const CameraModel& camera) {
   return Splined(camera) ? ConvexHull(camera.valid_region_px) : Eigen::Matrix2Xd();
 }
 
+// An intrinsics prior and the seconds its covariance took (0 if none was computed).
+struct TimedPrior {
+  IntrinsicsPrior prior;
+  double seconds = 0.0;
+};
+
+std::future<TimedPrior> Ready(IntrinsicsPrior prior) {
+  std::promise<TimedPrior> ready;
+  ready.set_value({std::move(prior), 0.0});
+  return ready.get_future();
+}
+
 // The calibration's intrinsics prior: from the calibrate stage's solve record
 // (this run's, out/'s, or calibration.from's project), if it belongs to
 // *camera; then *camera takes the record's exact intrinsics (mrcal writes the
 // .cameramodel with 6 decimals), and *rt_cam_from_plates the record's plate
-// poses.
-IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camera,
-                                 std::vector<Vector6d>* rt_cam_from_plates) {
+// poses. The covariance is computed on another thread (0.06 s on
+// lens-mismatch 284), beside the registration's single-threaded solves.
+std::future<TimedPrior> CalibrationPrior(const StageContext& context, CameraModel* camera,
+                                         std::vector<Vector6d>* rt_cam_from_plates) {
   const Project& project = context.project;
   IntrinsicsPrior prior;
   fs::path record_path = context.Input(kSolveRecordName);
@@ -122,35 +135,38 @@ IntrinsicsPrior CalibrationPrior(const StageContext& context, CameraModel* camer
       project.calibration_from->kind == CalibrationSource::Kind::kCameraModel) {
     prior.why_held = "calibration from a .cameramodel without covariance";
     prior.measured_region_px = MeasuredRegion(*camera);
-    return prior;
+    return Ready(std::move(prior));
   }
   if (record_path.empty() || !fs::exists(record_path)) {
     prior.why_held = "no calibration solve record (" + std::string(kSolveRecordName) + ")";
-    return prior;
+    return Ready(std::move(prior));
   }
-  const SolveRecord record = ReadSolveRecord(record_path);
+  SolveRecord record = ReadSolveRecord(record_path);
   const Eigen::VectorXd& k = camera->intrinsics;
   if (record.camera.lens_model != camera->lens_model ||
       record.camera.intrinsics.size() != k.size() ||
       !((record.camera.intrinsics - k).cwiseAbs().array() <= 1e-6).all()) {
     prior.why_held = record_path.string() + " is not the solve of the camera used";
-    return prior;
+    return Ready(std::move(prior));
   }
   for (const SolveImage& image : record.images)
     rt_cam_from_plates->push_back(image.rt_cam_from_plate);
-  const Eigen::Matrix2Xd region = MeasuredRegion(record);
-  std::string why_not;
-  const std::optional<CalibrationUncertainty> uncertainty =
-      CalibrationUncertainty::Compute(record, 0.0, &why_not);
-  if (!uncertainty) {
-    prior.why_held = "the calibration's covariance could not be computed: " + why_not;
-    prior.measured_region_px = region;
-    return prior;
-  }
   camera->intrinsics = record.camera.intrinsics;
-  prior = IntrinsicsPriorFromCovariance(uncertainty->IntrinsicsCovariance());
-  prior.measured_region_px = region;
-  return prior;
+  return std::async(std::launch::async, [record = std::move(record)] {
+    const auto start = std::chrono::steady_clock::now();
+    TimedPrior timed;
+    std::string why_not;
+    const std::optional<CalibrationUncertainty> uncertainty =
+        CalibrationUncertainty::Compute(record, 0.0, &why_not);
+    if (uncertainty) {
+      timed.prior = IntrinsicsPriorFromCovariance(uncertainty->IntrinsicsCovariance());
+    } else {
+      timed.prior.why_held = "the calibration's covariance could not be computed: " + why_not;
+    }
+    timed.prior.measured_region_px = MeasuredRegion(record);
+    timed.seconds = SecondsSince(start);
+    return timed;
+  });
 }
 
 // The calibration plate on the part off by more than this from the table's
@@ -584,10 +600,8 @@ void RunMosaicStage(StageContext& context) {
   }
   const fs::path camera_path = CameraModelPath(context);
   CameraModel camera = ReadCameraModel(camera_path);
-  const auto prior_start = std::chrono::steady_clock::now();
   std::vector<Vector6d> rt_cam_from_plates;
-  const IntrinsicsPrior prior = CalibrationPrior(context, &camera, &rt_cam_from_plates);
-  const double prior_seconds = SecondsSince(prior_start);
+  std::future<TimedPrior> pending_prior = CalibrationPrior(context, &camera, &rt_cam_from_plates);
   const RegisterTilesOptions register_options = MosaicRegistrationOptions(context);
   MosaicTiles prepared_tiles =
       context.mosaic_tiles.valid()
@@ -640,6 +654,8 @@ void RunMosaicStage(StageContext& context) {
     plate.brief = "no plate on the part: project.yaml has no board";
   }
   spdlog::info("mosaic: {}", plate.brief);
+  const TimedPrior timed_prior = pending_prior.get();
+  const IntrinsicsPrior& prior = timed_prior.prior;
   FinalAdjustmentOptions final_options;
   final_options.bundle = register_options.bundle;
   if (context.progress)
@@ -836,7 +852,7 @@ void RunMosaicStage(StageContext& context) {
                                  {"matching", registration.matching_seconds},
                                  {"adjustment", registration.adjustment_seconds},
                                  {"plate_detection", plate.seconds},
-                                 {"intrinsics_prior", prior_seconds},
+                                 {"intrinsics_prior", timed_prior.seconds},
                                  {"hole_ties", final_outcome.fit_seconds},
                                  {"overlap_ties", final_outcome.overlap_seconds},
                                  {"final_adjustment", final_outcome.solve_seconds},
