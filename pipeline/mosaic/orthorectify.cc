@@ -8,6 +8,7 @@
 #include <numbers>
 #include <numeric>
 #include <optional>
+#include <stdexcept>
 
 #include <Eigen/Geometry>
 
@@ -263,9 +264,21 @@ std::vector<WholeDisc> WholeDiscs(const OrthoGeometry& geometry,
   return discs;
 }
 
+std::vector<ImageF> InterpolatorSamples(const std::vector<ImageF>& tiles,
+                                        const OrthoOptions& options) {
+  std::vector<ImageF> coefficients;
+  if (options.interpolator == OrthoInterpolator::kCubicBSpline) {
+    coefficients.resize(tiles.size());
+    ParallelFor(static_cast<int>(tiles.size()), options.num_threads,
+                [&](int i) { coefficients[i] = CubicBSplineCoefficients(tiles[i]); });
+  }
+  return coefficients;
+}
+
 ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles,
                       const std::vector<TileExposure>& exposure, const OrthoOptions& options,
-                      const std::vector<WholeDisc>& whole, ResampleCounts* counts) {
+                      const std::vector<WholeDisc>& whole, ResampleCounts* counts,
+                      const std::vector<ImageF>* samples) {
   const int num_tiles = static_cast<int>(tiles.size());
   assert(num_tiles == static_cast<int>(geometry.tiles.size()));
   assert(exposure.empty() || static_cast<int>(exposure.size()) == num_tiles);
@@ -274,14 +287,12 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
   const VignettingFrame& frame = geometry.vignetting;
   const double band = options.blend_band_px;
 
-  // What the interpolator samples: the pixels or their B-spline coefficients.
-  std::vector<ImageF> coefficients;
-  if (options.interpolator == OrthoInterpolator::kCubicBSpline) {
-    coefficients.resize(num_tiles);
-    ParallelFor(num_tiles, options.num_threads,
-                [&](int i) { coefficients[i] = CubicBSplineCoefficients(tiles[i]); });
+  std::vector<ImageF> computed;
+  if (samples == nullptr) {
+    computed = InterpolatorSamples(tiles, options);
+    samples = &computed;
   }
-  const std::vector<ImageF>& sampled = coefficients.empty() ? tiles : coefficients;
+  const std::vector<ImageF>& sampled = samples->empty() ? tiles : *samples;
 
   // Blocks of rows: the per-row buffers are allocated once per block.
   constexpr int kRowsPerBlock = 16;
@@ -413,7 +424,8 @@ ExposureSummary EstimateTileExposure(const OrthoGeometry& geometry,
 
 OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
                          const std::vector<ImageF>& tiles, const OrthoOptions& options,
-                         const std::vector<OrthoDisc>& features, const ExposureSummary* exposure) {
+                         const std::vector<OrthoDisc>& features,
+                         const OrthoPrecomputed& precomputed) {
   const Clock::time_point start = Clock::now();
   if (tiles.size() != scene.table_pos_mm.size())
     throw InputError("tiles", std::to_string(tiles.size()) + " images for " +
@@ -425,6 +437,16 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
                        std::to_string(tiles[i].rows()) + " px, the camera " +
                        std::to_string(camera.width_px) + " x " + std::to_string(camera.height_px));
   }
+  if (const std::vector<ImageF>* samples = precomputed.samples) {
+    const bool spline = options.interpolator == OrthoInterpolator::kCubicBSpline;
+    bool fit = samples->size() == (spline ? tiles.size() : 0);
+    for (size_t i = 0; fit && i < samples->size(); ++i)
+      fit = (*samples)[i].rows() == tiles[i].rows() && (*samples)[i].cols() == tiles[i].cols();
+    if (!fit) {
+      throw std::invalid_argument(
+          "Orthorectify: the precomputed samples are not InterpolatorSamples of the tiles");
+    }
+  }
   OrthoResult result;
   OrthoSummary& summary = result.summary;
   const OrthoGeometry geometry = ComputeOrthoGeometry(camera, scene, options);
@@ -435,8 +457,9 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
 
   const Clock::time_point exposure_start = Clock::now();
   if (options.compensate_exposure) {
-    summary.exposure =
-        exposure != nullptr ? *exposure : EstimateTileExposure(geometry, tiles, options);
+    summary.exposure = precomputed.exposure != nullptr
+                           ? *precomputed.exposure
+                           : EstimateTileExposure(geometry, tiles, options);
   }
   summary.exposure_seconds = SecondsSince(exposure_start);
 
@@ -445,7 +468,8 @@ OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
   const std::vector<WholeDisc> whole = WholeDiscs(geometry, features, options);
   summary.features_kept_whole = static_cast<int>(whole.size());
   summary.features_blended = static_cast<int>(features.size() - whole.size());
-  ImageF pixels = ResampleMosaic(geometry, tiles, summary.exposure.tiles, options, whole, &counts);
+  ImageF pixels = ResampleMosaic(geometry, tiles, summary.exposure.tiles, options, whole, &counts,
+                                 precomputed.samples);
   const std::int64_t covered = counts.covered_px, clipped = counts.clipped_px;
   summary.resample_seconds = SecondsSince(resample_start);
   summary.covered_fraction = pixels.size() > 0 ? static_cast<double>(covered) / pixels.size() : 0.0;

@@ -230,27 +230,43 @@ struct ResampleCounts {
   std::int64_t clipped_px = 0;  // ... whose blend fell outside [0, 1] and was clamped
 };
 
+// What options.interpolator samples of each tile: its cubic B-spline
+// coefficients (kCubicBSpline), else nothing (the pixels themselves). Pure.
+std::vector<ImageF> InterpolatorSamples(const std::vector<ImageF>& tiles,
+                                        const OrthoOptions& options);
+
 // Blends the tiles (gray, [0, 1], all camera.width_px x camera.height_px, in
 // the scene's tile order) into the mosaic `geometry` describes, each divided
 // by its exposure (`exposure` empty: as recorded), the `whole` discs each
-// from its tile. Pure.
+// from its tile. `samples`, if given, is InterpolatorSamples(tiles, options).
+// Pure.
 ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& tiles,
                       const std::vector<TileExposure>& exposure, const OrthoOptions& options,
-                      const std::vector<WholeDisc>& whole = {}, ResampleCounts* counts = nullptr);
+                      const std::vector<WholeDisc>& whole = {}, ResampleCounts* counts = nullptr,
+                      const std::vector<ImageF>* samples = nullptr);
 
 // The tiles' exposure (options.exposure) from their overlaps in `geometry`.
 ExposureSummary EstimateTileExposure(const OrthoGeometry& geometry,
                                      const std::vector<ImageF>& tiles, const OrthoOptions& options);
 
+// Work on the tiles that Orthorectify can be given, done beforehand (the
+// mosaic stage does it on the core its final adjustment leaves free); each
+// one not given is done by Orthorectify.
+struct OrthoPrecomputed {
+  // EstimateTileExposure on a geometry of the same tiles: gains and
+  // vignetting do not move with a scene's hundredths of a pixel.
+  const ExposureSummary* exposure = nullptr;
+  // InterpolatorSamples(tiles, options).
+  const std::vector<ImageF>* samples = nullptr;
+};
+
 // Geometry, exposure compensation and resampling, with the `features` discs
-// kept whole. The exposure is estimated here unless `exposure` gives it
-// (EstimateTileExposure on a geometry of the same tiles: gains and
-// vignetting do not move with a scene's hundredths of a pixel). Throws
-// InputError for invalid options or tiles that do not fit the camera or the
-// scene (count, size).
+// kept whole. Throws InputError for invalid options or tiles that do not fit
+// the camera or the scene (count, size), std::invalid_argument for
+// precomputed samples that are not those of the tiles (count, size).
 OrthoResult Orthorectify(const CameraModel& camera, const PlaneScene& scene,
                          const std::vector<ImageF>& tiles, const OrthoOptions& options,
                          const std::vector<OrthoDisc>& features = {},
-                         const ExposureSummary* exposure = nullptr);
+                         const OrthoPrecomputed& precomputed = {});
 
 }  // namespace omm

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <map>
 #include <random>
+#include <stdexcept>
 
 #include <gtest/gtest.h>
 
@@ -250,6 +251,36 @@ TEST(Orthorectify, PixelConventionOfProjectFormat) {
   // +X: columns increase; +Y: rows decrease.
   EXPECT_NEAR(found[1].x() - found[0].x(), 12.0 / grid.gsd_mm, 0.05);
   EXPECT_NEAR(found[2].y() - found[0].y(), -8.0 / grid.gsd_mm, 0.05);
+}
+
+// Samples computed beforehand (the mosaic stage's, during its final
+// adjustment) give the mosaic bit for bit; samples of other tiles are refused.
+TEST(Orthorectify, PrecomputedSamplesGiveTheSameMosaic) {
+  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  const CameraModel& camera = plan.truth.camera.model;
+  PlaneScene scene = TruthPlaneScene(plan.truth);
+  scene.table_pos_mm.resize(1);  // one tile
+  OrthoOptions options;
+  options.gsd_mm = 0.2;
+  options.compensate_exposure = false;
+  ImageF tile(camera.height_px, camera.width_px);
+  for (int r = 0; r < tile.rows(); ++r) {
+    for (int c = 0; c < tile.cols(); ++c)
+      tile(r, c) = static_cast<float>(0.5 + 0.4 * std::sin(0.05 * c) * std::cos(0.07 * r));
+  }
+  const std::vector<ImageF> tiles = {tile};
+  const std::vector<ImageF> samples = InterpolatorSamples(tiles, options);
+  ASSERT_EQ(samples.size(), 1u);
+  const OrthoResult own = Orthorectify(camera, scene, tiles, options);
+  const OrthoResult given = Orthorectify(camera, scene, tiles, options, {}, {.samples = &samples});
+  EXPECT_EQ(given.mosaic.pixels, own.mosaic.pixels);
+
+  const std::vector<ImageF> none;
+  EXPECT_THROW(Orthorectify(camera, scene, tiles, options, {}, {.samples = &none}),
+               std::invalid_argument);
+  const std::vector<ImageF> cropped = {samples[0].topRows(tile.rows() - 1)};
+  EXPECT_THROW(Orthorectify(camera, scene, tiles, options, {}, {.samples = &cropped}),
+               std::invalid_argument);
 }
 
 struct HoleErrors {
@@ -529,7 +560,8 @@ TEST(Orthorectify, ExposureOfASceneOffByAFractionOfAPixelIsTheSame) {
   EXPECT_LT(vignetting_change, 0.001);
 
   // Given an exposure, Orthorectify blends with it rather than its own.
-  const OrthoResult given = Orthorectify(camera, scene, r.tiles, options, {}, &at_moved);
+  const OrthoResult given =
+      Orthorectify(camera, scene, r.tiles, options, {}, {.exposure = &at_moved});
   const OrthoResult own = Orthorectify(camera, scene, r.tiles, options);
   ASSERT_EQ(given.summary.exposure.tiles.size(), at_moved.tiles.size());
   for (size_t i = 0; i < at_moved.tiles.size(); ++i) {

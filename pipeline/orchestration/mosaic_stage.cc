@@ -400,9 +400,11 @@ struct FinalOutcome {
   // their views put them, else where near_px does, within a quarter of the
   // diameter (project-format.md).
   std::vector<OrthoDisc> holes_to_keep_whole;
-  // The tiles' exposure, estimated on the registered scene during the
-  // solves (their single thread leaves a core free).
+  // The tiles' exposure, estimated on the registered scene, and what the
+  // mosaic's interpolator samples of them (InterpolatorSamples), both during
+  // the solves (their single thread leaves a core free).
   ExposureSummary exposure;
+  std::vector<ImageF> samples;
   double fit_seconds = 0.0;      // the ties' hole fits
   double overlap_seconds = 0.0;  // the held tiles' overlap alignments
   double solve_seconds = 0.0;    // the final adjustment's solves
@@ -475,10 +477,12 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
   result.overlap_seconds = SecondsSince(overlap_start);
 
-  OrthoOptions exposure_options = ortho_options;
-  exposure_options.num_threads = std::max(1, num_threads - 1);
-  std::future<ExposureSummary> exposure = std::async(
-      std::launch::async, [&] { return EstimateTileExposure(geometry, tiles, exposure_options); });
+  OrthoOptions beside_options = ortho_options;
+  beside_options.num_threads = std::max(1, num_threads - 1);
+  std::future<void> beside_solves = std::async(std::launch::async, [&] {
+    result.exposure = EstimateTileExposure(geometry, tiles, beside_options);
+    result.samples = InterpolatorSamples(tiles, beside_options);
+  });
   TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
                                            options, ties, tie_options);
   // Table positions the features contradict (table_prior_check.h): every
@@ -523,7 +527,7 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
     }
   }
   result.adjusted = std::move(tied.adjusted);
-  result.exposure = exposure.get();
+  beside_solves.get();
   result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
   result.overlap_report =
       OverlapTiesReport(project, overlap_ties, first_overlap_observation,
@@ -734,7 +738,8 @@ void RunMosaicStage(StageContext& context) {
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
   ortho_options.num_threads = context.num_threads;
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options,
-                                   final_outcome.holes_to_keep_whole, &final_outcome.exposure);
+                                   final_outcome.holes_to_keep_whole,
+                                   {&final_outcome.exposure, &final_outcome.samples});
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) {
     // Name the tiles the exposure fit found nothing in, and the likely cause.
