@@ -190,7 +190,8 @@ std::vector<MeasurementSpec> Specs() {
 
 ReportHtmlInputs FullInputs() {
   ReportHtmlInputs inputs;
-  inputs.mosaic_png = EncodePreviewPng(ImageF::Constant(400, 600, kMosaicGray), 1200);
+  inputs.mosaic_png =
+      EncodePreviewPng(QuantizeImage(ImageF::Constant(400, 600, kMosaicGray), 16), 1200);
   inputs.residuals_svg = "<svg xmlns=\"http://www.w3.org/2000/svg\"><text>resid</text></svg>";
   inputs.uncertainty_svg =
       "<?xml version=\"1.0\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\"><text>unc</text></svg>";

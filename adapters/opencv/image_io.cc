@@ -128,24 +128,25 @@ void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int
   WriteStoredImage(path, QuantizeImage(pixels, bit_depth));
 }
 
-std::string EncodePreviewPng(const ImageF& pixels, int max_width_px) {
-  if (pixels.size() == 0 || max_width_px < 1) {
+std::string EncodePreviewPng(const StoredImage& image, int max_width_px) {
+  if (image.width < 1 || image.height < 1 || max_width_px < 1) {
     throw std::invalid_argument("EncodePreviewPng: empty image or max_width_px < 1");
   }
-  const cv::Mat as_float(static_cast<int>(pixels.rows()), static_cast<int>(pixels.cols()), CV_32F,
-                         const_cast<float*>(pixels.data()));
-  cv::Mat shrunk = as_float;
-  if (as_float.cols > max_width_px) {
-    const double scale = static_cast<double>(max_width_px) / as_float.cols;
-    const int height = std::max(1, static_cast<int>(std::lround(as_float.rows * scale)));
-    cv::resize(as_float, shrunk, cv::Size(max_width_px, height), 0, 0, cv::INTER_AREA);
+  // Shrunk as stored (8 or 16 bits): converting the whole image to float
+  // first took most of the call on the demo's mosaic, on the run's serial tail.
+  const cv::Mat samples = SamplesMat(image);
+  cv::Mat shrunk = samples;
+  if (samples.cols > max_width_px) {
+    const double scale = static_cast<double>(max_width_px) / samples.cols;
+    const int height = std::max(1, static_cast<int>(std::lround(samples.rows * scale)));
+    cv::resize(samples, shrunk, cv::Size(max_width_px, height), 0, 0, cv::INTER_AREA);
   }
   StoredImage preview;
   preview.width = shrunk.cols;
   preview.height = shrunk.rows;
   preview.samples.resize(shrunk.total());
   cv::Mat out = SamplesMat(preview);
-  shrunk.convertTo(out, CV_8U, 255.0);  // saturating, rounded
+  shrunk.convertTo(out, CV_8U, 255.0 / ((1 << image.bit_depth) - 1));  // rounded
   // adapters/png rather than cv::imencode: half the CPU of the whole call on
   // the demo's mosaic (libdeflate instead of zlib), on the run's serial tail.
   return EncodeGrayPng(preview);

@@ -48,10 +48,10 @@ void WriteStoredImage(const std::filesystem::path& path, const StoredImage& imag
 // WriteStoredImage(path, QuantizeImage(pixels, bit_depth)).
 void WriteGrayImage(const std::filesystem::path& path, const ImageF& pixels, int bit_depth);
 
-// An 8-bit gray PNG file's bytes, in memory, of `pixels` (values clamped to
-// [0, 1]) shrunk by area averaging (cv::INTER_AREA) to max_width_px wide,
+// An 8-bit gray PNG file's bytes, in memory, of `image` shrunk by area
+// averaging (cv::INTER_AREA, on the stored samples) to max_width_px wide,
 // aspect kept (height rounded, at least 1 px); an image no wider is encoded
 // as it is. For previews embedded in other files (report.html).
-std::string EncodePreviewPng(const ImageF& pixels, int max_width_px);
+std::string EncodePreviewPng(const StoredImage& image, int max_width_px);
 
 }  // namespace omm

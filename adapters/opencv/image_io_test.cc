@@ -1,9 +1,12 @@
 #include "adapters/opencv/image_io.h"
 
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -158,32 +161,48 @@ TEST_F(ImageIo, AnImageThatCannotBeWrittenSaysWhy) {
   }
 }
 
+// A 16-bit image of the given samples, row-major.
+StoredImage Stored16(int height, int width, const std::vector<std::uint16_t>& values) {
+  StoredImage image;
+  image.width = width;
+  image.height = height;
+  image.bit_depth = 16;
+  image.samples.resize(values.size() * 2);
+  std::memcpy(image.samples.data(), values.data(), image.samples.size());
+  return image;
+}
+
 TEST_F(ImageIo, PreviewPngIsTheBlockMeanAtEightBits) {
   // 30 x 21 px shrunk to 10 px wide: exactly 3 x 3 blocks, so INTER_AREA is
-  // each block's mean; 8 bits round it to within half a digital number.
-  ImageF pixels(21, 30);
+  // each block's mean, rounded to 16 bits, then to 8: within half a digital
+  // number of 8 bits and half of 16.
+  std::vector<std::uint16_t> values(21 * 30);
   for (int r = 0; r < 21; ++r)
-    for (int c = 0; c < 30; ++c) pixels(r, c) = static_cast<float>((r * 7 + c * 13) % 29) / 28.f;
-  const GrayImage preview = DecodePng(EncodePreviewPng(pixels, 10), "preview.png");
+    for (int c = 0; c < 30; ++c)
+      values[r * 30 + c] = static_cast<std::uint16_t>((r * 7 + c * 13) % 29 * 2260);
+  const GrayImage preview =
+      DecodePng(EncodePreviewPng(Stored16(21, 30, values), 10), "preview.png");
   EXPECT_EQ(preview.bit_depth, 8);
   ASSERT_EQ(preview.width(), 10);
   ASSERT_EQ(preview.height(), 7);
   for (int r = 0; r < 7; ++r) {
     for (int c = 0; c < 10; ++c) {
-      const float mean = pixels.block(3 * r, 3 * c, 3, 3).mean();
-      EXPECT_NEAR(preview.pixels(r, c), mean, 0.5f / 255.f + 1e-6f) << r << "," << c;
+      double sum = 0.0;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) sum += values[(3 * r + i) * 30 + 3 * c + j];
+      const double mean = sum / 9 / 65535;
+      EXPECT_NEAR(preview.pixels(r, c), mean, 0.5 / 255 + 0.5 / 65535 + 1e-6) << r << "," << c;
     }
   }
 }
 
-TEST_F(ImageIo, PreviewPngKeepsANarrowImageAndClamps) {
-  ImageF pixels(2, 3);
-  pixels << -0.5f, 0.0f, 0.2f, 0.6f, 1.0f, 1.5f;
-  const GrayImage preview = DecodePng(EncodePreviewPng(pixels, 1200), "narrow.png");
+TEST_F(ImageIo, PreviewPngKeepsANarrowImage) {
+  const std::vector<std::uint16_t> values = {0, 13107, 39321, 65535, 1000, 64000};
+  const GrayImage preview = DecodePng(EncodePreviewPng(Stored16(2, 3, values), 1200), "narrow.png");
   ASSERT_EQ(preview.width(), 3);
   ASSERT_EQ(preview.height(), 2);
-  EXPECT_LT((preview.pixels - pixels.cwiseMax(0.f).cwiseMin(1.f)).cwiseAbs().maxCoeff(),
-            0.5f / 255.f + 1e-6f);
+  for (int k = 0; k < 6; ++k)
+    EXPECT_NEAR(preview.pixels(k / 3, k % 3), values[k] / 65535.0, 0.5 / 255 + 1e-6) << k;
 }
 
 }  // namespace

@@ -654,8 +654,7 @@ ReportHtmlInputs ReadReportHtmlInputs(const Report& report, const std::vector<fs
   ReportHtmlInputs inputs;
   inputs.measurements = measurements;
   if (report.mosaic && mosaic) {
-    inputs.mosaic_png =
-        EncodePreviewPng(ToGrayImage(*mosaic).pixels, options.mosaic_preview_width_px);
+    inputs.mosaic_png = EncodePreviewPng(*mosaic, options.mosaic_preview_width_px);
   } else if (report.mosaic) {
     const fs::path path = FindNamed(report.mosaic->file, dirs);
     if (path.empty()) {
@@ -663,7 +662,7 @@ ReportHtmlInputs ReadReportHtmlInputs(const Report& report, const std::vector<fs
     } else {
       try {
         inputs.mosaic_png =
-            EncodePreviewPng(ReadGrayImage(path).pixels, options.mosaic_preview_width_px);
+            EncodePreviewPng(ReadStoredImage(path), options.mosaic_preview_width_px);
       } catch (const InputError& e) {
         inputs.mosaic_missing_why = e.what();
       }
