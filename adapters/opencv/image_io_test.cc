@@ -203,6 +203,15 @@ TEST_F(ImageIo, PreviewPngKeepsANarrowImage) {
   ASSERT_EQ(preview.height(), 2);
   for (int k = 0; k < 6; ++k)
     EXPECT_NEAR(preview.pixels(k / 3, k % 3), values[k] / 65535.0, 0.5 / 255 + 1e-6) << k;
+
+  // 8-bit samples are the preview's as they are.
+  StoredImage eight;
+  eight.width = 3;
+  eight.height = 2;
+  eight.bit_depth = 8;
+  eight.samples = {0, 51, 128, 200, 254, 255};
+  const std::string bytes = EncodePreviewPng(eight, 1200);
+  EXPECT_EQ(DecodeImage(bytes, "eight.png").samples, eight.samples);
 }
 
 }  // namespace

@@ -274,6 +274,10 @@ TEST(Orthorectify, PrecomputedSamplesGiveTheSameMosaic) {
   const OrthoResult own = Orthorectify(camera, scene, tiles, options);
   const OrthoResult given = Orthorectify(camera, scene, tiles, options, {}, {.samples = &samples});
   EXPECT_EQ(given.mosaic.pixels, own.mosaic.pixels);
+  // They are what it samples: half the coefficients, half the mosaic.
+  const std::vector<ImageF> halved = {0.5f * samples[0]};
+  const OrthoResult dimmed = Orthorectify(camera, scene, tiles, options, {}, {.samples = &halved});
+  EXPECT_LT((dimmed.mosaic.pixels - 0.5f * own.mosaic.pixels).cwiseAbs().maxCoeff(), 1e-6f);
 
   const std::vector<ImageF> none;
   EXPECT_THROW(Orthorectify(camera, scene, tiles, options, {}, {.samples = &none}),

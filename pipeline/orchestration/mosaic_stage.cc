@@ -740,6 +740,7 @@ void RunMosaicStage(StageContext& context) {
   OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options,
                                    final_outcome.holes_to_keep_whole,
                                    {&final_outcome.exposure, &final_outcome.samples});
+  final_outcome.samples = {};  // the tiles' coefficients (the demo's: 69 MB) serve no later step
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) {
     // Name the tiles the exposure fit found nothing in, and the likely cause.
