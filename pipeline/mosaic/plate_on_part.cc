@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 #include <sstream>
+#include <utility>
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
@@ -38,6 +39,7 @@ std::string FinalAdjustmentOptions::Check() const {
   if (std::string e = bundle.Check(); !e.empty()) return e;
   if (!(plate_outlier_sigmas > 0)) return "plate_outlier_sigmas must be > 0";
   if (!(extrapolation_px_per_px >= 0)) return "extrapolation_px_per_px must be >= 0";
+  if (!(min_corner_sigma_px > 0)) return "min_corner_sigma_px must be > 0";
   return {};
 }
 
@@ -96,6 +98,48 @@ PlaneBundleInput WithPlate(const PlaneBundleInput& registered, const PlateOnPart
   input.plates = {plate.marks};
   input.plate_observations = plate.observations;
   return input;
+}
+
+// Each plate mark weighed as having sigma_px (0: keep its own sigma), then
+// widened outside the calibration's measured region (IntrinsicsPrior's
+// header: hypot(sigma, extrapolation_px_per_px * distance)). Returns how many
+// marks were widened.
+int WeighPlateMarks(const Eigen::Matrix2Xd& measured_region_px, double extrapolation_px_per_px,
+                    double observation_sigma_px, double sigma_px,
+                    std::vector<PlateMarkObservation>* observations) {
+  int num_outside = 0;
+  for (PlateMarkObservation& obs : *observations) {
+    if (sigma_px > 0) obs.weight = observation_sigma_px / sigma_px;
+    const double own_sigma_px = observation_sigma_px / obs.weight;
+    if (measured_region_px.cols() == 0) continue;
+    const double d = DistanceOutsideConvexPolygon(measured_region_px, obs.q_px);
+    if (!(d > 0)) continue;
+    ++num_outside;
+    obs.weight = observation_sigma_px / std::hypot(own_sigma_px, extrapolation_px_per_px * d);
+  }
+  return num_outside;
+}
+
+// The marks' 1-sigma from their scatter about the solve, px: the residuals
+// of those inside the measured region (the others hold the lens's
+// extrapolation), over their degrees of freedom, 2 per mark less the
+// plate's free parameters (the scene's are shared with the tracks and
+// neglected). 0 if no degree of freedom is left.
+double PlateMarkScatterPx(const std::vector<PlateMarkObservation>& observations,
+                          const Eigen::Matrix2Xd& residual_px,
+                          const Eigen::Matrix2Xd& measured_region_px, int num_plate_parameters) {
+  double sum_sq = 0;
+  int count = 0;
+  for (Eigen::Index n = 0; n < residual_px.cols(); ++n) {
+    if (measured_region_px.cols() > 0 &&
+        DistanceOutsideConvexPolygon(measured_region_px,
+                                     observations[static_cast<size_t>(n)].q_px) > 0)
+      continue;
+    sum_sq += residual_px.col(n).squaredNorm();
+    ++count;
+  }
+  const int dof = 2 * count - num_plate_parameters;
+  return dof > 0 && std::isfinite(sum_sq) ? std::sqrt(sum_sq / dof) : 0.0;
 }
 
 }  // namespace
@@ -350,6 +394,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
         "(mosaic.plate_height_mm sets it)";
   }
   result.found = true;
+  result.sigma_assumed = !dots;
   std::ostringstream brief;
   brief << "plate on the part: whole in " << result.whole_in_tiles.size() << " tile(s), "
         << result.observations.size() << " marks in " << num_seen << " tile(s); height "
@@ -503,15 +548,9 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   FinalAdjustment result;
   result.intrinsics_refined = prior.information.size() > 0;
   result.input = plate.found ? WithPlate(registered_input, plate) : registered_input;
-  if (plate.found && prior.measured_region_px.cols() > 0) {
-    const double sigma = result.input.observation_sigma_px;
-    for (PlateMarkObservation& obs : result.input.plate_observations) {
-      const double d = DistanceOutsideConvexPolygon(prior.measured_region_px, obs.q_px);
-      if (!(d > 0)) continue;
-      ++result.plate_outside_region;
-      obs.weight = sigma / std::hypot(sigma / obs.weight, options.extrapolation_px_per_px * d);
-    }
-  }
+  result.plate_outside_region =
+      WeighPlateMarks(prior.measured_region_px, options.extrapolation_px_per_px,
+                      result.input.observation_sigma_px, 0.0, &result.input.plate_observations);
   if (result.intrinsics_refined) {
     result.input.intrinsics_information = prior.information;
     result.input.intrinsics_held = prior.held;
@@ -534,27 +573,53 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.scene = initial;
   result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
 
-  std::string why_not_used;
-  if (plate.found && result.summary.usable) {
-    // Misread marks: drop and solve again.
+  // Misread marks: dropped, the scene solved again from `from`. Empty, or
+  // why the plate is not used (most of its marks outliers).
+  const auto drop_plate_outliers = [&](PlaneScene from) -> std::string {
     const double sigma = result.input.observation_sigma_px;
     std::vector<PlateMarkObservation> kept;
+    int num_dropped = 0;
     for (size_t n = 0; n < result.input.plate_observations.size(); ++n) {
       const PlateMarkObservation& obs = result.input.plate_observations[n];
       const Eigen::Vector2d res = result.scene.plate_residual_px.col(static_cast<Eigen::Index>(n));
       if (res.allFinite() && res.norm() * obs.weight <= options.plate_outlier_sigmas * sigma) {
         kept.push_back(obs);
       } else {
-        ++result.plate_outliers;
+        ++num_dropped;
       }
     }
+    result.plate_outliers += num_dropped;
     if (2 * kept.size() < result.input.plate_observations.size()) {
-      why_not_used = std::to_string(result.plate_outliers) + " of " +
-                     std::to_string(result.input.plate_observations.size()) + " marks are outliers";
-    } else if (result.plate_outliers > 0) {
+      return std::to_string(num_dropped) + " of " +
+             std::to_string(result.input.plate_observations.size()) + " marks are outliers";
+    }
+    if (num_dropped > 0) {
       result.input.plate_observations = kept;
-      result.scene = initial;
+      result.scene = std::move(from);
       result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
+    }
+    return {};
+  };
+  std::string why_not_used;
+  if (plate.found && result.summary.usable) why_not_used = drop_plate_outliers(initial);
+  if (plate.found && plate.sigma_assumed && why_not_used.empty() && result.summary.usable) {
+    // The corners weighed by their scatter about this solve, solved again
+    // from it, and screened again at that sigma. With the detector's assumed
+    // 0.1 px, rendered corners that scatter by ~0.02 px counted 1/25 of what
+    // they are worth, and the plate's scale was stated ~28 ppm where its
+    // errors spread by ~14 (14 demo projects with a chessboard on the part).
+    const int num_plate_parameters =
+        3 + (plate.marks.height_mm.has_value() ? 0 : 1) + (config.refine_plate_scale ? 1 : 0);
+    const double scatter_px =
+        PlateMarkScatterPx(result.input.plate_observations, result.scene.plate_residual_px,
+                           prior.measured_region_px, num_plate_parameters);
+    if (scatter_px > 0) {
+      result.corner_sigma_px = std::max(scatter_px, options.min_corner_sigma_px);
+      WeighPlateMarks(prior.measured_region_px, options.extrapolation_px_per_px,
+                      result.input.observation_sigma_px, result.corner_sigma_px,
+                      &result.input.plate_observations);
+      result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
+      if (result.summary.usable) why_not_used = drop_plate_outliers(result.scene);
     }
   }
   if (options.rescale_observation_sigma && why_not_used.empty() && result.summary.usable &&

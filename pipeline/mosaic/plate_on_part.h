@@ -88,6 +88,10 @@ struct PlateOnPart {
   // The plate's pitch sets the mosaic's scale; false when its height is
   // unknown and confounded with the scale (seen in one tile, no height given).
   bool scale_reference = false;
+  // A chessboard's corners: cv::cornerSubPix gives them no sigma, so they
+  // carry the detector's assumed chessboard_sigma_px until the final
+  // adjustment weighs them by their scatter (AdjustWithPlateAndPrior).
+  bool sigma_assumed = false;
   std::string height_source;            // "given", "estimated (seen in N tiles)", "unknown: ..."
   double max_bias_correction_px = 0.0;  // largest perspective-bias shift applied
   double seconds = 0.0;
@@ -189,6 +193,9 @@ struct FinalAdjustmentOptions {
   // lens-mismatch-203 showed (0.004-0.009 px/px, header above). Marks just
   // outside keep most of their weight, marks 100 px out are worth ~1 %.
   double extrapolation_px_per_px = 0.01;
+  // Floor of the sigma a plate's corners get from their scatter (PlateOnPart::
+  // sigma_assumed), px: the scatter leaves out the model's systematic misfit.
+  double min_corner_sigma_px = 0.01;
 
   std::string Check() const;
 };
@@ -219,6 +226,10 @@ struct FinalAdjustment {
   // Plate observations outside the calibration's measured region
   // (IntrinsicsPrior::measured_region_px), their sigma widened.
   int plate_outside_region = 0;
+  // The sigma a plate's corners were weighed by, from their scatter about
+  // the solve (PlateOnPart::sigma_assumed), px; 0 when the marks kept their
+  // own (dots: their ellipse fits') or none could be estimated.
+  double corner_sigma_px = 0.0;
   PlateScaleCheck scale_check;
   // Set when a found plate was left out (its solve unusable, or most of its
   // marks outliers: not the plate it seemed): the scene is the one without it.
@@ -230,9 +241,12 @@ struct FinalAdjustment {
 
 // Adjusts the registered scene once more with the plate (if plate.found) and
 // the intrinsics prior (if prior.information is set), warm-started from
-// `registered_scene`, whose intrinsics must be the calibration's. Data
-// failures come back in summary (usable, brief); throws InputError for
-// invalid options or sizes.
+// `registered_scene`, whose intrinsics must be the calibration's. A plate
+// whose marks' sigma is assumed (a chessboard's corners) is solved with it
+// first; the corners are then weighed by their scatter about that solve
+// (dof-corrected, floored by min_corner_sigma_px) and the scene solved again,
+// as the calibration stage weighs them. Data failures come back in summary
+// (usable, brief); throws InputError for invalid options or sizes.
 FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
                                         const PlaneBundleInput& registered_input,
                                         const PlaneScene& registered_scene,

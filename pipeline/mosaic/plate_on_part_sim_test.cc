@@ -291,11 +291,18 @@ TEST(PlateOnPartChessboard, CornersFollowedWhereTilesCutItSetTheScale) {
   const auto [rms, max_px] = MarkErrorsPx(c);
   std::printf("%zu corners in %zu tiles: error rms %.4f px, max %.4f px\n",
               c.plate.observations.size(), c.plate.seen_in_tiles.size(), rms, max_px);
-  // Well inside the corners' assumed sigma (PlateDetectionOptions::
-  // chessboard_sigma_px, 0.1 px), which weighs them.
+  // Well inside the detector's assumed sigma (PlateDetectionOptions::
+  // chessboard_sigma_px, 0.1 px).
   EXPECT_LT(rms, 0.05);
   EXPECT_LT(max_px, 0.1);
   ASSERT_TRUE(c.with_plate.summary.usable) << c.with_plate.summary.brief;
+  // The final adjustment weighs them by their scatter instead: the sigma per
+  // axis their errors against the truth show (rms over two axes), within
+  // what the scene's own errors and the estimate's ~5 % add.
+  const double truth_sigma_px = rms / std::sqrt(2.0);
+  std::printf("corners weighed by their scatter: sigma %.4f px, truth %.4f px\n",
+              c.with_plate.corner_sigma_px, truth_sigma_px);
+  EXPECT_NEAR(c.with_plate.corner_sigma_px, truth_sigma_px, 0.25 * truth_sigma_px);
   std::vector<Eigen::Vector2d> actual;
   for (const TileTruth& tile : c.truth.tiles) actual.push_back(tile.actual_mm);
   const double with = ScaleErrorPpm(c.with_plate.scene.table_pos_mm, actual);

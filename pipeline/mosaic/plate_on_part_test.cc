@@ -382,6 +382,40 @@ TEST(FinalAdjustment, PlateThatDoesNotFitIsLeftOut) {
   EXPECT_FALSE(a.scale_check.ok);
 }
 
+// A chessboard's corners come with the detector's assumed sigma (here 0.2
+// px) where they scatter by 0.07 px: the final adjustment estimates their
+// sigma from their scatter, and the scene and its scale sigma are then those
+// that their true sigma gives. Marks with a sigma of their own keep it.
+TEST(FinalAdjustment, CornersOfAssumedSigmaAreWeighedByTheirScatter) {
+  const Registered r = Register(PlateScene());
+  const double true_sigma_px = r.input.observation_sigma_px;  // the synthetic marks' noise
+  const PlateOnPart truly_weighed = PlateOf(r.s);
+  PlateOnPart assumed = truly_weighed;
+  assumed.sigma_assumed = true;
+  for (PlateMarkObservation& o : assumed.observations) o.weight = true_sigma_px / 0.2;
+  const FinalAdjustment a =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, assumed, IntrinsicsPrior{}, {});
+  const FinalAdjustment t =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, truly_weighed, IntrinsicsPrior{}, {});
+  ASSERT_TRUE(a.summary.usable) << a.summary.brief;
+  ASSERT_TRUE(t.summary.usable) << t.summary.brief;
+  ASSERT_TRUE(a.plate_not_used.empty()) << a.plate_not_used;
+  std::printf(
+      "%zu marks: corner sigma %.4f px (truth %.2f); scale sigma %.2f ppm (true weights "
+      "%.2f); scale error %.2f ppm (true weights %.2f)\n",
+      a.input.plate_observations.size(), a.corner_sigma_px, true_sigma_px, a.scale_sigma_ppm,
+      t.scale_sigma_ppm, ScaleErrorPpm(a.scene.table_pos_mm, r.s.truth.table_pos_mm),
+      ScaleErrorPpm(t.scene.table_pos_mm, r.s.truth.table_pos_mm));
+  // 137 marks: the scatter's own relative sigma is ~4 %.
+  EXPECT_NEAR(a.corner_sigma_px, true_sigma_px, 0.15 * true_sigma_px);
+  EXPECT_NEAR(a.scale_sigma_ppm, t.scale_sigma_ppm, 0.15 * t.scale_sigma_ppm);
+  EXPECT_NEAR(ScaleErrorPpm(a.scene.table_pos_mm, r.s.truth.table_pos_mm),
+              ScaleErrorPpm(t.scene.table_pos_mm, r.s.truth.table_pos_mm), 0.2 * t.scale_sigma_ppm);
+  EXPECT_EQ(t.corner_sigma_px, 0.0);
+  for (size_t n = 0; n < t.input.plate_observations.size(); ++n)
+    EXPECT_EQ(t.input.plate_observations[n].weight, truly_weighed.observations[n].weight);
+}
+
 // Matches that scatter 3x more than declared: the final adjustment finds the
 // factor (the unit-weight sigma) and its covariance becomes that of a solve
 // told the true sigma; declared right, nothing is widened. Without the
