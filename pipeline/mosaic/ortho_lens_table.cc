@@ -32,18 +32,41 @@ Eigen::Matrix2Xd RectangleBorderPx(const Eigen::Vector2d& min_px, const Eigen::V
 namespace {
 
 // Range of normalised rays over the image border pushed out by margin_px.
-void RayRange(const CameraModel& camera, double margin_px, Eigen::Vector2d* u_min,
+// Where the lens maps no ray to a margin pixel (mrcal leaves NaN: a splined
+// model beyond the knots its marks constrained, a radial polynomial past its
+// fold), the image border's ray there, pushed out by margin_px / f, stands
+// in; the table reaches on by extrapolating the projection. False if no
+// border pixel unprojects.
+bool RayRange(const CameraModel& camera, double margin_px, Eigen::Vector2d* u_min,
               Eigen::Vector2d* u_max) {
-  const Eigen::Matrix2Xd border =
-      RectangleBorderPx(Eigen::Vector2d::Constant(-margin_px),
-                        {camera.width_px - 1 + margin_px, camera.height_px - 1 + margin_px}, 64);
-  Eigen::Matrix3Xd v;
-  const bool ok = UnprojectPixels(camera, border, &v);
-  assert(ok);
-  (void)ok;
-  const Eigen::Matrix2Xd u = v.topRows<2>().array().rowwise() / v.row(2).array();
-  *u_min = u.rowwise().minCoeff();
-  *u_max = u.rowwise().maxCoeff();
+  constexpr int kPerSide = 64;
+  const Eigen::Vector2d last(camera.width_px - 1, camera.height_px - 1);
+  const Eigen::Matrix2Xd margin = RectangleBorderPx(
+      Eigen::Vector2d::Constant(-margin_px), last + Eigen::Vector2d::Constant(margin_px), kPerSide);
+  const Eigen::Matrix2Xd border = RectangleBorderPx(Eigen::Vector2d::Zero(), last, kPerSide);
+  const Eigen::Vector2d focal(camera.intrinsics[0], camera.intrinsics[1]);
+  const auto normalised = [&](const Eigen::Matrix2Xd& q, Eigen::Matrix2Xd* u) {
+    Eigen::Matrix3Xd v;
+    if (!UnprojectPixels(camera, q, &v)) v.setConstant(3, q.cols(), NAN);
+    *u = v.topRows<2>().array().rowwise() / v.row(2).array();
+  };
+  Eigen::Matrix2Xd u, u_border;
+  normalised(margin, &u);
+  *u_min = Eigen::Vector2d::Constant(INFINITY);
+  *u_max = -*u_min;
+  bool any = false;
+  for (Eigen::Index k = 0; k < u.cols(); ++k) {
+    Eigen::Vector2d uk = u.col(k);
+    if (!uk.allFinite()) {
+      if (u_border.cols() == 0) normalised(border, &u_border);
+      uk = u_border.col(k) + (margin.col(k) - border.col(k)).cwiseQuotient(focal);
+      if (!uk.allFinite()) continue;
+    }
+    *u_min = u_min->cwiseMin(uk);
+    *u_max = u_max->cwiseMax(uk);
+    any = true;
+  }
+  return any;
 }
 
 }  // namespace
@@ -51,10 +74,10 @@ void RayRange(const CameraModel& camera, double margin_px, Eigen::Vector2d* u_mi
 LensTable BuildLensTable(const CameraModel& camera, const LensTableOptions& options) {
   assert(options.Check().empty());
   Eigen::Vector2d u_min, u_max;
-  RayRange(camera, options.margin_px, &u_min, &u_max);
+  LensTable table;
+  if (!RayRange(camera, options.margin_px, &u_min, &u_max)) return table;
   const Eigen::Vector2d focal(camera.intrinsics[0], camera.intrinsics[1]);
 
-  LensTable table;
   double spacing_px = options.node_spacing_px;
   for (int attempt = 0; attempt < 5; ++attempt, spacing_px *= 0.5) {
     const Eigen::Vector2d step = Eigen::Vector2d::Constant(spacing_px).cwiseQuotient(focal);

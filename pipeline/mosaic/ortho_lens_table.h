@@ -90,10 +90,13 @@ Eigen::Matrix2Xd RectangleBorderPx(const Eigen::Vector2d& min_px, const Eigen::V
                                    int per_side);
 
 // Builds the table over the rays of the image (plus options.margin_px): the
-// image border is unprojected to find their range. Precondition:
-// options.Check() is empty and the camera projects (a valid mrcal model).
-// If the bound cannot be met at 1/16 of the initial spacing the table is
-// returned anyway; max_error_px() says how good it is.
+// image border pushed out by the margin is unprojected to find their range
+// (where the lens maps no ray to a margin pixel, the border's ray pushed out
+// by margin / f stands in). Precondition: options.Check() is empty and the
+// camera projects (a valid mrcal model). If the bound cannot be met at 1/16
+// of the initial spacing the table is returned anyway; max_error_px() says
+// how good it is. Empty (Project always false) if no border pixel
+// unprojects.
 LensTable BuildLensTable(const CameraModel& camera, const LensTableOptions& options = {});
 
 }  // namespace omm
