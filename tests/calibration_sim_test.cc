@@ -311,29 +311,64 @@ TEST(CalibrationOnSimulatedProjects, LensMismatchWithFewImagesStillChoosesASplin
 // Eight images (six usable) of lens-mismatch seed 243 leave the lower left
 // of the image without marks: the plate reached x 141..1433 and y 136..981 px
 // of 1600 x 1200. The splined model the choice needs there (OPENCV8: 1.48 px
-// residual sigma) maps no ray to that corner, which the true lens does; the
-// tiles use the whole image, so the stage must fail and say where the marks
-// reached, not hand the mosaic a camera whose border misses the part.
-TEST(CalibrationOnSimulatedProjects, LensThatTheMarksDoNotCoverToTheCornersFailsSayingWhy) {
+// residual sigma), sized for the marks (26 deg), maps no ray to that corner,
+// which the true lens does; the tiles use the whole image. Not widened
+// (splined_max_widening 1), the stage must fail and say where the marks
+// reached, not hand the mosaic a camera whose border misses the part; with
+// the default widening the spline maps the whole border.
+TEST(CalibrationOnSimulatedProjects, LensThatTheMarksDoNotCoverToTheCornersIsWidenedOrFails) {
   const testing::CachedProject sim = testing::SimulatedProject("lens-mismatch", 243, 8);
   Project project = LoadProject(sim.project_dir);
   project.camera.lens_model.reset();
   std::vector<NamedImage> images;
   for (const auto& path : project.calib_images)
     images.push_back({path.filename().string(), ReadGrayImage(path)});
+  CalibrationStageOptions not_widened;
+  not_widened.splined_max_widening = 1.0;
   const CalibrationStageSummary summary =
-      RunCalibration(images, *project.board, project.camera, {});
+      RunCalibration(images, *project.board, project.camera, not_widened);
   EXPECT_FALSE(summary.usable);
   EXPECT_NE(summary.result.camera.lens_model.find("SPLINED"), std::string::npos);
-  EXPECT_NE(summary.brief.find("does not map the whole image"), std::string::npos)
-      << summary.brief;
+  EXPECT_NE(summary.brief.find("does not map the whole image"), std::string::npos) << summary.brief;
   EXPECT_NE(summary.brief.find("x 141..1433 and y 136..981 px"), std::string::npos)
+      << summary.brief;
+  EXPECT_NE(summary.brief.find("widened from 26 to 26 deg; the lens choice widens it up to 1.00"),
+            std::string::npos)
       << summary.brief;
   // The true lens maps every border pixel; the calibrated one not.
   Eigen::Matrix2Xd corners(2, 4);
   corners << 0, 1599, 0, 1599, 0, 0, 1199, 1199;
   EXPECT_FALSE(FirstUnmappedPixel(sim.truth.camera.model, corners, 0.01).has_value());
   EXPECT_TRUE(FirstUnmappedPixel(summary.result.camera, corners, 0.01).has_value());
+
+  const CalibrationStageSummary widened =
+      RunCalibration(images, *project.board, project.camera, {});
+  ASSERT_TRUE(widened.usable) << widened.brief;
+  EXPECT_GT(widened.lens.splined_fov_deg, widened.lens.splined_fov_sized_deg);
+  EXPECT_FALSE(FirstUnmappedPixel(widened.result.camera, corners, 0.01).has_value());
+}
+
+// Lens-mismatch seed 315 (20 images, 18 usable: the plate reached y 1038 of
+// 1200 px): the spline sized for the marks (27 deg) folds before the image's
+// lower right corner, which the tiles use, and failed the run. Its knot
+// field is widened until every border pixel maps: the camera then maps the
+// corners the true lens maps, and over the whole imager it is still closer
+// to the truth than OpenCV's calibration of the same images.
+TEST(CalibrationOnSimulatedProjects, SplineThatLeavesTheBorderUnmappedIsWidened) {
+  const Calibrated& c = Calibrate("lens-mismatch", 315);
+  ASSERT_TRUE(c.summary.usable) << c.summary.brief;
+  EXPECT_NE(c.summary.result.camera.lens_model.find("SPLINED"), std::string::npos);
+  EXPECT_GT(c.summary.lens.splined_fov_deg, c.summary.lens.splined_fov_sized_deg);
+  EXPECT_LE(c.summary.lens.splined_fov_deg,
+            CalibrationStageOptions{}.splined_max_widening * c.summary.lens.splined_fov_sized_deg);
+  EXPECT_NE(c.summary.lens.why.find("knot field widened"), std::string::npos) << c.summary.lens.why;
+  EXPECT_NE(c.summary.result.camera.lens_model.find("fov_x_deg=" +
+                                                    std::to_string(c.summary.lens.splined_fov_deg)),
+            std::string::npos);
+  Eigen::Matrix2Xd corners(2, 4);
+  corners << 0, 1599, 0, 1599, 0, 0, 1199, 1199;
+  EXPECT_FALSE(FirstUnmappedPixel(c.summary.result.camera, corners, 0.01).has_value());
+  EXPECT_LT(c.truth_diff_px, c.opencv_truth_diff_px);
 }
 
 TEST(CalibrationOnSimulatedProjects, ImageCountStudyFindsWhereMoreImagesOnlyAverageNoise) {

@@ -283,11 +283,10 @@ Eigen::Matrix2Xd ImageBorderPx(int width_px, int height_px, double step_px) {
 // Why `camera` cannot serve the tiles, which use the whole image: a border
 // pixel the lens maps to no ray (a splined model past the knots the marks
 // constrained, found only in the mosaic stage otherwise, with no hint of the
-// cause); empty if every border pixel maps. No retry with the spline's knots
-// spread to the image's corners: the knots no mark reaches are regularised
-// to the undistorted lens (SplinedModelFor), a bias the covariance does not
-// hold (lens-mismatch seed 245, 12 images: the border maps from 1.1 x the
-// marks' field, 6 usable images of seed 243 from 1.4 x).
+// cause); empty if every border pixel maps. The lens choice widens the
+// spline's knot field a little first (splined_max_widening), not to the
+// image's corners: the knots no mark reaches are regularised to the
+// undistorted lens (SplinedFieldDeg), a bias the covariance does not hold.
 std::string UnmappedImageBorder(const CameraModel& camera,
                                 const std::vector<PlateObservation>& observations) {
   constexpr double kStepPx = 8.0, kTolerancePx = 0.01;
@@ -357,6 +356,8 @@ std::string CalibrationStageOptions::Check() const {
   if (splined_nx < 4) what << "splined_nx must be >= 4; ";
   if (!(splined_fov_margin > 0.5 && splined_fov_margin <= 1.5))
     what << "splined_fov_margin must be in (0.5, 1.5]; ";
+  if (!(splined_max_widening >= 1.0 && splined_max_widening <= 2.0))
+    what << "splined_max_widening must be in [1, 2]; ";
   if (!(lens_choice_significance_z > 0)) what << "lens_choice_significance_z must be > 0; ";
   if (!(lens_choice_min_misfit_fraction >= 0)) {
     what << "lens_choice_min_misfit_fraction must be >= 0; ";
@@ -380,9 +381,8 @@ std::vector<PlateObservation> DetectPlates(const std::vector<NamedImage>& images
   return detections;
 }
 
-std::string SplinedModelFor(const CameraModel& camera,
-                            const std::vector<PlateObservation>& observations, int nx,
-                            double fov_margin) {
+int SplinedFieldDeg(const CameraModel& camera, const std::vector<PlateObservation>& observations,
+                    double fov_margin) {
   std::vector<Eigen::Vector2d> marks;
   for (const PlateObservation& o : observations) {
     if (!o.usable) continue;
@@ -402,8 +402,11 @@ std::string SplinedModelFor(const CameraModel& camera,
     // A pinhole guess if the working camera cannot unproject the marks.
     half_angle_rad = std::atan(0.5 * camera.width_px / camera.intrinsics(0));
   }
-  const int fov_x_deg = std::max(1, static_cast<int>(std::floor(2.0 * half_angle_rad * fov_margin *
-                                                                180.0 / std::numbers::pi)));
+  return std::max(1, static_cast<int>(
+                         std::floor(2.0 * half_angle_rad * fov_margin * 180.0 / std::numbers::pi)));
+}
+
+std::string SplinedModel(const CameraModel& camera, int nx, int fov_x_deg) {
   const int ny =
       static_cast<int>(std::ceil(nx * static_cast<double>(camera.height_px) / camera.width_px));
   return fmt::format("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx={}_Ny={}_fov_x_deg={}", nx,
@@ -490,9 +493,10 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     summary.lens.why = "default (lens-model choice off)";
   } else {
     const Clock::time_point choice_start = Clock::now();
+    const int sized_deg = SplinedFieldDeg(result.camera, corrected, options.splined_fov_margin);
+    constexpr int kSplined = 1;  // the candidates' index of the spline
     const std::vector<std::string> candidates = {
-        kWorkingLensModel,
-        SplinedModelFor(result.camera, corrected, options.splined_nx, options.splined_fov_margin)};
+        kWorkingLensModel, SplinedModel(result.camera, options.splined_nx, sized_deg)};
     std::vector<CalibrationResult> solved;
     for (const std::string& model : candidates) {
       CalibrationOptions candidate_options = solve_options;
@@ -503,6 +507,7 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
           model == working_model ? result : CalibrateCamera(board, corrected, candidate_options));
       summary.lens.candidates.push_back(ScoreCandidate(model, solved.back()));
     }
+    summary.lens.splined_fov_sized_deg = summary.lens.splined_fov_deg = sized_deg;
     // Candidates are listed by increasing parameter count. Starting from the
     // smallest usable one, a larger one replaces the current choice only if
     // its fit is better by more than its extra parameters explain by chance,
@@ -547,10 +552,40 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
       SettleObservations(detections, board, solve_options, options, &result, &corrected,
                          &corrections, &summary.bias, &summary.corner_sigma_px);
     }
+    if (chosen == kSplined) {
+      // The settled spline widened while its border has a pixel no ray
+      // reaches (step 4), each wider one solved on the settled observations.
+      const int max_deg = static_cast<int>(std::floor(sized_deg * options.splined_max_widening));
+      CalibrationOptions wider_options = solve_options;
+      while (summary.lens.splined_fov_deg < max_deg &&
+             !UnmappedImageBorder(result.camera, corrected).empty()) {
+        wider_options.lens_model =
+            SplinedModel(result.camera, options.splined_nx, summary.lens.splined_fov_deg + 1);
+        CalibrationResult wider = CalibrateCamera(board, corrected, wider_options);
+        if (!wider.usable) break;
+        ++summary.lens.splined_fov_deg;
+        summary.lens.lens_model = wider_options.lens_model;
+        result = std::move(wider);
+      }
+      if (summary.lens.splined_fov_deg > sized_deg) {
+        summary.lens.why += fmt::format(
+            "; its knot field widened from {} deg (sized for the marks) to {} deg so that every "
+            "pixel of the image border maps: beyond the marks the lens is extrapolated, and "
+            "calibration images near the image's corners would measure it",
+            sized_deg, summary.lens.splined_fov_deg);
+      }
+    }
   }
 
   if (const std::string why = UnmappedImageBorder(result.camera, corrected); !why.empty()) {
     summary.brief = "calibration unusable: " + why;
+    if (summary.lens.splined_fov_sized_deg > 0 && summary.lens.lens_model != kWorkingLensModel) {
+      summary.brief += fmt::format(
+          " (its knot field widened from {} to {} deg; the lens choice widens it up to {:.2f} "
+          "times)",
+          summary.lens.splined_fov_sized_deg, summary.lens.splined_fov_deg,
+          options.splined_max_widening);
+    }
     summary.result = std::move(result);
     summary.total_seconds = SecondsSince(start);
     return summary;

@@ -250,6 +250,14 @@ void CalibrateFromImages(StageContext& context) {
     throw StageFailedError(Stage::kCalibrate, why);
   }
   spdlog::info("calibrate: {}", summary.lens.why);
+  if (summary.lens.splined_fov_deg > summary.lens.splined_fov_sized_deg &&
+      summary.result.camera.lens_model.find("SPLINED") != std::string::npos) {
+    spdlog::warn(
+        "calibrate: the spline's knot field was widened from {} to {} deg so that the lens maps "
+        "the whole image: beyond the plate's marks it is extrapolated (calibration images with "
+        "the plate near the image's corners would measure it)",
+        summary.lens.splined_fov_sized_deg, summary.lens.splined_fov_deg);
+  }
   spdlog::info("calibrate: {} ({:.2f} s: detection {:.2f} s, lens-model choice {:.2f} s)",
                summary.brief, summary.total_seconds, summary.detection_seconds,
                summary.lens_choice_seconds);
