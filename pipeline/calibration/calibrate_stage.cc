@@ -485,6 +485,9 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     return summary;
   }
 
+  // Why the camera cannot serve the tiles (UnmappedImageBorder), once known:
+  // it unprojects the whole border, slowly through a spline.
+  std::optional<std::string> unmapped;
   summary.lens.lens_model = working_model;
   summary.lens.forced = forced;
   if (forced) {
@@ -557,8 +560,8 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
       // reaches (step 4), each wider one solved on the settled observations.
       const int max_deg = static_cast<int>(std::floor(sized_deg * options.splined_max_widening));
       CalibrationOptions wider_options = solve_options;
-      while (summary.lens.splined_fov_deg < max_deg &&
-             !UnmappedImageBorder(result.camera, corrected).empty()) {
+      unmapped = UnmappedImageBorder(result.camera, corrected);
+      while (summary.lens.splined_fov_deg < max_deg && !unmapped->empty()) {
         wider_options.lens_model =
             SplinedModel(result.camera, options.splined_nx, summary.lens.splined_fov_deg + 1);
         CalibrationResult wider = CalibrateCamera(board, corrected, wider_options);
@@ -566,6 +569,7 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
         ++summary.lens.splined_fov_deg;
         summary.lens.lens_model = wider_options.lens_model;
         result = std::move(wider);
+        unmapped = UnmappedImageBorder(result.camera, corrected);
       }
       if (summary.lens.splined_fov_deg > sized_deg) {
         summary.lens.why += fmt::format(
@@ -577,8 +581,9 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     }
   }
 
-  if (const std::string why = UnmappedImageBorder(result.camera, corrected); !why.empty()) {
-    summary.brief = "calibration unusable: " + why;
+  if (!unmapped) unmapped = UnmappedImageBorder(result.camera, corrected);
+  if (!unmapped->empty()) {
+    summary.brief = "calibration unusable: " + *unmapped;
     if (summary.lens.splined_fov_sized_deg > 0 && summary.lens.lens_model != kWorkingLensModel) {
       summary.brief += fmt::format(
           " (its knot field widened from {} to {} deg; the lens choice widens it up to {:.2f} "
