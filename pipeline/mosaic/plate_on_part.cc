@@ -120,26 +120,26 @@ int WeighPlateMarks(const Eigen::Matrix2Xd& measured_region_px, double extrapola
   return num_outside;
 }
 
-// The marks' 1-sigma from their scatter about the solve, px: the residuals
-// of those inside the measured region (the others hold the lens's
-// extrapolation), over their degrees of freedom, 2 per mark less the
-// plate's free parameters (the scene's are shared with the tracks and
-// neglected). 0 if no degree of freedom is left.
-double PlateMarkScatterPx(const std::vector<PlateMarkObservation>& observations,
-                          const Eigen::Matrix2Xd& residual_px,
-                          const Eigen::Matrix2Xd& measured_region_px, int num_plate_parameters) {
-  double sum_sq = 0;
+// The plate marks' residuals inside the measured region (all if it is
+// empty; those outside carry the lens's extrapolation error): the sum of
+// their squared norms, px^2, and how many marks.
+struct InsideResiduals {
+  double sum_sq = 0.0;
   int count = 0;
+};
+InsideResiduals ResidualsInsideRegion(const std::vector<PlateMarkObservation>& observations,
+                                      const Eigen::Matrix2Xd& residual_px,
+                                      const Eigen::Matrix2Xd& measured_region_px) {
+  InsideResiduals inside;
   for (Eigen::Index n = 0; n < residual_px.cols(); ++n) {
     if (measured_region_px.cols() > 0 &&
         DistanceOutsideConvexPolygon(measured_region_px,
                                      observations[static_cast<size_t>(n)].q_px) > 0)
       continue;
-    sum_sq += residual_px.col(n).squaredNorm();
-    ++count;
+    inside.sum_sq += residual_px.col(n).squaredNorm();
+    ++inside.count;
   }
-  const int dof = 2 * count - num_plate_parameters;
-  return dof > 0 && std::isfinite(sum_sq) ? std::sqrt(sum_sq / dof) : 0.0;
+  return inside;
 }
 
 }  // namespace
@@ -610,9 +610,14 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
     // errors spread by ~14 (14 demo projects with a chessboard on the part).
     const int num_plate_parameters =
         3 + (plate.marks.height_mm.has_value() ? 0 : 1) + (config.refine_plate_scale ? 1 : 0);
+    // Their scatter inside the measured region over its degrees of freedom,
+    // 2 per mark less the plate's free parameters (the scene's are shared
+    // with the tracks and neglected).
+    const InsideResiduals inside = ResidualsInsideRegion(
+        result.input.plate_observations, result.scene.plate_residual_px, prior.measured_region_px);
+    const int dof = 2 * inside.count - num_plate_parameters;
     const double scatter_px =
-        PlateMarkScatterPx(result.input.plate_observations, result.scene.plate_residual_px,
-                           prior.measured_region_px, num_plate_parameters);
+        dof > 0 && std::isfinite(inside.sum_sq) ? std::sqrt(inside.sum_sq / dof) : 0.0;
     if (scatter_px > 0) {
       result.corner_sigma_px = std::max(scatter_px, options.min_corner_sigma_px);
       WeighPlateMarks(prior.measured_region_px, options.extrapolation_px_per_px,
@@ -641,20 +646,9 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.scene.covariance =
       (0.5 * (result.scene.covariance + result.scene.covariance.transpose())).eval();
   if (plate.found) {
-    // Over the marks whose weight the region left as it was: the widened
-    // ones carry the lens's extrapolation error.
-    double sum_sq = 0;
-    int count = 0;
-    const Eigen::Matrix2Xd& res = result.scene.plate_residual_px;
-    for (Eigen::Index n = 0; n < res.cols(); ++n) {
-      const Eigen::Vector2d& q = result.input.plate_observations[static_cast<size_t>(n)].q_px;
-      if (prior.measured_region_px.cols() > 0 &&
-          DistanceOutsideConvexPolygon(prior.measured_region_px, q) > 0)
-        continue;
-      sum_sq += res.col(n).squaredNorm();
-      ++count;
-    }
-    result.plate_rms_px = count > 0 ? std::sqrt(sum_sq / count) : 0.0;
+    const InsideResiduals inside = ResidualsInsideRegion(
+        result.input.plate_observations, result.scene.plate_residual_px, prior.measured_region_px);
+    result.plate_rms_px = inside.count > 0 ? std::sqrt(inside.sum_sq / inside.count) : 0.0;
     result.plate_height_mm = result.scene.plates[0].height_mm;
     const int h = plate_index + 3;
     if (result.scene.covariance.rows() > h)

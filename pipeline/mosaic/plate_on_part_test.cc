@@ -416,6 +416,40 @@ TEST(FinalAdjustment, CornersOfAssumedSigmaAreWeighedByTheirScatter) {
     EXPECT_EQ(t.input.plate_observations[n].weight, truly_weighed.observations[n].weight);
 }
 
+// With a measured region (a splined lens's), the corners' scatter is taken
+// over those inside it, and those outside are widened from it by their
+// distance, hypot(sigma, extrapolation_px_per_px * d), as dots are from
+// their own sigmas.
+TEST(FinalAdjustment, CornersOutsideTheMeasuredRegionAreWidenedFromTheirScatter) {
+  const Registered r = Register(PlateScene());
+  const double true_sigma_px = r.input.observation_sigma_px;
+  PlateOnPart assumed = PlateOf(r.s);
+  assumed.sigma_assumed = true;
+  for (PlateMarkObservation& o : assumed.observations) o.weight = true_sigma_px / 0.2;
+  // The left 60 % of the image.
+  const double w = r.s.camera.width_px, h = r.s.camera.height_px;
+  Eigen::Matrix2Xd corners(2, 4);
+  corners << 0, 0.6 * w, 0.6 * w, 0, 0, 0, h, h;
+  IntrinsicsPrior prior;
+  prior.measured_region_px = ConvexHull(corners);
+  const FinalAdjustmentOptions options;
+  const FinalAdjustment a =
+      AdjustWithPlateAndPrior(r.s.camera, r.input, r.scene, assumed, prior, options);
+  ASSERT_TRUE(a.summary.usable) << a.summary.brief;
+  ASSERT_TRUE(a.plate_not_used.empty()) << a.plate_not_used;
+  const int num_marks = static_cast<int>(a.input.plate_observations.size());
+  std::printf("%d of %d marks outside the region; corner sigma %.4f px (truth %.2f)\n",
+              a.plate_outside_region, num_marks, a.corner_sigma_px, true_sigma_px);
+  EXPECT_GT(a.plate_outside_region, 10);
+  EXPECT_LT(a.plate_outside_region, num_marks - 10);
+  EXPECT_NEAR(a.corner_sigma_px, true_sigma_px, 0.15 * true_sigma_px);
+  for (const PlateMarkObservation& o : a.input.plate_observations) {
+    const double d = DistanceOutsideConvexPolygon(prior.measured_region_px, o.q_px);
+    const double sigma_px = std::hypot(a.corner_sigma_px, options.extrapolation_px_per_px * d);
+    EXPECT_NEAR(o.weight, true_sigma_px / sigma_px, 1e-12) << "distance " << d << " px";
+  }
+}
+
 // Matches that scatter 3x more than declared: the final adjustment finds the
 // factor (the unit-weight sigma) and its covariance becomes that of a solve
 // told the true sigma; declared right, nothing is widened. Without the

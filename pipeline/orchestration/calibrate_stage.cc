@@ -250,8 +250,7 @@ void CalibrateFromImages(StageContext& context) {
     throw StageFailedError(Stage::kCalibrate, why);
   }
   spdlog::info("calibrate: {}", summary.lens.why);
-  if (summary.lens.splined_fov_deg > summary.lens.splined_fov_sized_deg &&
-      summary.result.camera.lens_model.find("SPLINED") != std::string::npos) {
+  if (summary.lens.splined_fov_deg > summary.lens.splined_fov_sized_deg) {
     spdlog::warn(
         "calibrate: the spline's knot field was widened from {} to {} deg so that the lens maps "
         "the whole image: beyond the plate's marks it is extrapolated (calibration images with "
