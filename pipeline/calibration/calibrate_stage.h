@@ -16,8 +16,10 @@
 //     the corrections the solution gives differ by less than bias_settle_px
 //     from those it was solved on (they depend on the pose only to second
 //     order, so one round suffices with OPENCV8; a splined model, which bends
-//     to each round's corrections, takes more) or max_bias_rounds re-solves
-//     are reached. A chessboard's corners have no such bias, but no sigma
+//     to each round's corrections, takes more: from the second re-solve on,
+//     the corrections solved on are extrapolated from the last two rounds,
+//     pipeline/core/fixed_point.h) or max_bias_rounds re-solves are
+//     reached. A chessboard's corners have no such bias, but no sigma
 //     either (cornerSubPix gives none): the detector's assumed
 //     chessboard_sigma_px is replaced by their scatter about this first
 //     solve (its dof-corrected RMS), the weights set from it (MarkWeight),
