@@ -357,6 +357,49 @@ std::string UnmappedImageBorder(const CameraModel& camera,
       camera.width_px, camera.height_px);
 }
 
+// Step 5: the chosen spline `result` beyond the marks, guided by the working
+// model's solve; kept only if the border still maps.
+void ExtrapolateSpline(const CalibrationResult& working, double working_sigma_px,
+                       const std::vector<PlateObservation>& corrected,
+                       const CalibrationStageOptions& options, CalibrationResult* result,
+                       LensModelChoice* lens) {
+  std::string why_not;
+  const std::optional<CalibrationUncertainty> uncertainty =
+      CalibrationUncertainty::Compute(result->record, 0.0, &why_not);
+  if (!uncertainty) {
+    lens->extrapolation.why_not = "no uncertainty: " + why_not;
+    return;
+  }
+  const std::optional<CalibrationUncertainty> working_uncertainty =
+      CalibrationUncertainty::Compute(working.record, 0.0, &why_not);
+  if (!working_uncertainty) {
+    lens->extrapolation.why_not = "no uncertainty of the working model: " + why_not;
+    return;
+  }
+  SplineExtrapolation extrapolation = ExtrapolateSplineByParametric(
+      result->camera, *uncertainty, working.camera, *working_uncertainty, working_sigma_px,
+      WorkingDistanceMm(*result), options.spline_extrapolation);
+  if (extrapolation.applied) {
+    CameraModel extrapolated = result->camera;
+    extrapolated.intrinsics = extrapolation.intrinsics;
+    if (const std::string unmapped = UnmappedImageBorder(extrapolated, corrected);
+        !unmapped.empty()) {
+      extrapolation.applied = false;
+      extrapolation.why_not = "it would leave the border unmapped: " + unmapped;
+    } else {
+      result->camera.intrinsics = extrapolation.intrinsics;
+      result->record.camera.intrinsics = extrapolation.intrinsics;
+      lens->why += fmt::format(
+          "; beyond the marks, where its 1-sigma exceeds that of {}'s fit (its misfit {:.3f} px "
+          "and its own uncertainty), the spline follows that fit (moved by up to {:.3f} px; "
+          "{:.4f} px among the marks)",
+          working.camera.lens_model, working_sigma_px, extrapolation.max_change_px,
+          extrapolation.max_change_where_aligned_px);
+    }
+  }
+  lens->extrapolation = std::move(extrapolation);
+}
+
 }  // namespace
 
 void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
@@ -537,6 +580,9 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   // Why the camera cannot serve the tiles (UnmappedImageBorder), once known:
   // it unprojects the whole border, slowly through a spline.
   std::optional<std::string> unmapped;
+  // The working model's solve, kept when a spline is chosen (step 5).
+  std::optional<CalibrationResult> working_solve;
+  double working_sigma_px = 0.0;
   summary.lens.lens_model = working_model;
   summary.lens.forced = forced;
   if (forced) {
@@ -590,7 +636,11 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
                                           other.sigma_px);
         }
       }
-      if (c.lens_model != working_model) result = std::move(solved[chosen]);
+      if (c.lens_model != working_model) {
+        result = std::move(solved[chosen]);
+        working_solve = std::move(solved[0]);
+        working_sigma_px = summary.lens.candidates[0].sigma_px;
+      }
     }
     if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;
     summary.lens_choice_seconds = SecondsSince(choice_start);
@@ -643,6 +693,10 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     summary.result = std::move(result);
     summary.total_seconds = SecondsSince(start);
     return summary;
+  }
+  if (working_solve && options.extrapolate_spline_by_working_model) {
+    ExtrapolateSpline(*working_solve, working_sigma_px, corrected, options, &result,
+                      &summary.lens);
   }
   summary.observations = std::move(corrected);
   summary.uncertainty =

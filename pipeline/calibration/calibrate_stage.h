@@ -78,7 +78,13 @@
 //     scores extrapolation rather than fit (on the lens-mismatch preset it
 //     ranked the splined model last, 4.2 px, while that model is 5x closer to
 //     the truth than OPENCV8), and it costs 24+ solves instead of 2.
-//  5. Projection uncertainty over the imager (adapters/mrcal/uncertainty.h) at
+//  5. A chosen spline beyond the marks (pipeline/calibration/
+//     spline_extrapolation.h): where its projection 1-sigma exceeds the
+//     working model's misfit, it follows that model's fit of the same
+//     images, aligned to it where the spline is the surer; among the marks
+//     it is unchanged. mrcal's regularisation pulled the corners the plates
+//     never reached toward the bare stereographic projection.
+//  6. Projection uncertainty over the imager (adapters/mrcal/uncertainty.h) at
 //     the working distance, the median distance of the plates' centres from the
 //     camera: typical (median over the imager) and worst (max) of mrcal's
 //     worst-direction stdev.
@@ -92,6 +98,7 @@
 #include <Eigen/Core>
 
 #include "adapters/opencv/plate_detector.h"
+#include "pipeline/calibration/spline_extrapolation.h"
 #include "pipeline/core/board.h"
 #include "pipeline/core/calibration_result.h"
 #include "pipeline/core/image.h"
@@ -124,6 +131,10 @@ struct CalibrationStageOptions {
   // ... and if the misfit it removes, sqrt(sigma_small^2 - sigma_big^2), is
   // at least this fraction of the noise it leaves (step 4).
   double lens_choice_min_misfit_fraction = 0.5;
+  // A chosen spline follows the working model's fit where it is the less
+  // sure of the two (step 5); false: mrcal's own extrapolation.
+  bool extrapolate_spline_by_working_model = true;
+  SplineExtrapolationOptions spline_extrapolation;
 
   // Calibration solve.
   bool optimize_calobject_warp = false;
@@ -164,6 +175,9 @@ struct LensModelChoice {
   // (wider when the first left some border pixel unmapped), deg; 0: none.
   int splined_fov_sized_deg = 0;
   int splined_fov_deg = 0;
+  // A chosen spline beyond the marks, guided by the working model's fit
+  // (step 5).
+  SplineExtrapolation extrapolation;
 };
 
 struct BiasCorrectionSummary {

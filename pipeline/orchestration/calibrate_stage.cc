@@ -94,6 +94,18 @@ ReportValue LensChoice(const LensModelChoice& lens) {
         "sigma_px = rms sqrt(M / (M - P))");
     choice.emplace_back("candidates", candidates);
   }
+  const SplineExtrapolation& e = lens.extrapolation;
+  if (e.applied || !e.why_not.empty()) {
+    ReportObject beyond{{"applied", e.applied}};
+    if (e.applied) {
+      beyond.emplace_back("follows", e.parametric_model);
+      beyond.emplace_back("max_change_px", e.max_change_px);
+      beyond.emplace_back("max_change_among_marks_px", e.max_change_where_aligned_px);
+    } else {
+      beyond.emplace_back("why_not", e.why_not);
+    }
+    choice.emplace_back("spline_beyond_marks", beyond);
+  }
   return choice;
 }
 

@@ -1,0 +1,134 @@
+#include "pipeline/calibration/spline_extrapolation.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
+
+#include "adapters/mrcal/lens.h"
+#include "adapters/mrcal/projection_diff.h"
+#include "adapters/mrcal/uncertainty.h"
+#include "pipeline/core/plane_scene.h"
+
+namespace omm {
+
+std::string SplineExtrapolationOptions::Check() const {
+  if (grid_nx < 4 || grid_ny < 4) return "grid_nx and grid_ny must be >= 4";
+  if (!(align_below_fraction > 0.0 && align_below_fraction <= 1.0))
+    return "align_below_fraction must be in (0, 1]";
+  return "";
+}
+
+SplineExtrapolation ExtrapolateSplineByParametric(
+    const CameraModel& spline, const CalibrationUncertainty& uncertainty,
+    const CameraModel& parametric, const CalibrationUncertainty& parametric_uncertainty,
+    double parametric_sigma_px, double distance_mm, const SplineExtrapolationOptions& options) {
+  SplineExtrapolation result;
+  result.intrinsics = spline.intrinsics;
+  result.parametric_model = parametric.lens_model;
+  if (spline.lens_model.find("SPLINED") == std::string::npos) {
+    result.why_not = "not a splined model";
+    return result;
+  }
+  if (!(parametric_sigma_px > 0.0)) {
+    result.why_not = "the parametric model's sigma is not positive";
+    return result;
+  }
+  const ImagerUncertainty grid = ProjectionUncertaintyOverImager(uncertainty, spline, distance_mm,
+                                                                 options.grid_nx, options.grid_ny);
+  const Eigen::Matrix2Xd& q = grid.q_px;
+  const Eigen::Index n = q.cols();
+  Eigen::VectorXd sigma_s(n);
+  for (Eigen::Index k = 0; k < n; ++k) sigma_s(k) = grid.points[k].worst_stdev_px;
+
+  // The parametric camera's frame differs from the spline's by a small
+  // rigid motion (each solve has its own plate poses): fitted where the
+  // spline is the surer, as mrcal's projection_diff fits one.
+  std::vector<Eigen::Index> surer;
+  for (Eigen::Index k = 0; k < n; ++k)
+    if (sigma_s(k) < options.align_below_fraction * parametric_sigma_px) surer.push_back(k);
+  result.num_aligned = static_cast<int>(surer.size());
+  if (surer.size() < 3) {
+    result.why_not = "the spline is nowhere surer than the parametric model";
+    return result;
+  }
+  const ProjectionDiff aligned =
+      FitRigidToProjections(grid.p_cam(Eigen::all, surer), q(Eigen::all, surer), parametric);
+  if (!aligned.converged) {
+    result.why_not = "the parametric model could not be aligned to the spline";
+    return result;
+  }
+  Eigen::Matrix3Xd p_parametric;
+  if (!UnprojectPixels(parametric, q, &p_parametric)) {
+    result.why_not = "the parametric model does not map the whole imager";
+    return result;
+  }
+  for (Eigen::Index k = 0; k < n; ++k)
+    p_parametric.col(k) = distance_mm * p_parametric.col(k).normalized();
+  // Its 1-sigma: the misfit, and its own projection uncertainty (the misfit
+  // taken as noise, as mrcal does), which grows where its fit extrapolates.
+  Eigen::VectorXd sigma_p(n);
+  {
+    const std::vector<PointUncertainty> own =
+        ProjectionUncertainty(parametric_uncertainty, p_parametric);
+    for (Eigen::Index k = 0; k < n; ++k)
+      sigma_p(k) = std::hypot(parametric_sigma_px, own[k].worst_stdev_px);
+  }
+  // Its rays at the same range, into the spline's frame: p_s = R' (p_p - t).
+  const Eigen::Matrix3d r = RotationFromAngleAxis(aligned.rt_b_from_a.head<3>());
+  const Eigen::Vector3d t = aligned.rt_b_from_a.tail<3>();
+  for (Eigen::Index k = 0; k < n; ++k)
+    p_parametric.col(k) = r.transpose() * (p_parametric.col(k) - t);
+
+  // Both targets' residuals and their gradients in the control points (the
+  // intrinsics after the core's 4).
+  Eigen::Matrix3Xd p(3, 2 * n);
+  p << grid.p_cam, p_parametric;
+  Eigen::Matrix2Xd q_now;
+  Eigen::MatrixXd dq_dintrinsics;
+  if (!ProjectPoints(spline, p, &q_now, nullptr, &dq_dintrinsics)) {
+    result.why_not = "mrcal refused to project through the spline";
+    return result;
+  }
+  const int num_control = static_cast<int>(spline.intrinsics.size()) - 4;
+  Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(num_control, num_control);
+  Eigen::VectorXd gradient = Eigen::VectorXd::Zero(num_control);
+  for (Eigen::Index k = 0; k < 2 * n; ++k) {
+    const double weight = k < n ? 1.0 / sigma_s(k) : 1.0 / sigma_p(k - n);
+    const Eigen::MatrixXd j = weight * dq_dintrinsics.middleRows(2 * k, 2).rightCols(num_control);
+    const Eigen::Vector2d residual = weight * (q_now.col(k) - q.col(k % n));
+    normal.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
+    gradient += j.transpose() * residual;
+  }
+  // Control points no target reaches (their knots beyond the imager) keep
+  // their values: a ridge far below every reached one's information.
+  const double ridge = 1e-12 * normal.diagonal().maxCoeff();
+  normal.diagonal().array() += ridge;
+  const Eigen::VectorXd step = -normal.selfadjointView<Eigen::Lower>().ldlt().solve(gradient);
+  if (!step.allFinite()) {
+    result.why_not = "the least-squares step is not finite";
+    return result;
+  }
+  result.intrinsics.tail(num_control) += step;
+
+  // How far the spline's projection of its own rays moved.
+  CameraModel extrapolated = spline;
+  extrapolated.intrinsics = result.intrinsics;
+  Eigen::Matrix2Xd q_after;
+  if (!ProjectPoints(extrapolated, grid.p_cam, &q_after)) {
+    result.why_not = "mrcal refused to project through the extrapolated spline";
+    result.intrinsics = spline.intrinsics;
+    return result;
+  }
+  for (Eigen::Index k = 0; k < n; ++k)
+    result.max_change_px = std::max(result.max_change_px, (q_after.col(k) - q.col(k)).norm());
+  for (const Eigen::Index k : surer) {
+    result.max_change_where_aligned_px =
+        std::max(result.max_change_where_aligned_px, (q_after.col(k) - q.col(k)).norm());
+  }
+  result.applied = true;
+  return result;
+}
+
+}  // namespace omm

@@ -1,0 +1,82 @@
+// A splined lens beyond the calibration marks, guided by a parametric fit.
+//
+// Why. A splined model follows any smooth lens where the marks were, but
+// beyond them mrcal's regularisation pulls its control points toward the bare
+// stereographic projection. On lens-mismatch seed 341 (marks reaching x
+// 127..1461, y 128..1076 of 1600 x 1200 px) the spline was 0.02 px from the
+// truth within 50 px of a mark and 7.5 px RMS (27 px at worst) more than
+// 200 px from one, where the OPENCV8 fit of the same images, ~0.8 px off
+// everywhere, was 2.6 px off. The tiles and the user's own checks use the
+// whole imager.
+//
+// Model. Two estimates of the projection of each pixel's ray: the spline's,
+// with its stated projection 1-sigma sigma_s (mrcal's uncertainty: ~0.01 px
+// among the marks, growing without bound beyond them), and the parametric
+// fit's, aligned to the spline by the rigid motion that best maps the one's
+// rays on the other's where the spline is by far the surer. The parametric
+// fit's 1-sigma sigma_p combines its misfit (its residual sigma over the
+// marks) and its own projection uncertainty with that misfit taken as noise
+// (as mrcal does), which grows where its fit extrapolates: a rational
+// OPENCV8 can fold in the corners (lens-mismatch seed 347: 13.8 px off there,
+// the spline 4.2). On a grid over the imager both are targets for the
+// spline's control points, weighted 1/sigma:
+//   min_c  sum_k |q(c; p_s,k) - q_k|^2 / sigma_s,k^2 + |q(c; p_p,k) - q_k|^2 / sigma_p,k^2
+// (p_s,k, p_p,k: pixel q_k's ray under each). Where the marks were, sigma_s <<
+// sigma_p and the spline is unchanged (to (sigma_s / sigma_p)^2 of the
+// difference); far beyond them it follows the parametric model. The spline's
+// projection is linear in its control points (q = f (u + du(u)) + c, du a
+// B-spline of u), so one least-squares step is the exact minimum; the core
+// (f, c) is kept.
+//
+// The result is no longer mrcal's optimum of its own problem: the solve
+// record keeps the extrapolated intrinsics, whose projection of the marks is
+// the same to well below their noise, and the stated uncertainty stays
+// mrcal's (conservative beyond the marks).
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+
+#include "pipeline/core/camera.h"
+
+namespace omm {
+
+class CalibrationUncertainty;
+
+struct SplineExtrapolationOptions {
+  // Targets: a grid_nx x grid_ny grid spanning the imager (a few per knot
+  // spacing: the spline's 10 knots across are ~150 px apart).
+  int grid_nx = 41;
+  int grid_ny = 31;
+  // The parametric model is aligned to the spline over the grid points where
+  // sigma_s is below this fraction of sigma_p.
+  double align_below_fraction = 0.1;
+
+  // Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+struct SplineExtrapolation {
+  bool applied = false;
+  std::string why_not;           // when !applied
+  std::string parametric_model;  // the lens model followed beyond the marks
+  Eigen::VectorXd intrinsics;    // the spline's, extrapolated (same core)
+  // The largest change of the spline's projection over the grid, and over
+  // the grid points the alignment used (where the spline is by far the
+  // surer: among the marks), px.
+  double max_change_px = 0.0;
+  double max_change_where_aligned_px = 0.0;
+  int num_aligned = 0;
+};
+
+// `spline`: a solved LENSMODEL_SPLINED_* camera and `uncertainty` its
+// solve's; `parametric`: a parametric camera solved on the same
+// observations, with residual sigma `parametric_sigma_px`; `distance_mm`:
+// the range the rays are taken at (the working distance).
+SplineExtrapolation ExtrapolateSplineByParametric(
+    const CameraModel& spline, const CalibrationUncertainty& uncertainty,
+    const CameraModel& parametric, const CalibrationUncertainty& parametric_uncertainty,
+    double parametric_sigma_px, double distance_mm, const SplineExtrapolationOptions& options = {});
+
+}  // namespace omm
