@@ -392,19 +392,34 @@ TEST_F(MosaicStageTest, TilesOfAnotherSizeThanTheCameraAreRefusedByName) {
   EXPECT_FALSE(fs::exists(dir / "out" / "mosaic.png"));
 }
 
+// The centre tile recorded as `recorded` of its pixels (16-bit), the
+// calibration the truth camera's: why the mosaic stage fails.
+std::string FailureWithCentreTileRecordedAs(const fs::path& dir, const fs::path& project_dir,
+                                            const CameraModel& camera, const std::string& image,
+                                            float scale, float offset) {
+  testing::CopyProject(project_dir, dir);
+  fs::create_directories(dir / "out");
+  WriteCameraModel(dir / "out" / "camera.cameramodel", camera);
+  const ImageF pixels = ReadGrayImage(dir / "tiles" / image).pixels;
+  WriteGrayImage(dir / "tiles" / image, (scale * pixels.array() + offset).matrix(), 16);
+  return MosaicStageFailure(dir);
+}
+
 // A tile recorded far too dark (a 16-bit capture at 2.5 % of the exposure:
 // the texture is there, so it registers) is below the exposure fit's floor
-// everywhere: the mosaic stage fails and names it.
-TEST_F(MosaicStageTest, UnderexposedTileFailsTheStageByName) {
-  const fs::path dir = dir_->path() / "dark";
-  testing::CopyProject(sim_->project_dir, dir);
-  fs::create_directories(dir / "out");
-  WriteCameraModel(dir / "out" / "camera.cameramodel", Truth().camera.model);
+// everywhere: the mosaic stage fails and names it. Recorded near white
+// instead (its texture in the top 2.5 %), it is above the fit's ceiling.
+TEST_F(MosaicStageTest, UnderexposedOrSaturatedTileFailsTheStageByName) {
   const std::string& image = Truth().tiles[4].image;
-  const ImageF dark = ReadGrayImage(dir / "tiles" / image).pixels * 0.025f;
-  WriteGrayImage(dir / "tiles" / image, dark, 16);
-  const std::string why = MosaicStageFailure(dir);
-  EXPECT_NE(why.find(image + " has no pixel between 3 % and 97 %"), std::string::npos) << why;
+  const std::string dark = FailureWithCentreTileRecordedAs(
+      dir_->path() / "dark", sim_->project_dir, Truth().camera.model, image, 0.025f, 0.0f);
+  EXPECT_NE(dark.find(image + " has no pixel between 3 % and 97 %"), std::string::npos) << dark;
+  EXPECT_NE(dark.find("a black or underexposed image?"), std::string::npos) << dark;
+  const std::string bright = FailureWithCentreTileRecordedAs(
+      dir_->path() / "bright", sim_->project_dir, Truth().camera.model, image, 0.025f, 0.975f);
+  EXPECT_NE(bright.find(image + " has no pixel between 3 % and 97 %"), std::string::npos)
+      << bright;
+  EXPECT_NE(bright.find("a white or saturated image?"), std::string::npos) << bright;
 }
 
 TEST_F(MosaicStageTest, ColmapReadsTheExportedModel) {

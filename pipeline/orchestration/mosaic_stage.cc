@@ -753,11 +753,17 @@ void RunMosaicStage(StageContext& context) {
     std::string why = ortho.summary.brief;
     const ExposureOptions exposure_options;
     for (const int i : ortho.summary.exposure.tiles_without_samples) {
+      const double median = MedianOfImage(tiles[i]);
+      const char* cause = median < exposure_options.min_value
+                              ? "a black or underexposed image?"
+                          : median > exposure_options.max_value
+                              ? "a white or saturated image?"
+                              : "where it overlaps the others it is all black or saturated";
       why += fmt::format(
           "; {} has no pixel between {:.0f} % and {:.0f} % of full scale where it overlaps "
-          "another tile (median {:.1f} %): a black, blank or saturated image?",
+          "another tile (median {:.1f} %): {}",
           project.tiles[i].image, 100.0 * exposure_options.min_value,
-          100.0 * exposure_options.max_value, 100.0 * MedianOfImage(tiles[i]));
+          100.0 * exposure_options.max_value, 100.0 * median, cause);
     }
     throw StageFailedError(Stage::kMosaic, why);
   }
