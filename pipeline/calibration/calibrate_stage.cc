@@ -360,25 +360,31 @@ std::string UnmappedImageBorder(const CameraModel& camera,
 // Step 5: the chosen spline `result` beyond the marks, guided by the working
 // model's solve; kept only if the border still maps.
 void ExtrapolateSpline(const CalibrationResult& working, double working_sigma_px,
+                       const CalibrationUncertainty& uncertainty,
                        const std::vector<PlateObservation>& corrected,
                        const CalibrationStageOptions& options, CalibrationResult* result,
                        LensModelChoice* lens) {
   std::string why_not;
-  const std::optional<CalibrationUncertainty> uncertainty =
-      CalibrationUncertainty::Compute(result->record, 0.0, &why_not);
-  if (!uncertainty) {
-    lens->extrapolation.why_not = "no uncertainty: " + why_not;
-    return;
-  }
   const std::optional<CalibrationUncertainty> working_uncertainty =
       CalibrationUncertainty::Compute(working.record, 0.0, &why_not);
   if (!working_uncertainty) {
     lens->extrapolation.why_not = "no uncertainty of the working model: " + why_not;
     return;
   }
+  // The solve's inlier marks, through its poses.
+  const Eigen::Matrix3Xd board_points = BoardPoints(result->record.board);
+  std::vector<Eigen::Vector3d> marks;
+  for (size_t i = 0; i < result->record.images.size(); ++i) {
+    for (Eigen::Index k = 0; k < board_points.cols(); ++k) {
+      if (!result->record.images[i].outlier[k])
+        marks.push_back(result->cam_from_plate[i] * board_points.col(k));
+    }
+  }
+  Eigen::Matrix3Xd marks_cam(3, static_cast<Eigen::Index>(marks.size()));
+  for (size_t k = 0; k < marks.size(); ++k) marks_cam.col(static_cast<Eigen::Index>(k)) = marks[k];
   SplineExtrapolation extrapolation = ExtrapolateSplineByParametric(
-      result->camera, *uncertainty, working.camera, *working_uncertainty, working_sigma_px,
-      WorkingDistanceMm(*result), options.spline_extrapolation);
+      result->camera, uncertainty, working.camera, *working_uncertainty, working_sigma_px,
+      WorkingDistanceMm(*result), marks_cam, options.spline_extrapolation);
   if (extrapolation.applied) {
     CameraModel extrapolated = result->camera;
     extrapolated.intrinsics = extrapolation.intrinsics;
@@ -392,9 +398,9 @@ void ExtrapolateSpline(const CalibrationResult& working, double working_sigma_px
       lens->why += fmt::format(
           "; beyond the marks, where its 1-sigma exceeds that of {}'s fit (its misfit {:.3f} px "
           "and its own uncertainty), the spline follows that fit (moved by up to {:.3f} px; "
-          "{:.4f} px among the marks)",
+          "{:.4f} px at the marks)",
           working.camera.lens_model, working_sigma_px, extrapolation.max_change_px,
-          extrapolation.max_change_where_aligned_px);
+          extrapolation.max_change_at_marks_px);
     }
   }
   lens->extrapolation = std::move(extrapolation);
@@ -512,23 +518,17 @@ double WorkingDistanceMm(const CalibrationResult& result) {
   return Median(distances);
 }
 
-UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distance_mm, int grid_nx,
+UncertaintySummary SummarizeUncertainty(const CalibrationUncertainty& uncertainty,
+                                        const CameraModel& camera, double distance_mm, int grid_nx,
                                         int grid_ny) {
   UncertaintySummary summary;
   summary.distance_mm = distance_mm;
-  std::string why_not;
-  const std::optional<CalibrationUncertainty> uncertainty =
-      CalibrationUncertainty::Compute(record, 0.0, &why_not);
-  if (!uncertainty) {
-    summary.why_not = why_not;
-    return summary;
-  }
   const ImagerUncertainty over_imager =
-      ProjectionUncertaintyOverImager(*uncertainty, record.camera, distance_mm, grid_nx, grid_ny);
+      ProjectionUncertaintyOverImager(uncertainty, camera, distance_mm, grid_nx, grid_ny);
   summary.available = true;
   summary.typical_px = over_imager.typical_worst_stdev_px;
   summary.worst_px = over_imager.max_worst_stdev_px;
-  summary.observed_sigma_px = uncertainty->observed_sigma_px();
+  summary.observed_sigma_px = uncertainty.observed_sigma_px();
   summary.grid_nx = grid_nx;
   summary.grid_ny = grid_ny;
   summary.grid_q_px = over_imager.q_px;
@@ -536,6 +536,20 @@ UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distan
   for (size_t i = 0; i < over_imager.points.size(); ++i)
     summary.grid_worst_px(static_cast<Eigen::Index>(i)) = over_imager.points[i].worst_stdev_px;
   return summary;
+}
+
+UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distance_mm, int grid_nx,
+                                        int grid_ny) {
+  std::string why_not;
+  const std::optional<CalibrationUncertainty> uncertainty =
+      CalibrationUncertainty::Compute(record, 0.0, &why_not);
+  if (!uncertainty) {
+    UncertaintySummary summary;
+    summary.distance_mm = distance_mm;
+    summary.why_not = why_not;
+    return summary;
+  }
+  return SummarizeUncertainty(*uncertainty, record.camera, distance_mm, grid_nx, grid_ny);
 }
 
 CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservation>& detections,
@@ -694,14 +708,30 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     summary.total_seconds = SecondsSince(start);
     return summary;
   }
+  // Computed once, at the solve's optimum: step 5 moves no mark's projection
+  // by more than a fraction of its noise, and mrcal's regularisation is
+  // linear in the control points, so it leaves J'J as it was.
+  std::string why_no_uncertainty;
+  const std::optional<CalibrationUncertainty> uncertainty =
+      CalibrationUncertainty::Compute(result.record, 0.0, &why_no_uncertainty);
   if (working_solve && options.extrapolate_spline_by_working_model) {
-    ExtrapolateSpline(*working_solve, working_sigma_px, corrected, options, &result,
-                      &summary.lens);
+    if (uncertainty) {
+      ExtrapolateSpline(*working_solve, working_sigma_px, *uncertainty, corrected, options,
+                        &result, &summary.lens);
+    } else {
+      summary.lens.extrapolation.why_not = "no projection uncertainty: " + why_no_uncertainty;
+    }
   }
   summary.observations = std::move(corrected);
-  summary.uncertainty =
-      SummarizeUncertainty(result.record, WorkingDistanceMm(result), options.uncertainty_grid_nx,
-                           options.uncertainty_grid_ny);
+  const double distance_mm = WorkingDistanceMm(result);
+  if (uncertainty) {
+    summary.uncertainty =
+        SummarizeUncertainty(*uncertainty, result.camera, distance_mm,
+                             options.uncertainty_grid_nx, options.uncertainty_grid_ny);
+  } else {
+    summary.uncertainty.distance_mm = distance_mm;
+    summary.uncertainty.why_not = why_no_uncertainty;
+  }
   summary.outliers = ListOutliers(result, board);
   ResidualVectors(result, &summary.residual_q_px, &summary.residual_px);
   summary.usable = true;

@@ -79,11 +79,12 @@
 //     ranked the splined model last, 4.2 px, while that model is 5x closer to
 //     the truth than OPENCV8), and it costs 24+ solves instead of 2.
 //  5. A chosen spline beyond the marks (pipeline/calibration/
-//     spline_extrapolation.h): where its projection 1-sigma exceeds the
-//     working model's misfit, it follows that model's fit of the same
-//     images, aligned to it where the spline is the surer; among the marks
-//     it is unchanged. mrcal's regularisation pulled the corners the plates
-//     never reached toward the bare stereographic projection.
+//     spline_extrapolation.h): where its projection 1-sigma exceeds that of
+//     the working model's fit of the same images (its misfit and its own
+//     uncertainty), it follows that fit; the marks' projections move by a
+//     small fraction of their noise (the change at the marks is reported).
+//     mrcal's regularisation pulled the corners the plates never reached
+//     toward the bare stereographic projection.
 //  6. Projection uncertainty over the imager (adapters/mrcal/uncertainty.h) at
 //     the working distance, the median distance of the plates' centres from the
 //     camera: typical (median over the imager) and worst (max) of mrcal's
@@ -283,8 +284,12 @@ void ResidualVectors(const CalibrationResult& result, Eigen::Matrix2Xd* q_px,
 // Median distance of the plates' centres from the camera, mm.
 double WorkingDistanceMm(const CalibrationResult& result);
 
-// The uncertainty summary of a finished solve at `distance_mm`.
+// The uncertainty summary of a finished solve at `distance_mm`, or of its
+// computed uncertainty projected through `camera`.
 UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distance_mm, int grid_nx,
+                                        int grid_ny);
+UncertaintySummary SummarizeUncertainty(const CalibrationUncertainty& uncertainty,
+                                        const CameraModel& camera, double distance_mm, int grid_nx,
                                         int grid_ny);
 
 }  // namespace omm

@@ -23,7 +23,8 @@ std::string SplineExtrapolationOptions::Check() const {
 SplineExtrapolation ExtrapolateSplineByParametric(
     const CameraModel& spline, const CalibrationUncertainty& uncertainty,
     const CameraModel& parametric, const CalibrationUncertainty& parametric_uncertainty,
-    double parametric_sigma_px, double distance_mm, const SplineExtrapolationOptions& options) {
+    double parametric_sigma_px, double distance_mm, const Eigen::Matrix3Xd& marks_cam,
+    const SplineExtrapolationOptions& options) {
   SplineExtrapolation result;
   result.intrinsics = spline.intrinsics;
   result.parametric_model = parametric.lens_model;
@@ -112,21 +113,22 @@ SplineExtrapolation ExtrapolateSplineByParametric(
   }
   result.intrinsics.tail(num_control) += step;
 
-  // How far the spline's projection of its own rays moved.
+  // How far the spline's projection of its own rays and of the marks moved.
   CameraModel extrapolated = spline;
   extrapolated.intrinsics = result.intrinsics;
-  Eigen::Matrix2Xd q_after;
-  if (!ProjectPoints(extrapolated, grid.p_cam, &q_after)) {
+  Eigen::Matrix3Xd p_check(3, n + marks_cam.cols());
+  p_check << grid.p_cam, marks_cam;
+  Eigen::Matrix2Xd q_before, q_after;
+  if (!ProjectPoints(spline, p_check, &q_before) ||
+      !ProjectPoints(extrapolated, p_check, &q_after)) {
     result.why_not = "mrcal refused to project through the extrapolated spline";
     result.intrinsics = spline.intrinsics;
     return result;
   }
-  for (Eigen::Index k = 0; k < n; ++k)
-    result.max_change_px = std::max(result.max_change_px, (q_after.col(k) - q.col(k)).norm());
-  for (const Eigen::Index k : surer) {
-    result.max_change_where_aligned_px =
-        std::max(result.max_change_where_aligned_px, (q_after.col(k) - q.col(k)).norm());
-  }
+  const Eigen::VectorXd change = (q_after - q_before).colwise().norm();
+  result.max_change_px = change.head(n).maxCoeff();
+  if (marks_cam.cols() > 0)
+    result.max_change_at_marks_px = change.tail(marks_cam.cols()).maxCoeff();
   result.applied = true;
   return result;
 }

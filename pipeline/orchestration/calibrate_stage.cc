@@ -100,7 +100,7 @@ ReportValue LensChoice(const LensModelChoice& lens) {
     if (e.applied) {
       beyond.emplace_back("follows", e.parametric_model);
       beyond.emplace_back("max_change_px", e.max_change_px);
-      beyond.emplace_back("max_change_among_marks_px", e.max_change_where_aligned_px);
+      beyond.emplace_back("max_change_at_marks_px", e.max_change_at_marks_px);
     } else {
       beyond.emplace_back("why_not", e.why_not);
     }
