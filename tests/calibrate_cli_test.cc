@@ -182,5 +182,52 @@ TEST_F(CalibrateCliTest, ReuseFromAProjectWithoutCalibrationIsABadInput) {
   EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
 }
 
+// Lens-mismatch seed 315 (20 images; the marks reached y 1038 of 1200 px):
+// the chosen spline's knot field is widened (27 -> 29 deg) so that the
+// whole border maps, and the log warns that the lens is extrapolated beyond
+// the marks; there it follows the OPENCV8 fit, which the report records.
+// python3-mrcal reads the written spline and projects as our code does,
+// in the image corner the marks never reached.
+TEST(CalibrateCliSplined, WidenedSplineIsWarnedAboutAndMrcalReadsItAsWritten) {
+  testing::TempDir dir;
+  const fs::path project = dir.path() / "lens-mismatch-315";
+  testing::CopyProject(testing::SimulatedProject("lens-mismatch", 315, 20).project_dir, project);
+  const testing::CommandResult calibrate = testing::RunOmm("calibrate " + Quoted(project));
+  ASSERT_EQ(calibrate.exit_code, 0) << calibrate.output;
+  EXPECT_THAT(calibrate.output,
+              HasSubstr("calibrate: the spline's knot field was widened from 27 to 29 deg"));
+
+  const Report report = ReadReportJson(project / "out" / "report.json");
+  ASSERT_TRUE(report.calibration);
+  const auto& choice =
+      std::get<ReportObject>(Member(report.calibration->extra, "lens_model_choice")->data());
+  const ReportValue* beyond = Member(choice, "spline_beyond_marks");
+  ASSERT_NE(beyond, nullptr);
+  const auto& extrapolation = std::get<ReportObject>(beyond->data());
+  EXPECT_EQ(*Member(extrapolation, "applied"), ReportValue(true));
+  EXPECT_EQ(*Member(extrapolation, "follows"), ReportValue("LENSMODEL_OPENCV8"));
+
+  const fs::path model = project / "out" / "camera.cameramodel";
+  const CameraModel camera = ReadCameraModel(model);
+  EXPECT_THAT(camera.lens_model, HasSubstr("SPLINED_STEREOGRAPHIC"));
+  // A point toward the lower right corner, ~1550, 1150 px.
+  const Eigen::Vector3d p(115.0, 80.0, 400.0);
+  std::string script = "import mrcal, numpy; m = mrcal.cameramodel('";
+  script.append(model.string())
+      .append("'); q = mrcal.project(numpy.array((115.0, 80.0, 400.0)), *m.intrinsics()); ")
+      .append("print('%.9f %.9f' % (q[0], q[1]))");
+  const auto python = testing::RunCommand("/usr/bin/python3 -c \"" + script + "\"");
+  ASSERT_EQ(python.exit_code, 0) << python.output;
+  Eigen::Matrix2Xd q;
+  ASSERT_TRUE(ProjectPoints(camera, p, &q));
+  EXPECT_GT(q(0, 0), 1400.0);
+  EXPECT_GT(q(1, 0), 1050.0);
+  std::istringstream numbers(python.output);
+  double x = 0, y = 0;
+  numbers >> x >> y;
+  EXPECT_NEAR(x, q(0, 0), 1e-6) << python.output;
+  EXPECT_NEAR(y, q(1, 0), 1e-6) << python.output;
+}
+
 }  // namespace
 }  // namespace omm
