@@ -652,8 +652,10 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
       }
       if (c.lens_model != working_model) {
         result = std::move(solved[chosen]);
-        working_solve = std::move(solved[0]);
-        working_sigma_px = summary.lens.candidates[0].sigma_px;
+        if (summary.lens.candidates[0].usable) {
+          working_solve = std::move(solved[0]);
+          working_sigma_px = summary.lens.candidates[0].sigma_px;
+        }
       }
     }
     if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;

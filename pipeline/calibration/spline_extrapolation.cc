@@ -10,13 +10,13 @@
 #include "adapters/mrcal/projection_diff.h"
 #include "adapters/mrcal/uncertainty.h"
 #include "pipeline/core/plane_scene.h"
+#include "pipeline/core/statistics.h"
 
 namespace omm {
 
 std::string SplineExtrapolationOptions::Check() const {
   if (grid_nx < 4 || grid_ny < 4) return "grid_nx and grid_ny must be >= 4";
-  if (!(align_below_fraction > 0.0 && align_below_fraction <= 1.0))
-    return "align_below_fraction must be in (0, 1]";
+  if (!(align_below_fraction > 0.0)) return "align_below_fraction must be positive";
   return "";
 }
 
@@ -41,19 +41,19 @@ SplineExtrapolation ExtrapolateSplineByParametric(
   const Eigen::Matrix2Xd& q = grid.q_px;
   const Eigen::Index n = q.cols();
   Eigen::VectorXd sigma_s(n);
-  for (Eigen::Index k = 0; k < n; ++k) sigma_s(k) = grid.points[k].worst_stdev_px;
+  // (Floored: a weight must stay finite.)
+  for (Eigen::Index k = 0; k < n; ++k) sigma_s(k) = std::max(grid.points[k].worst_stdev_px, 1e-9);
 
   // The parametric camera's frame differs from the spline's by a small
-  // rigid motion (each solve has its own plate poses): fitted where the
-  // spline is the surer, as mrcal's projection_diff fits one.
+  // rigid motion (each solve has its own plate poses): fitted, as mrcal's
+  // projection_diff fits one, where the spline is far surer than the
+  // parametric model's misfit, or over its surer half if that is nowhere
+  // (a parametric model that fits the marks to their noise).
+  const double align_below = std::max(options.align_below_fraction * parametric_sigma_px,
+                                      Median(std::vector<double>(sigma_s.begin(), sigma_s.end())));
   std::vector<Eigen::Index> surer;
   for (Eigen::Index k = 0; k < n; ++k)
-    if (sigma_s(k) < options.align_below_fraction * parametric_sigma_px) surer.push_back(k);
-  result.num_aligned = static_cast<int>(surer.size());
-  if (surer.size() < 3) {
-    result.why_not = "the spline is nowhere surer than the parametric model";
-    return result;
-  }
+    if (sigma_s(k) <= align_below) surer.push_back(k);
   const ProjectionDiff aligned =
       FitRigidToProjections(grid.p_cam(Eigen::all, surer), q(Eigen::all, surer), parametric);
   if (!aligned.converged) {

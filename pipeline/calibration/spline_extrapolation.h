@@ -13,7 +13,8 @@
 // with its stated projection 1-sigma sigma_s (mrcal's uncertainty: ~0.01 px
 // among the marks, growing without bound beyond them), and the parametric
 // fit's, aligned to the spline by the rigid motion that best maps the one's
-// rays on the other's where the spline is by far the surer. The parametric
+// rays on the other's where the spline is far the surer (its surer half if
+// that is nowhere: a parametric fit as good as the marks). The parametric
 // fit's 1-sigma sigma_p combines its misfit (its residual sigma over the
 // marks) and its own projection uncertainty with that misfit taken as noise
 // (as mrcal does), which grows where its fit extrapolates: a rational
@@ -50,8 +51,8 @@ struct SplineExtrapolationOptions {
   // 41 x 31 cost 0.05 s more and did no better over 14 seeds).
   int grid_nx = 21;
   int grid_ny = 16;
-  // The parametric model is aligned to the spline over the grid points where
-  // sigma_s is below this fraction of sigma_p.
+  // The parametric model is aligned to the spline where sigma_s is below
+  // this fraction of the parametric model's misfit (or below its median).
   double align_below_fraction = 0.1;
 
   // Empty if valid, else what is wrong.
@@ -67,7 +68,6 @@ struct SplineExtrapolation {
   // marks, px.
   double max_change_px = 0.0;
   double max_change_at_marks_px = 0.0;
-  int num_aligned = 0;  // grid points the alignment used
 };
 
 // `spline`: a solved LENSMODEL_SPLINED_* camera and `uncertainty` its
