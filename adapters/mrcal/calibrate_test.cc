@@ -16,14 +16,6 @@ namespace {
 
 constexpr double kDistanceMm = 390.0;
 
-CalibrationOptions Options(const std::string& lens_model) {
-  CalibrationOptions options;
-  options.lens_model = lens_model;
-  options.width_px = 1600;
-  options.height_px = 1200;
-  return options;
-}
-
 TEST(Calibrate, HomographySeedRecoversAPinholePose) {
   const BoardSpec board;
   CameraModel pinhole{"LENSMODEL_PINHOLE", Eigen::Vector4d(2600, 2600, 799.5, 599.5), 1600, 1200};
@@ -44,7 +36,7 @@ TEST(Calibrate, TinyNoiseRecoversTheTruth) {
   const CameraModel truth = testing::TruthCamera();
   const testing::SyntheticPlates plates =
       testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
-  CalibrationOptions options = Options("LENSMODEL_OPENCV8");
+  CalibrationOptions options = testing::SyntheticSolveOptions("LENSMODEL_OPENCV8");
   options.apply_regularization = false;
   const CalibrationResult result = CalibrateCamera(board, plates.Observe(1e-6, 7), options);
   ASSERT_TRUE(result.usable) << result.brief;
@@ -73,8 +65,8 @@ TEST(Calibrate, RegularizationBiasIsNegligible) {
   const CameraModel truth = testing::TruthCamera();
   const testing::SyntheticPlates plates =
       testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
-  const CalibrationResult result =
-      CalibrateCamera(board, plates.Observe(1e-6, 7), Options("LENSMODEL_OPENCV8"));
+  const CalibrationResult result = CalibrateCamera(
+      board, plates.Observe(1e-6, 7), testing::SyntheticSolveOptions("LENSMODEL_OPENCV8"));
   ASSERT_TRUE(result.usable) << result.brief;
   EXPECT_LT(ProjectionDiffRms(result.camera, truth, kDistanceMm), 1e-3);
 }
@@ -87,7 +79,8 @@ TEST(Calibrate, FlagsAGrossOutlier) {
   observations[4].q_px(0, 10) += 3.0;      // 100 sigma off
   observations[5].weight[20] = 0.0;        // not observed
   observations[6].usable = false;          // rejected by detection
-  const CalibrationResult result = CalibrateCamera(board, observations, Options("LENSMODEL_OPENCV8"));
+  const CalibrationResult result =
+      CalibrateCamera(board, observations, testing::SyntheticSolveOptions("LENSMODEL_OPENCV8"));
   ASSERT_TRUE(result.usable) << result.brief;
   ASSERT_EQ(result.record.images.size(), 17u);
   EXPECT_EQ(result.images_not_used, std::vector<std::string>{"calib_6.png"});
@@ -103,14 +96,14 @@ TEST(Calibrate, TooFewImagesIsAResultNotACrash) {
   const BoardSpec board;
   const testing::SyntheticPlates plates =
       testing::MakeSyntheticPlates(board, testing::TruthCamera(), 3, kDistanceMm, 1);
-  const CalibrationResult result =
-      CalibrateCamera(board, plates.Observe(0.03, 7), Options("LENSMODEL_OPENCV8"));
+  const CalibrationResult result = CalibrateCamera(
+      board, plates.Observe(0.03, 7), testing::SyntheticSolveOptions("LENSMODEL_OPENCV8"));
   EXPECT_FALSE(result.usable);
   EXPECT_NE(result.brief.find("too few"), std::string::npos);
 }
 
 TEST(Calibrate, BadOptionsThrow) {
-  CalibrationOptions options = Options("LENSMODEL_SPLINED_STEREOGRAPHIC");
+  CalibrationOptions options = testing::SyntheticSolveOptions("LENSMODEL_SPLINED_STEREOGRAPHIC");
   EXPECT_FALSE(options.Check().empty());
   EXPECT_THROW(CalibrateCamera(BoardSpec(), {}, options), InputError);
 }
@@ -119,9 +112,10 @@ TEST(Calibrate, SplinedModelSeededFromOpencv4FitsTheLens) {
   const BoardSpec board;
   const CameraModel truth = testing::TruthCamera();
   const testing::SyntheticPlates plates = testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
-  const CalibrationResult result = CalibrateCamera(
-      board, plates.Observe(0.02, 7),
-      Options("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=40"));
+  const CalibrationResult result =
+      CalibrateCamera(board, plates.Observe(0.02, 7),
+                      testing::SyntheticSolveOptions(
+                          "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=40"));
   ASSERT_TRUE(result.usable) << result.brief;
   EXPECT_NEAR(result.rms_px, 0.02, 0.004);
   EXPECT_EQ(result.num_outliers, 0);
@@ -135,7 +129,7 @@ TEST(Calibrate, RefineFromAnEarlierSolutionReachesTheFreshSolve) {
   const CameraModel truth = testing::TruthCamera();
   const testing::SyntheticPlates plates =
       testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
-  const CalibrationOptions options = Options("LENSMODEL_OPENCV8");
+  const CalibrationOptions options = testing::SyntheticSolveOptions("LENSMODEL_OPENCV8");
   std::vector<PlateObservation> before = plates.Observe(0.03, 7);
   before[4].q_px(0, 10) += 3.0;
   std::vector<PlateObservation> after = plates.Observe(0.03, 8);
@@ -189,8 +183,8 @@ TEST(Calibrate, RefineOfASplinedModelHoldsItsCore) {
   const CameraModel truth = testing::TruthCamera();
   const testing::SyntheticPlates plates =
       testing::MakeSyntheticPlates(board, truth, 18, kDistanceMm, 1);
-  const CalibrationOptions options =
-      Options("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=40");
+  const CalibrationOptions options = testing::SyntheticSolveOptions(
+      "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=40");
   const CalibrationResult earlier = CalibrateCamera(board, plates.Observe(0.02, 7), options);
   ASSERT_TRUE(earlier.usable) << earlier.brief;
   const std::vector<PlateObservation> after = plates.Observe(0.02, 8);
@@ -218,8 +212,8 @@ TEST(MrcalProblem, PackedStateRoundTrips) {
   const BoardSpec board;
   const testing::SyntheticPlates plates =
       testing::MakeSyntheticPlates(board, testing::TruthCamera(), 6, kDistanceMm, 1);
-  CalibrationResult result =
-      CalibrateCamera(board, plates.Observe(0.02, 7), Options("LENSMODEL_OPENCV8"));
+  CalibrationResult result = CalibrateCamera(board, plates.Observe(0.02, 7),
+                                             testing::SyntheticSolveOptions("LENSMODEL_OPENCV8"));
   ASSERT_TRUE(result.usable) << result.brief;
   result.record.problem.optimize_calobject_warp = true;
   const mrcal_internal::Problem problem = mrcal_internal::ToProblem(result.record);
@@ -259,7 +253,8 @@ TEST(MrcalProblem, GaussNewtonWithLineSearchReachesMrcalsOptimumOfASplinedLens) 
       testing::MakeSyntheticPlates(board, testing::SplinedCamera(), 18, kDistanceMm, 1);
   const CalibrationResult earlier =
       CalibrateCamera(board, Weighed(plates.Observe(0.005, 7)),
-                      Options("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=30"));
+                      testing::SyntheticSolveOptions(
+                          "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=30"));
   ASSERT_TRUE(earlier.usable) << earlier.brief;
   SolveRecord moved = earlier.record;
   const std::vector<PlateObservation> after = plates.Observe(0.005, 8);

@@ -21,6 +21,14 @@ CameraModel TruthCamera() {
   return camera;
 }
 
+CalibrationOptions SyntheticSolveOptions(const std::string& lens_model) {
+  CalibrationOptions options;
+  options.lens_model = lens_model;
+  options.width_px = 1600;
+  options.height_px = 1200;
+  return options;
+}
+
 CameraModel SplinedCamera() {
   CameraModel camera;
   camera.lens_model = "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38";

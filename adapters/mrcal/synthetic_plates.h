@@ -7,8 +7,10 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
+#include "adapters/mrcal/calibrate.h"
 #include "pipeline/core/board.h"
 #include "pipeline/core/calibration_result.h"
 #include "pipeline/core/camera.h"
@@ -29,6 +31,10 @@ struct SyntheticPlates {
   // The observations for a given noise draw: q_truth + N(0, sigma^2).
   std::vector<PlateObservation> Observe(double noise_px, uint32_t seed) const;
 };
+
+// Solve options for these plates: `lens_model` on the cameras' 1600 x 1200
+// imager, the rest default.
+CalibrationOptions SyntheticSolveOptions(const std::string& lens_model);
 
 // Poses whose every mark lands at least 20 px inside the imager.
 SyntheticPlates MakeSyntheticPlates(const BoardSpec& board, const CameraModel& camera,

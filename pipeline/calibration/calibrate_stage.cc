@@ -371,20 +371,9 @@ void ExtrapolateSpline(const CalibrationResult& working, double working_sigma_px
     lens->extrapolation.why_not = "no uncertainty of the working model: " + why_not;
     return;
   }
-  // The solve's inlier marks, through its poses.
-  const Eigen::Matrix3Xd board_points = BoardPoints(result->record.board);
-  std::vector<Eigen::Vector3d> marks;
-  for (size_t i = 0; i < result->record.images.size(); ++i) {
-    for (Eigen::Index k = 0; k < board_points.cols(); ++k) {
-      if (!result->record.images[i].outlier[k])
-        marks.push_back(result->cam_from_plate[i] * board_points.col(k));
-    }
-  }
-  Eigen::Matrix3Xd marks_cam(3, static_cast<Eigen::Index>(marks.size()));
-  for (size_t k = 0; k < marks.size(); ++k) marks_cam.col(static_cast<Eigen::Index>(k)) = marks[k];
   SplineExtrapolation extrapolation = ExtrapolateSplineByParametric(
       result->camera, uncertainty, working.camera, *working_uncertainty, working_sigma_px,
-      WorkingDistanceMm(*result), marks_cam, options.spline_extrapolation);
+      WorkingDistanceMm(*result), InlierMarksInCamera(*result), options.spline_extrapolation);
   if (extrapolation.applied) {
     CameraModel extrapolated = result->camera;
     extrapolated.intrinsics = extrapolation.intrinsics;

@@ -9,6 +9,7 @@
 #include "adapters/mrcal/lens.h"
 #include "adapters/mrcal/projection_diff.h"
 #include "adapters/mrcal/uncertainty.h"
+#include "pipeline/core/board.h"
 #include "pipeline/core/plane_scene.h"
 #include "pipeline/core/statistics.h"
 
@@ -131,6 +132,19 @@ SplineExtrapolation ExtrapolateSplineByParametric(
     result.max_change_at_marks_px = change.tail(marks_cam.cols()).maxCoeff();
   result.applied = true;
   return result;
+}
+
+Eigen::Matrix3Xd InlierMarksInCamera(const CalibrationResult& result) {
+  const Eigen::Matrix3Xd board = BoardPoints(result.record.board);
+  std::vector<Eigen::Vector3d> marks;
+  for (size_t i = 0; i < result.record.images.size(); ++i) {
+    for (Eigen::Index k = 0; k < board.cols(); ++k)
+      if (!result.record.images[i].outlier[k])
+        marks.push_back(result.cam_from_plate[i] * board.col(k));
+  }
+  Eigen::Matrix3Xd marks_cam(3, static_cast<Eigen::Index>(marks.size()));
+  for (size_t k = 0; k < marks.size(); ++k) marks_cam.col(static_cast<Eigen::Index>(k)) = marks[k];
+  return marks_cam;
 }
 
 }  // namespace omm

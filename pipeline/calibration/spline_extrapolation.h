@@ -39,6 +39,7 @@
 
 #include <Eigen/Core>
 
+#include "pipeline/core/calibration_result.h"
 #include "pipeline/core/camera.h"
 
 namespace omm {
@@ -81,5 +82,9 @@ SplineExtrapolation ExtrapolateSplineByParametric(
     const CameraModel& parametric, const CalibrationUncertainty& parametric_uncertainty,
     double parametric_sigma_px, double distance_mm, const Eigen::Matrix3Xd& marks_cam,
     const SplineExtrapolationOptions& options = {});
+
+// The solve's inlier marks through its solved poses, in the camera frame
+// (3 x N, mm): ExtrapolateSplineByParametric's marks_cam.
+Eigen::Matrix3Xd InlierMarksInCamera(const CalibrationResult& result);
 
 }  // namespace omm

@@ -21,14 +21,6 @@ constexpr double kDistanceMm = 390.0;
 constexpr double kNoisePx = 0.02;
 constexpr double kObservedBelowXPx = 1000.0;  // marks right of this are not observed
 
-CalibrationOptions Options(const std::string& lens_model) {
-  CalibrationOptions options;
-  options.lens_model = lens_model;
-  options.width_px = 1600;
-  options.height_px = 1200;
-  return options;
-}
-
 // Projection vs the truth over the imager's columns [x0, x1) at the working
 // distance, after the rigid motion fitted over the observed columns (the
 // solves' camera frame is the truth's up to such a motion), rms px.
@@ -69,28 +61,19 @@ TEST(ExtrapolateSplineByParametric, FollowsAParametricFitThatIsSurerBeyondTheMar
   }
   const CalibrationResult spline =
       CalibrateCamera(board, observations,
-                      Options("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38"));
+                      testing::SyntheticSolveOptions(
+                          "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=10_Ny=8_fov_x_deg=38"));
   const CalibrationResult opencv8 =
-      CalibrateCamera(board, observations, Options("LENSMODEL_OPENCV8"));
+      CalibrateCamera(board, observations, testing::SyntheticSolveOptions("LENSMODEL_OPENCV8"));
   ASSERT_TRUE(spline.usable) << spline.brief;
   ASSERT_TRUE(opencv8.usable) << opencv8.brief;
   const auto spline_uncertainty = CalibrationUncertainty::Compute(spline.record);
   const auto opencv8_uncertainty = CalibrationUncertainty::Compute(opencv8.record);
   ASSERT_TRUE(spline_uncertainty && opencv8_uncertainty);
 
-  // The solve's inlier marks, through its poses.
-  const Eigen::Matrix3Xd board_points = BoardPoints(board);
-  std::vector<Eigen::Vector3d> marks;
-  for (size_t i = 0; i < spline.record.images.size(); ++i)
-    for (Eigen::Index k = 0; k < board_points.cols(); ++k)
-      if (!spline.record.images[i].outlier[k])
-        marks.push_back(spline.cam_from_plate[i] * board_points.col(k));
-  Eigen::Matrix3Xd marks_cam(3, static_cast<Eigen::Index>(marks.size()));
-  for (size_t k = 0; k < marks.size(); ++k) marks_cam.col(static_cast<Eigen::Index>(k)) = marks[k];
-
-  const SplineExtrapolation extrapolation =
-      ExtrapolateSplineByParametric(spline.camera, *spline_uncertainty, opencv8.camera,
-                                    *opencv8_uncertainty, opencv8.rms_px, kDistanceMm, marks_cam);
+  const SplineExtrapolation extrapolation = ExtrapolateSplineByParametric(
+      spline.camera, *spline_uncertainty, opencv8.camera, *opencv8_uncertainty, opencv8.rms_px,
+      kDistanceMm, InlierMarksInCamera(spline));
   ASSERT_TRUE(extrapolation.applied) << extrapolation.why_not;
   CameraModel extrapolated = spline.camera;
   extrapolated.intrinsics = extrapolation.intrinsics;
