@@ -4,6 +4,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <regex>
 #include <sstream>
 
@@ -22,6 +23,29 @@ namespace {
 // (Built by append: GCC 12's -Wrestrict misfires on "'" + std::string at -O3.)
 std::string Quoted(const fs::path& path) {
   return std::string("'").append(path.string()).append("'");
+}
+
+// python3-mrcal's reading of a written camera model: it prints the lens
+// model and imager width it read, then its projection of camera-frame point
+// p; `q` holds that projection once parsed.
+struct MrcalReading {
+  testing::CommandResult python;
+  Eigen::Vector2d q = Eigen::Vector2d::Constant(NAN);
+};
+
+MrcalReading ReadWithPython3Mrcal(const fs::path& model, const Eigen::Vector3d& p) {
+  std::ostringstream script;
+  script.precision(17);
+  script << "import mrcal, numpy; m = mrcal.cameramodel('" << model.string()
+         << "'); q = mrcal.project(numpy.array((" << p.x() << ", " << p.y() << ", " << p.z()
+         << "), dtype=float), *m.intrinsics()); print(m.intrinsics()[0], m.imagersize()[0]); "
+         << "print('%.9f %.9f' % (q[0], q[1]))";
+  MrcalReading reading;
+  reading.python = testing::RunCommand("/usr/bin/python3 -c \"" + script.str() + "\"");
+  std::istringstream last_line(reading.python.output.substr(
+      reading.python.output.find_last_of('\n', reading.python.output.size() - 2) + 1));
+  last_line >> reading.q.x() >> reading.q.y();
+  return reading;
 }
 
 // One calibrated copy of the demo project shared by the tests below.
@@ -113,22 +137,16 @@ TEST_F(CalibrateCliTest, UncertaintyMapMatchesTheReportAndThePageInlinesIt) {
 TEST_F(CalibrateCliTest, Python3MrcalLoadsTheCameraModel) {
   ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
   const fs::path model = Calibrated() / "out" / "camera.cameramodel";
-  std::string script = "import mrcal, numpy; m = mrcal.cameramodel('";
-  script.append(model.string())
-      .append("'); q = mrcal.project(numpy.array((30.0, -20.0, 400.0)), *m.intrinsics()); ")
-      .append("print(m.intrinsics()[0], m.imagersize()[0], '%.9f %.9f' % (q[0], q[1]))");
-  const auto python = testing::RunCommand("/usr/bin/python3 -c \"" + script + "\"");
-  ASSERT_EQ(python.exit_code, 0) << python.output;
+  const Eigen::Vector3d p(30.0, -20.0, 400.0);
+  const MrcalReading mrcal = ReadWithPython3Mrcal(model, p);
+  ASSERT_EQ(mrcal.python.exit_code, 0) << mrcal.python.output;
   const CameraModel camera = ReadCameraModel(model);
-  EXPECT_THAT(python.output, HasSubstr(camera.lens_model + " 1600 "));
+  EXPECT_THAT(mrcal.python.output, HasSubstr(camera.lens_model + " 1600\n"));
   // mrcal projects with the model it read exactly as our code does.
   Eigen::Matrix2Xd q;
-  ASSERT_TRUE(ProjectPoints(camera, Eigen::Vector3d(30.0, -20.0, 400.0), &q));
-  std::istringstream numbers(python.output.substr(python.output.rfind(" 1600 ") + 6));
-  double x = 0, y = 0;
-  numbers >> x >> y;
-  EXPECT_NEAR(x, q(0, 0), 1e-6) << python.output;
-  EXPECT_NEAR(y, q(1, 0), 1e-6) << python.output;
+  ASSERT_TRUE(ProjectPoints(camera, p, &q));
+  EXPECT_NEAR(mrcal.q.x(), q(0, 0), 1e-6) << mrcal.python.output;
+  EXPECT_NEAR(mrcal.q.y(), q(1, 0), 1e-6) << mrcal.python.output;
 }
 
 TEST_F(CalibrateCliTest, ReuseFromAProjectCopiesTheCameraAndTheSolveRecord) {
@@ -212,21 +230,14 @@ TEST(CalibrateCliSplined, WidenedSplineIsWarnedAboutAndMrcalReadsItAsWritten) {
   EXPECT_THAT(camera.lens_model, HasSubstr("SPLINED_STEREOGRAPHIC"));
   // A point toward the lower right corner, ~1550, 1150 px.
   const Eigen::Vector3d p(115.0, 80.0, 400.0);
-  std::string script = "import mrcal, numpy; m = mrcal.cameramodel('";
-  script.append(model.string())
-      .append("'); q = mrcal.project(numpy.array((115.0, 80.0, 400.0)), *m.intrinsics()); ")
-      .append("print('%.9f %.9f' % (q[0], q[1]))");
-  const auto python = testing::RunCommand("/usr/bin/python3 -c \"" + script + "\"");
-  ASSERT_EQ(python.exit_code, 0) << python.output;
+  const MrcalReading mrcal = ReadWithPython3Mrcal(model, p);
+  ASSERT_EQ(mrcal.python.exit_code, 0) << mrcal.python.output;
   Eigen::Matrix2Xd q;
   ASSERT_TRUE(ProjectPoints(camera, p, &q));
   EXPECT_GT(q(0, 0), 1400.0);
   EXPECT_GT(q(1, 0), 1050.0);
-  std::istringstream numbers(python.output);
-  double x = 0, y = 0;
-  numbers >> x >> y;
-  EXPECT_NEAR(x, q(0, 0), 1e-6) << python.output;
-  EXPECT_NEAR(y, q(1, 0), 1e-6) << python.output;
+  EXPECT_NEAR(mrcal.q.x(), q(0, 0), 1e-6) << mrcal.python.output;
+  EXPECT_NEAR(mrcal.q.y(), q(1, 0), 1e-6) << mrcal.python.output;
 }
 
 }  // namespace
