@@ -37,19 +37,29 @@ function(omm_library name)
   target_link_libraries(${name} PUBLIC ${ARG_LINKS} PRIVATE omm_warnings)
 endfunction()
 
-# omm_test(NAME SOURCES ... LINKS ... [LABELS name] [TIMEOUT s]): one GoogleTest
-# executable; each TEST becomes its own CTest name. LABELS slow marks tests
-# that scripts/test.sh leaves out of the sanitizer pass. Tests get the
-# environment variable OMM_SOURCE_DIR. (One label and one environment variable
-# only: gtest_discover_tests splits list-valued PROPERTIES apart.)
+# omm_test(NAME SOURCES ... LINKS ... [LABELS name] [TIMEOUT s] [COST c]
+#          [SLOW_TESTS filter]): one GoogleTest executable; each TEST becomes its
+# own CTest name. LABELS slow marks tests that scripts/test.sh leaves out of
+# the sanitizer pass. SLOW_TESTS (a gtest filter, Suite.Name patterns joined
+# by ':') gives the label slow to those tests of an unlabelled executable: its
+# Monte-Carlo statistics, seconds in Release but minutes under the sanitizers,
+# whose code the executable's other tests already take through them. Tests get
+# the environment variable OMM_SOURCE_DIR. (One label and one environment
+# variable only: gtest_discover_tests splits list-valued PROPERTIES apart.)
 # A label in OMM_UNBUILT_TEST_LABELS keeps the executable out of the default
 # build and its tests out of CTest: the sanitizer pass does not compile what it
 # does not run. The target still exists, so later target_* calls on it hold.
+# COST orders a parallel ctest run, highest first (the CTest COST property;
+# default 10 for slow tests, else 0): long tests started first do not end
+# alone on one core of CI's two. A tree's own measured costs override it.
 function(omm_test name)
-  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;LINKS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "" "TIMEOUT;COST;SLOW_TESTS" "SOURCES;LINKS;LABELS" ${ARGN})
   list(LENGTH ARG_LABELS label_count)
   if(label_count GREATER 1)
     message(FATAL_ERROR "omm_test(${name}): one label at most")
+  endif()
+  if(ARG_SLOW_TESTS AND ARG_LABELS)
+    message(FATAL_ERROR "omm_test(${name}): SLOW_TESTS in a labelled executable")
   endif()
   set(unbuilt "")
   if(ARG_LABELS AND ARG_LABELS IN_LIST OMM_UNBUILT_TEST_LABELS)
@@ -63,12 +73,27 @@ function(omm_test name)
   if(NOT ARG_TIMEOUT)
     set(ARG_TIMEOUT 600)
   endif()
-  set(props TIMEOUT ${ARG_TIMEOUT} ENVIRONMENT "OMM_SOURCE_DIR=${PROJECT_SOURCE_DIR}")
-  if(ARG_LABELS)
-    list(APPEND props LABELS ${ARG_LABELS})
+  set(cost 0)
+  if(ARG_COST)
+    set(cost ${ARG_COST})
+  elseif(ARG_LABELS STREQUAL "slow" OR ARG_SLOW_TESTS)
+    set(cost 10)
   endif()
-  gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+  set(props TIMEOUT ${ARG_TIMEOUT} ENVIRONMENT "OMM_SOURCE_DIR=${PROJECT_SOURCE_DIR}")
+  if(NOT ARG_SLOW_TESTS)
+    if(ARG_LABELS)
+      list(APPEND props LABELS ${ARG_LABELS})
+    endif()
+    gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+                         PROPERTIES ${props} COST ${cost} DISCOVERY_TIMEOUT 60)
+    return()
+  endif()
+  gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR} TEST_FILTER "-${ARG_SLOW_TESTS}"
                        PROPERTIES ${props} DISCOVERY_TIMEOUT 60)
+  if(NOT "slow" IN_LIST OMM_UNBUILT_TEST_LABELS)
+    gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR} TEST_FILTER "${ARG_SLOW_TESTS}"
+                         PROPERTIES ${props} LABELS slow COST ${cost} DISCOVERY_TIMEOUT 60)
+  endif()
 endfunction()
 include(GoogleTest)
 

@@ -6,8 +6,9 @@
 # CI=true turns warnings into errors (OMM_WERROR=ON). Budget: CI has 2 cores
 # and 30 minutes, so both builds use Ninja with -j2 (OMM_JOBS overrides) and the
 # sanitizer pass neither builds nor runs tests labelled "slow" (heavy simulator
-# renders, which run in the Release pass; `omm_test(... LABELS slow)` marks
-# them) or "acceptance".
+# renders and Monte-Carlo statistics, which run in the Release pass;
+# `omm_test(... LABELS slow)` or `omm_test(... SLOW_TESTS filter)` marks them)
+# or "acceptance".
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -4,7 +4,10 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <regex>
 #include <stdexcept>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -33,6 +36,18 @@ class FileLock {
   int fd_;
 };
 
+// A finished render in the cache: <dir>/{project/, truth.json}.
+CachedProject CachedAt(const fs::path& dir) {
+  CachedProject project;
+  project.project_dir = dir / "project";
+  project.truth_path = dir / "truth.json";
+  project.truth = ReadTruthJson(project.truth_path);
+  return project;
+}
+
+// SimulationOptions::Check's least.
+constexpr int kFewestCalibImages = 3;
+
 }  // namespace
 
 CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
@@ -41,9 +56,12 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
   const fs::path cache = OMM_SIM_CACHE_DIR;
   fs::create_directories(cache);
   const bool grid3 = grid.cols == 3 && grid.rows == 3;
+  // The default count asked for by number is the same project: one render.
+  const int default_calib_count = SimulationOptions{}.num_calib_images;
+  const int calib_count = num_calib_images.value_or(default_calib_count);
   const std::string name =
       preset + "-" + std::to_string(seed) +
-      (num_calib_images ? "-calib" + std::to_string(*num_calib_images) : "") +
+      (calib_count != default_calib_count ? "-calib" + std::to_string(calib_count) : "") +
       (plate_on_part ? "-plate" : "") +
       (grid3 ? "" : "-g" + std::to_string(grid.cols) + "x" + std::to_string(grid.rows)) +
       (board == BoardType::kCaltab ? "" : std::string("-") + BoardTypeName(board));
@@ -57,7 +75,7 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
       SimulationOptions options;
       options.preset = preset;
       options.seed = seed;
-      if (num_calib_images) options.num_calib_images = *num_calib_images;
+      options.num_calib_images = calib_count;
       options.plate_on_part = plate_on_part;
       options.grid_cols = grid.cols;
       options.grid_rows = grid.rows;
@@ -72,11 +90,23 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
       fs::rename(temp, final_dir);
     }
   }
-  CachedProject project;
-  project.project_dir = final_dir / "project";
-  project.truth_path = final_dir / "truth.json";
-  project.truth = ReadTruthJson(project.truth_path);
-  return project;
+  return CachedAt(final_dir);
+}
+
+CachedProject SimulatedTiles(const std::string& preset, std::uint64_t seed) {
+  const fs::path cache = OMM_SIM_CACHE_DIR;
+  const std::regex any_calib_count(preset + "-" + std::to_string(seed) + "(-calib[0-9]+)?");
+  std::vector<fs::path> cached;
+  if (fs::is_directory(cache)) {
+    for (const fs::directory_entry& entry : fs::directory_iterator(cache)) {
+      // Renders in progress are <name>.tmp-<pid>, renamed into place when done.
+      if (std::regex_match(entry.path().filename().string(), any_calib_count)) {
+        cached.push_back(entry.path());
+      }
+    }
+  }
+  if (cached.empty()) return SimulatedProject(preset, seed, kFewestCalibImages);
+  return CachedAt(*std::min_element(cached.begin(), cached.end()));
 }
 
 void CopyProject(const fs::path& from, const fs::path& to) {

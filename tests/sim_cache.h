@@ -26,13 +26,13 @@ struct CachedProject {
 };
 
 // Renders (or finds) the project of `preset` and `seed` with the simulator's
-// defaults, or with num_calib_images calib/ images if given (cached apart, as
-// <preset>-<seed>-calib<N>), with the plate on the part if asked (a -plate
-// suffix; the demo preset always has it), and on a grid of cols x rows tiles
-// (a -g<cols>x<rows> suffix unless 3 x 3), with a calibration plate of
-// another board than the caltab if asked (a -circles or -chessboard suffix,
-// SimulatedBoard). Fails the calling test (ADD_FAILURE) and throws if
-// rendering fails.
+// defaults, or with num_calib_images calib/ images if given and not the
+// default (cached apart, as <preset>-<seed>-calib<N>), with the plate on the
+// part if asked (a -plate suffix; the demo preset always has it), and on a
+// grid of cols x rows tiles (a -g<cols>x<rows> suffix unless 3 x 3), with a
+// calibration plate of another board than the caltab if asked (a -circles or
+// -chessboard suffix, SimulatedBoard). Fails the calling test (ADD_FAILURE)
+// and throws if rendering fails.
 struct TileGrid {
   int cols = 3, rows = 3;
 };
@@ -40,6 +40,13 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
                                std::optional<int> num_calib_images = std::nullopt,
                                bool plate_on_part = false, TileGrid grid = {},
                                BoardType board = BoardType::kCaltab);
+
+// For a test that reads a project's tiles, table.csv and truth but not its
+// calib/ images: any cached render of `preset` and `seed` on the default grid
+// and board without a plate on the part serves, whatever its calib/ count
+// (that count changes nothing else, PlanSimulation's streams); with none
+// cached, it renders the fewest calib/ images (3).
+CachedProject SimulatedTiles(const std::string& preset, std::uint64_t seed);
 
 // Copies a project's inputs (everything but out/) into `to` (created).
 void CopyProject(const std::filesystem::path& from, const std::filesystem::path& to);

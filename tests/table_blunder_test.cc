@@ -7,6 +7,7 @@
 // the report names it, and every measurement is as good as without the
 // error. The untouched project leaves every prior in; two wrong positions
 // are both found; positions in other units are reported.
+// The projects are MeasureRun's renders (seed 101, 14 calib/ images): shared.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -112,7 +113,7 @@ const ReportValue::Array& PriorsLeftOut(const Report& report) {
 }
 
 TEST(TableBlunder, APositionTheFeaturesContradictIsLeftOutAndNamed) {
-  const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
+  const testing::CachedProject sim = testing::SimulatedProject("markers", 101, 14);
 
   const Report right = RunWithTableErrors(sim, {});
   ASSERT_TRUE(right.mosaic.has_value());
@@ -147,7 +148,7 @@ TEST(TableBlunder, APositionTheFeaturesContradictIsLeftOutAndNamed) {
 // stated sigma is contradicted, and the priors are weighed by the scatter
 // estimated, so that the sigmas are true to the table's 0.02 mm.
 TEST(TableBlunder, ASigmaStatedTooSmallIsReportedNotTakenForWrongPositions) {
-  const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
+  const testing::CachedProject sim = testing::SimulatedProject("markers", 101, 14);
   const Report report = RunWithTableErrors(sim, {}, "0.005");
   EXPECT_TRUE(PriorsLeftOut(report).empty());
   EXPECT_EQ(TableSigmaConsistent(report), false);
@@ -168,7 +169,7 @@ TEST(TableBlunder, ASigmaStatedTooSmallIsReportedNotTakenForWrongPositions) {
 // true again (on markers seed 282 they were up to 0.49 raw px and 8 sigma
 // off, reported only as a table scattering 5 times its sigma).
 TEST(TableBlunder, TwoWrongPositionsAreBothLeftOut) {
-  const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
+  const testing::CachedProject sim = testing::SimulatedProject("markers", 101, 14);
   const Report report = RunWithTableErrors(sim, {{kTile, 0.3, 0.0}, {"tile_r2c2.png", 0.0, -0.3}});
   std::vector<std::string> images;
   for (const ReportValue& row : PriorsLeftOut(report)) {
@@ -187,7 +188,7 @@ TEST(TableBlunder, TwoWrongPositionsAreBothLeftOut) {
 // from the camera, and every size on it comes out a tenth; the run says
 // where the part is against where the calibration saw its plate.
 TEST(TableBlunder, PositionsInOtherUnitsAreReported) {
-  const testing::CachedProject sim = testing::SimulatedProject("markers", 101);
+  const testing::CachedProject sim = testing::SimulatedProject("markers", 101, 14);
   const Report report = RunWithTableErrors(sim, {}, "", 0.1);
   ASSERT_TRUE(report.mosaic.has_value());
   EXPECT_EQ(WorkingDistanceConsistent(report), false);
@@ -207,7 +208,7 @@ TEST(TableBlunder, PositionsInOtherUnitsAreReported) {
 // seed 101, whose plate lies in one tile). It read +2 000 000 ppm silently
 // before.
 TEST(TableBlunder, PositionsInOtherUnitsDisagreeWithAPlateOnThePart) {
-  const testing::CachedProject sim = testing::SimulatedProject("demo", 101);
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
   testing::TempDir dir;
   const fs::path project_dir = CopyWithTableErrors(dir, sim, {}, "", 3.0);
   const testing::CommandResult run = testing::RunOmm("-q run " + project_dir.string());

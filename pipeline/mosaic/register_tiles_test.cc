@@ -30,11 +30,12 @@ struct Rendered {
   std::vector<Eigen::Vector2d> commanded_mm;
 };
 
-// "preset-seed", e.g. "low-texture-2": the cached render (tests/sim_cache.h).
+// "preset-seed", e.g. "low-texture-2": the cached render (tests/sim_cache.h),
+// with any calib/ count (these tests take the truth camera).
 Rendered Render(const std::string& name) {
   const size_t dash = name.rfind('-');
   const omm::testing::CachedProject project =
-      omm::testing::SimulatedProject(name.substr(0, dash), std::stoull(name.substr(dash + 1)));
+      omm::testing::SimulatedTiles(name.substr(0, dash), std::stoull(name.substr(dash + 1)));
   Rendered r;
   r.project_dir = project.project_dir;
   r.truth = project.truth;

@@ -675,6 +675,28 @@ TEST(ProjectRenderer, ImagesAreDeterministic) {
   EXPECT_NE(renderer_one.RenderTile(4, rays_one), renderer_one.RenderTile(5, rays_one));
 }
 
+// The calib/ count changes the calib images alone (their own random stream):
+// the tiles, the table and the rest of the truth stay, to the bit, so tests
+// that read only tiles share any cached render (tests/sim_cache.h).
+TEST(PlanSimulation, CalibImageCountChangesOnlyTheCalibImages) {
+  SimulationOptions options;
+  options.preset = "markers";
+  options.seed = 12;
+  options.num_calib_images = 3;
+  SimulationPlan few = PlanSimulation(options);
+  options.num_calib_images = 20;
+  SimulationPlan many = PlanSimulation(options);
+  EXPECT_NE(TruthToJson(few.truth), TruthToJson(many.truth));
+  few.truth.calib_images.clear();
+  many.truth.calib_images.clear();
+  EXPECT_EQ(TruthToJson(few.truth), TruthToJson(many.truth));
+  const PixelRect rect{700, 500, 96, 80};
+  RayTableSummary summary;
+  const RayTable rays =
+      ComputeRayTable(few.truth.camera.model, rect, RayOptionsFor(few.options), &summary);
+  EXPECT_EQ(ProjectRenderer(few).RenderTile(4, rays), ProjectRenderer(many).RenderTile(4, rays));
+}
+
 // Exposure preset: clearly different brightness between tiles.
 TEST(PlanSimulation, ExposurePresetVariesGainAndVignetting) {
   const SimulationTruth truth = Plan("exposure").truth;
