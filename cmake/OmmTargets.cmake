@@ -41,9 +41,9 @@ endfunction()
 #          [SLOW_TESTS filter]): one GoogleTest executable; each TEST becomes its
 # own CTest name. LABELS slow marks tests that scripts/test.sh leaves out of
 # the sanitizer pass. SLOW_TESTS (a gtest filter, Suite.Name patterns joined
-# by ':') gives the label slow to those tests of an unlabelled executable: its
-# Monte-Carlo statistics, seconds in Release but minutes under the sanitizers,
-# whose code the executable's other tests already take through them. Tests get
+# by ':') gives the label slow, in place of LABELS, to those tests of the
+# executable: its Monte-Carlo statistics, seconds in Release but minutes under
+# the sanitizers, whose code its other tests take through them too. Tests get
 # the environment variable OMM_SOURCE_DIR. (One label and one environment
 # variable only: gtest_discover_tests splits list-valued PROPERTIES apart.)
 # A label in OMM_UNBUILT_TEST_LABELS keeps the executable out of the default
@@ -57,9 +57,6 @@ function(omm_test name)
   list(LENGTH ARG_LABELS label_count)
   if(label_count GREATER 1)
     message(FATAL_ERROR "omm_test(${name}): one label at most")
-  endif()
-  if(ARG_SLOW_TESTS AND ARG_LABELS)
-    message(FATAL_ERROR "omm_test(${name}): SLOW_TESTS in a labelled executable")
   endif()
   set(unbuilt "")
   if(ARG_LABELS AND ARG_LABELS IN_LIST OMM_UNBUILT_TEST_LABELS)
@@ -80,16 +77,17 @@ function(omm_test name)
     set(cost 10)
   endif()
   set(props TIMEOUT ${ARG_TIMEOUT} ENVIRONMENT "OMM_SOURCE_DIR=${PROJECT_SOURCE_DIR}")
+  set(own_label "")
+  if(ARG_LABELS)
+    set(own_label LABELS ${ARG_LABELS})
+  endif()
   if(NOT ARG_SLOW_TESTS)
-    if(ARG_LABELS)
-      list(APPEND props LABELS ${ARG_LABELS})
-    endif()
     gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
-                         PROPERTIES ${props} COST ${cost} DISCOVERY_TIMEOUT 60)
+                         PROPERTIES ${props} ${own_label} COST ${cost} DISCOVERY_TIMEOUT 60)
     return()
   endif()
   gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR} TEST_FILTER "-${ARG_SLOW_TESTS}"
-                       PROPERTIES ${props} DISCOVERY_TIMEOUT 60)
+                       PROPERTIES ${props} ${own_label} DISCOVERY_TIMEOUT 60)
   if(NOT "slow" IN_LIST OMM_UNBUILT_TEST_LABELS)
     gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR} TEST_FILTER "${ARG_SLOW_TESTS}"
                          PROPERTIES ${props} LABELS slow COST ${cost} DISCOVERY_TIMEOUT 60)
