@@ -209,7 +209,7 @@ TEST_F(CalibrateCliTest, ReuseFromAProjectWithoutCalibrationIsABadInput) {
 TEST(CalibrateCliSplined, WidenedSplineIsWarnedAboutAndMrcalReadsItAsWritten) {
   testing::TempDir dir;
   const fs::path project = dir.path() / "lens-mismatch-315";
-  testing::CopyProject(testing::SimulatedProject("lens-mismatch", 315, 20).project_dir, project);
+  testing::CopyProject(testing::SimulatedCalibration("lens-mismatch", 315).project_dir, project);
   const testing::CommandResult calibrate = testing::RunOmm("calibrate " + Quoted(project));
   ASSERT_EQ(calibrate.exit_code, 0) << calibrate.output;
   EXPECT_THAT(calibrate.output,

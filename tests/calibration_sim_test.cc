@@ -65,7 +65,7 @@ const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed,
             BoardTypeName(board)];
   if (!entry) {
     entry = std::make_unique<Calibrated>();
-    entry->sim = testing::SimulatedProject(preset, seed, num_calib_images, false, {}, board);
+    entry->sim = testing::SimulatedCalibration(preset, seed, num_calib_images, board);
     entry->project = LoadProject(entry->sim.project_dir);
     // The simulator's project.yaml names the lens model; these tests exercise
     // the stage's own choice, as for a project.yaml without camera.lens_model.
@@ -318,7 +318,7 @@ TEST(CalibrationOnSimulatedProjects, LensMismatchWithFewImagesStillChoosesASplin
 // reached, not hand the mosaic a camera whose border misses the part; with
 // the default widening the spline maps the whole border.
 TEST(CalibrationOnSimulatedProjects, LensThatTheMarksDoNotCoverToTheCornersIsWidenedOrFails) {
-  const testing::CachedProject sim = testing::SimulatedProject("lens-mismatch", 243, 8);
+  const testing::CachedProject sim = testing::SimulatedCalibration("lens-mismatch", 243, 8);
   Project project = LoadProject(sim.project_dir);
   project.camera.lens_model.reset();
   std::vector<NamedImage> images;

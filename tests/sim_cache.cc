@@ -45,8 +45,39 @@ CachedProject CachedAt(const fs::path& dir) {
   return project;
 }
 
-// SimulationOptions::Check's least.
+// SimulationOptions::Check's least calib/ count, and the fewest tiles.
 constexpr int kFewestCalibImages = 3;
+constexpr TileGrid kFewestTiles{2, 1};
+
+// The parts of a cache entry's name: <preset>-<seed><calib><plate><grid><board>.
+std::string CalibSuffix(int calib_count) {
+  return calib_count == SimulationOptions{}.num_calib_images
+             ? ""
+             : "-calib" + std::to_string(calib_count);
+}
+std::string GridSuffix(TileGrid grid) {
+  return grid.cols == 3 && grid.rows == 3
+             ? ""
+             : "-g" + std::to_string(grid.cols) + "x" + std::to_string(grid.rows);
+}
+std::string BoardSuffix(BoardType board) {
+  return board == BoardType::kCaltab ? "" : std::string("-") + BoardTypeName(board);
+}
+
+// The first (by name) finished render whose name matches `pattern`.
+// Renders in progress are <name>.tmp-<pid>, renamed into place when done.
+std::optional<CachedProject> FindCached(const std::regex& pattern) {
+  const fs::path cache = OMM_SIM_CACHE_DIR;
+  std::vector<fs::path> cached;
+  if (fs::is_directory(cache)) {
+    for (const fs::directory_entry& entry : fs::directory_iterator(cache)) {
+      if (std::regex_match(entry.path().filename().string(), pattern))
+        cached.push_back(entry.path());
+    }
+  }
+  if (cached.empty()) return std::nullopt;
+  return CachedAt(*std::min_element(cached.begin(), cached.end()));
+}
 
 }  // namespace
 
@@ -55,16 +86,10 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
                                TileGrid grid, BoardType board) {
   const fs::path cache = OMM_SIM_CACHE_DIR;
   fs::create_directories(cache);
-  const bool grid3 = grid.cols == 3 && grid.rows == 3;
   // The default count asked for by number is the same project: one render.
-  const int default_calib_count = SimulationOptions{}.num_calib_images;
-  const int calib_count = num_calib_images.value_or(default_calib_count);
-  const std::string name =
-      preset + "-" + std::to_string(seed) +
-      (calib_count != default_calib_count ? "-calib" + std::to_string(calib_count) : "") +
-      (plate_on_part ? "-plate" : "") +
-      (grid3 ? "" : "-g" + std::to_string(grid.cols) + "x" + std::to_string(grid.rows)) +
-      (board == BoardType::kCaltab ? "" : std::string("-") + BoardTypeName(board));
+  const int calib_count = num_calib_images.value_or(SimulationOptions{}.num_calib_images);
+  const std::string name = preset + "-" + std::to_string(seed) + CalibSuffix(calib_count) +
+                           (plate_on_part ? "-plate" : "") + GridSuffix(grid) + BoardSuffix(board);
   const fs::path final_dir = cache / name;
   {
     FileLock lock(cache / (name + ".lock"));
@@ -94,19 +119,18 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
 }
 
 CachedProject SimulatedTiles(const std::string& preset, std::uint64_t seed) {
-  const fs::path cache = OMM_SIM_CACHE_DIR;
   const std::regex any_calib_count(preset + "-" + std::to_string(seed) + "(-calib[0-9]+)?");
-  std::vector<fs::path> cached;
-  if (fs::is_directory(cache)) {
-    for (const fs::directory_entry& entry : fs::directory_iterator(cache)) {
-      // Renders in progress are <name>.tmp-<pid>, renamed into place when done.
-      if (std::regex_match(entry.path().filename().string(), any_calib_count)) {
-        cached.push_back(entry.path());
-      }
-    }
-  }
-  if (cached.empty()) return SimulatedProject(preset, seed, kFewestCalibImages);
-  return CachedAt(*std::min_element(cached.begin(), cached.end()));
+  if (std::optional<CachedProject> cached = FindCached(any_calib_count)) return *cached;
+  return SimulatedProject(preset, seed, kFewestCalibImages);
+}
+
+CachedProject SimulatedCalibration(const std::string& preset, std::uint64_t seed,
+                                   std::optional<int> num_calib_images, BoardType board) {
+  const int calib_count = num_calib_images.value_or(SimulationOptions{}.num_calib_images);
+  const std::regex any_grid(preset + "-" + std::to_string(seed) + CalibSuffix(calib_count) +
+                            "(-g[0-9]+x[0-9]+)?" + BoardSuffix(board));
+  if (std::optional<CachedProject> cached = FindCached(any_grid)) return *cached;
+  return SimulatedProject(preset, seed, calib_count, false, kFewestTiles, board);
 }
 
 void CopyProject(const fs::path& from, const fs::path& to) {

@@ -48,6 +48,15 @@ CachedProject SimulatedProject(const std::string& preset, std::uint64_t seed,
 // cached, it renders the fewest calib/ images (3).
 CachedProject SimulatedTiles(const std::string& preset, std::uint64_t seed);
 
+// For a test that reads a project's calib/ images and truth camera but not
+// its tiles: any cached render of `preset`, `seed`, that calib/ count and
+// board without a plate on the part serves, whatever its tile grid (the grid
+// changes nothing of calib/); with none cached, it renders the fewest tiles
+// (2 x 1).
+CachedProject SimulatedCalibration(const std::string& preset, std::uint64_t seed,
+                                   std::optional<int> num_calib_images = std::nullopt,
+                                   BoardType board = BoardType::kCaltab);
+
 // Copies a project's inputs (everything but out/) into `to` (created).
 void CopyProject(const std::filesystem::path& from, const std::filesystem::path& to);
 

@@ -697,6 +697,37 @@ TEST(PlanSimulation, CalibImageCountChangesOnlyTheCalibImages) {
   EXPECT_EQ(ProjectRenderer(few).RenderTile(4, rays), ProjectRenderer(many).RenderTile(4, rays));
 }
 
+// And the tile grid changes nothing of calib/: the camera, the plate's poses
+// and the images stay, so tests that read only calib/ share any cached render.
+TEST(PlanSimulation, TileGridChangesNoCalibImage) {
+  SimulationOptions options;
+  options.preset = "lens-mismatch";
+  options.seed = 12;
+  options.num_calib_images = 4;
+  const SimulationPlan three_by_three = PlanSimulation(options);
+  options.grid_cols = 2;
+  options.grid_rows = 1;
+  const SimulationPlan two_by_one = PlanSimulation(options);
+  SimulationTruth calib_only[2];
+  for (int k = 0; k < 2; ++k) {
+    const SimulationTruth& truth = (k == 0 ? three_by_three : two_by_one).truth;
+    calib_only[k].camera = truth.camera;
+    calib_only[k].board = truth.board;
+    calib_only[k].plate_size_mm = truth.plate_size_mm;
+    calib_only[k].calib_images = truth.calib_images;
+  }
+  EXPECT_EQ(TruthToJson(calib_only[0]), TruthToJson(calib_only[1]));
+  EXPECT_NE(TruthToJson(three_by_three.truth), TruthToJson(two_by_one.truth));
+  const PixelRect rect{700, 500, 96, 80};
+  RayTableSummary summary;
+  const RayTable rays = ComputeRayTable(three_by_three.truth.camera.model, rect,
+                                        RayOptionsFor(three_by_three.options), &summary);
+  for (int image = 0; image < options.num_calib_images; ++image) {
+    EXPECT_EQ(ProjectRenderer(three_by_three).RenderCalibImage(image, rays),
+              ProjectRenderer(two_by_one).RenderCalibImage(image, rays));
+  }
+}
+
 // Exposure preset: clearly different brightness between tiles.
 TEST(PlanSimulation, ExposurePresetVariesGainAndVignetting) {
   const SimulationTruth truth = Plan("exposure").truth;
