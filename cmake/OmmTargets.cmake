@@ -38,8 +38,10 @@ function(omm_library name)
 endfunction()
 
 # omm_test(NAME SOURCES ... LINKS ... [LABELS name] [TIMEOUT s] [COST c]
-#          [SLOW_TESTS filter]): one GoogleTest executable; each TEST becomes its
-# own CTest name. LABELS slow marks tests that scripts/test.sh leaves out of
+#          [SLOW_TESTS filter | ONE_PROCESS suite]): one GoogleTest executable;
+# each TEST becomes its own CTest name, except that ONE_PROCESS runs the tests
+# of one suite as a single CTest test of that name: one process computes the
+# suite's shared fixture (SetUpTestSuite) once instead of once per test. LABELS slow marks tests that scripts/test.sh leaves out of
 # the sanitizer pass. SLOW_TESTS (a gtest filter, Suite.Name patterns joined
 # by ':') gives the label slow, in place of LABELS, to those tests of the
 # executable: its Monte-Carlo statistics, seconds in Release but minutes under
@@ -53,7 +55,10 @@ endfunction()
 # default 10 for slow tests, else 0): long tests started first do not end
 # alone on one core of CI's two. A tree's own measured costs override it.
 function(omm_test name)
-  cmake_parse_arguments(ARG "" "TIMEOUT;COST;SLOW_TESTS" "SOURCES;LINKS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "" "TIMEOUT;COST;SLOW_TESTS;ONE_PROCESS" "SOURCES;LINKS;LABELS" ${ARGN})
+  if(ARG_SLOW_TESTS AND ARG_ONE_PROCESS)
+    message(FATAL_ERROR "omm_test(${name}): SLOW_TESTS or ONE_PROCESS, not both")
+  endif()
   list(LENGTH ARG_LABELS label_count)
   if(label_count GREATER 1)
     message(FATAL_ERROR "omm_test(${name}): one label at most")
@@ -80,6 +85,15 @@ function(omm_test name)
   set(own_label "")
   if(ARG_LABELS)
     set(own_label LABELS ${ARG_LABELS})
+  endif()
+  if(ARG_ONE_PROCESS)
+    add_test(NAME ${ARG_ONE_PROCESS} COMMAND ${name} --gtest_filter=${ARG_ONE_PROCESS}.*
+             WORKING_DIRECTORY ${PROJECT_SOURCE_DIR})
+    set_tests_properties(${ARG_ONE_PROCESS} PROPERTIES ${props} ${own_label} COST ${cost})
+    gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+                         TEST_FILTER "-${ARG_ONE_PROCESS}.*"
+                         PROPERTIES ${props} ${own_label} COST ${cost} DISCOVERY_TIMEOUT 60)
+    return()
   endif()
   if(NOT ARG_SLOW_TESTS)
     gtest_discover_tests(${name} WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
