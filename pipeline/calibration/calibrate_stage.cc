@@ -390,6 +390,13 @@ void ExtrapolateSpline(const CalibrationResult& working, double working_sigma_px
           "{:.4f} px at the marks)",
           working.camera.lens_model, working_sigma_px, extrapolation.max_change_px,
           extrapolation.max_change_at_marks_px);
+      if (extrapolation.num_without_parametric_ray > 0) {
+        lens->why += fmt::format(
+            " except at {} of the {} x {} grid's points, where that fit has no ray (beyond its "
+            "fold)",
+            extrapolation.num_without_parametric_ray, options.spline_extrapolation.grid_nx,
+            options.spline_extrapolation.grid_ny);
+      }
     }
   }
   lens->extrapolation = std::move(extrapolation);

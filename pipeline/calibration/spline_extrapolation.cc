@@ -61,31 +61,45 @@ SplineExtrapolation ExtrapolateSplineByParametric(
     result.why_not = "the parametric model could not be aligned to the spline";
     return result;
   }
-  Eigen::Matrix3Xd p_parametric;
-  if (!UnprojectPixels(parametric, q, &p_parametric)) {
-    result.why_not = "the parametric model does not map the whole imager";
+  Eigen::Matrix3Xd rays;
+  if (!UnprojectPixels(parametric, q, &rays)) {
+    result.why_not = "the parametric model does not map the imager";
     return result;
   }
+  // Where it has no ray (beyond the fold of a strong radial term mrcal's
+  // unprojection gives NaN) it is no target: the spline keeps its own there.
+  std::vector<Eigen::Index> mapped;
   for (Eigen::Index k = 0; k < n; ++k)
-    p_parametric.col(k) = distance_mm * p_parametric.col(k).normalized();
+    if (rays.col(k).allFinite()) mapped.push_back(k);
+  result.num_without_parametric_ray =
+      static_cast<int>(n - static_cast<Eigen::Index>(mapped.size()));
+  if (mapped.empty()) {
+    result.why_not = "the parametric model maps no pixel of the grid to a ray";
+    return result;
+  }
+  const Eigen::Index m = static_cast<Eigen::Index>(mapped.size());
+  Eigen::Matrix3Xd p_parametric(3, m);
+  for (Eigen::Index j = 0; j < m; ++j)
+    p_parametric.col(j) = distance_mm * rays.col(mapped[j]).normalized();
   // Its 1-sigma: the misfit, and its own projection uncertainty (the misfit
   // taken as noise, as mrcal does), which grows where its fit extrapolates.
-  Eigen::VectorXd sigma_p(n);
+  Eigen::VectorXd sigma_p(m);
   {
     const std::vector<PointUncertainty> own =
         ProjectionUncertainty(parametric_uncertainty, p_parametric);
-    for (Eigen::Index k = 0; k < n; ++k)
-      sigma_p(k) = std::hypot(parametric_sigma_px, own[k].worst_stdev_px);
+    for (Eigen::Index j = 0; j < m; ++j)
+      sigma_p(j) = std::hypot(parametric_sigma_px, own[j].worst_stdev_px);
   }
   // Its rays at the same range, into the spline's frame: p_s = R' (p_p - t).
   const Eigen::Matrix3d r = RotationFromAngleAxis(aligned.rt_b_from_a.head<3>());
   const Eigen::Vector3d t = aligned.rt_b_from_a.tail<3>();
-  for (Eigen::Index k = 0; k < n; ++k)
-    p_parametric.col(k) = r.transpose() * (p_parametric.col(k) - t);
+  for (Eigen::Index j = 0; j < m; ++j)
+    p_parametric.col(j) = r.transpose() * (p_parametric.col(j) - t);
 
   // Both targets' residuals and their gradients in the control points (the
-  // intrinsics after the core's 4).
-  Eigen::Matrix3Xd p(3, 2 * n);
+  // intrinsics after the core's 4): the n spline targets, then the m
+  // parametric ones.
+  Eigen::Matrix3Xd p(3, n + m);
   p << grid.p_cam, p_parametric;
   Eigen::Matrix2Xd q_now;
   Eigen::MatrixXd dq_dintrinsics;
@@ -96,10 +110,10 @@ SplineExtrapolation ExtrapolateSplineByParametric(
   const int num_control = static_cast<int>(spline.intrinsics.size()) - 4;
   Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(num_control, num_control);
   Eigen::VectorXd gradient = Eigen::VectorXd::Zero(num_control);
-  for (Eigen::Index k = 0; k < 2 * n; ++k) {
+  for (Eigen::Index k = 0; k < n + m; ++k) {
     const double weight = k < n ? 1.0 / sigma_s(k) : 1.0 / sigma_p(k - n);
     const Eigen::MatrixXd j = weight * dq_dintrinsics.middleRows(2 * k, 2).rightCols(num_control);
-    const Eigen::Vector2d residual = weight * (q_now.col(k) - q.col(k % n));
+    const Eigen::Vector2d residual = weight * (q_now.col(k) - q.col(k < n ? k : mapped[k - n]));
     normal.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
     gradient += j.transpose() * residual;
   }

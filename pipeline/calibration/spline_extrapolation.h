@@ -22,11 +22,12 @@
 // the spline 4.2). On a grid over the imager both are targets for the
 // spline's control points, weighted 1/sigma:
 //   min_c  sum_k |q(c; p_s,k) - q_k|^2 / sigma_s,k^2 + |q(c; p_p,k) - q_k|^2 / sigma_p,k^2
-// (p_s,k, p_p,k: pixel q_k's ray under each). Where the marks were, on a lens
-// the parametric model cannot represent, sigma_s << sigma_p and the spline is
-// unchanged (to (sigma_s / sigma_p)^2 of the difference; on one it can, the
-// two are averaged there too); far beyond them it follows the parametric
-// model. The spline's projection is linear in its control points (q = f (u +
+// (p_s,k, p_p,k: pixel q_k's ray under each; a pixel the parametric model maps
+// to no ray, beyond the fold of a strong radial term, has no second term).
+// Where the marks were, on a lens the parametric model cannot represent,
+// sigma_s << sigma_p and the spline is unchanged (to (sigma_s / sigma_p)^2 of
+// the difference; on one it can, the two are averaged there too); far beyond
+// them it follows the parametric model. The spline's projection is linear in its control points (q = f (u +
 // du(u)) + c, du a B-spline of u), so one least-squares step is the exact
 // minimum; the core (f, c) is kept.
 //
@@ -70,6 +71,9 @@ struct SplineExtrapolation {
   // marks, px.
   double max_change_px = 0.0;
   double max_change_at_marks_px = 0.0;
+  // Grid points where the parametric model has no ray (beyond its fold):
+  // no target there.
+  int num_without_parametric_ray = 0;
 };
 
 // `spline`: a solved LENSMODEL_SPLINED_* camera and `uncertainty` its

@@ -101,6 +101,8 @@ ReportValue LensChoice(const LensModelChoice& lens) {
       beyond.emplace_back("follows", e.parametric_model);
       beyond.emplace_back("max_change_px", e.max_change_px);
       beyond.emplace_back("max_change_at_marks_px", e.max_change_at_marks_px);
+      if (e.num_without_parametric_ray > 0)
+        beyond.emplace_back("grid_points_without_its_ray", e.num_without_parametric_ray);
     } else {
       beyond.emplace_back("why_not", e.why_not);
     }
