@@ -536,14 +536,22 @@ TEST(PlanSimulation, MarkersAreDistinctAndInView) {
 
 // ---------------------------------------------------------------- rendering
 
+// The plan's ray table over `rect`.
+RayTable RaysOf(const SimulationPlan& plan, const PixelRect& rect) {
+  RayTableSummary summary;
+  RayTable rays =
+      ComputeRayTable(plan.truth.camera.model, rect, RayOptionsFor(plan.options), &summary);
+  EXPECT_TRUE(summary.ok);
+  return rays;
+}
+
+// A crop where the determinism tests compare rendered images bit for bit.
+constexpr PixelRect kCompareCrop{700, 500, 96, 80};
+
 // The reflectance image of a crop of a tile or calib image.
 ImageF TileCrop(const SimulationPlan& plan, const ProjectRenderer& renderer, int tile,
                 const PixelRect& rect) {
-  RayTableSummary summary;
-  const RayTable rays =
-      ComputeRayTable(plan.truth.camera.model, rect, RayOptionsFor(plan.options), &summary);
-  EXPECT_TRUE(summary.ok);
-  return renderer.TileReflectance(tile, rays);
+  return renderer.TileReflectance(tile, RaysOf(plan, rect));
 }
 
 PixelRect RectAround(const Eigen::Matrix2Xd& q, int margin) {
@@ -662,12 +670,7 @@ TEST(ProjectRenderer, ImagesAreDeterministic) {
   const SimulationPlan one = PlanSimulation(options);
   options.num_threads = 2;
   const SimulationPlan two = PlanSimulation(options);
-  const PixelRect rect{700, 500, 96, 80};
-  RayTableSummary summary;
-  const RayTable rays_one =
-      ComputeRayTable(one.truth.camera.model, rect, RayOptionsFor(one.options), &summary);
-  const RayTable rays_two =
-      ComputeRayTable(two.truth.camera.model, rect, RayOptionsFor(two.options), &summary);
+  const RayTable rays_one = RaysOf(one, kCompareCrop), rays_two = RaysOf(two, kCompareCrop);
   const ProjectRenderer renderer_one(one), renderer_two(two);
   EXPECT_EQ(renderer_one.RenderTile(4, rays_one), renderer_two.RenderTile(4, rays_two));
   EXPECT_EQ(renderer_one.RenderCalibImage(3, rays_one), renderer_two.RenderCalibImage(3, rays_two));
@@ -690,10 +693,7 @@ TEST(PlanSimulation, CalibImageCountChangesOnlyTheCalibImages) {
   few.truth.calib_images.clear();
   many.truth.calib_images.clear();
   EXPECT_EQ(TruthToJson(few.truth), TruthToJson(many.truth));
-  const PixelRect rect{700, 500, 96, 80};
-  RayTableSummary summary;
-  const RayTable rays =
-      ComputeRayTable(few.truth.camera.model, rect, RayOptionsFor(few.options), &summary);
+  const RayTable rays = RaysOf(few, kCompareCrop);
   EXPECT_EQ(ProjectRenderer(few).RenderTile(4, rays), ProjectRenderer(many).RenderTile(4, rays));
 }
 
@@ -718,10 +718,7 @@ TEST(PlanSimulation, TileGridChangesNoCalibImage) {
   }
   EXPECT_EQ(TruthToJson(calib_only[0]), TruthToJson(calib_only[1]));
   EXPECT_NE(TruthToJson(three_by_three.truth), TruthToJson(two_by_one.truth));
-  const PixelRect rect{700, 500, 96, 80};
-  RayTableSummary summary;
-  const RayTable rays = ComputeRayTable(three_by_three.truth.camera.model, rect,
-                                        RayOptionsFor(three_by_three.options), &summary);
+  const RayTable rays = RaysOf(three_by_three, kCompareCrop);
   for (int image = 0; image < options.num_calib_images; ++image) {
     EXPECT_EQ(ProjectRenderer(three_by_three).RenderCalibImage(image, rays),
               ProjectRenderer(two_by_one).RenderCalibImage(image, rays));
