@@ -4,7 +4,9 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <map>
+#include <numeric>
 #include <random>
 #include <set>
 #include <sstream>
@@ -33,6 +35,8 @@ std::string RegisterTilesOptions::Check() const {
   if (num_probe_corners < 8) return "num_probe_corners must be >= 8";
   if (max_corners_per_pair < num_probe_corners)
     return "max_corners_per_pair must be >= num_probe_corners";
+  if (max_matches_per_pair < min_pair_matches)
+    return "max_matches_per_pair must be >= min_pair_matches";
   if (probe_search_radius_px < 1) return "probe_search_radius_px must be >= 1";
   if (probe_downsample_factor < 1) return "probe_downsample_factor must be >= 1";
   if (probe_half_size_px < 2) return "probe_half_size_px must be >= 2";
@@ -140,6 +144,22 @@ long long TagKey(int id, int k) { return -(static_cast<long long>(id) * 4 + k + 
 // 46 % of the demo's pixels, in whole bucketing cells.
 int CandidateMarginPx(const RegisterTilesOptions& options) {
   return options.patch.half_size_px + options.probe_search_radius_px + 3;
+}
+
+// A Harris corner's place in the order a pair locates its candidates in
+// (RegisterTilesOptions::max_matches_per_pair): a hash of its tile and pixel
+// (MurmurHash3's 64-bit finalizer), so the same in every pair the corner is a
+// candidate of.
+std::uint64_t CornerPriority(int tile, const Eigen::Vector2i& pixel) {
+  std::uint64_t h = (static_cast<std::uint64_t>(tile) << 40) ^
+                    (static_cast<std::uint64_t>(pixel.y()) << 20) ^
+                    static_cast<std::uint64_t>(pixel.x());
+  h ^= h >> 33;
+  h *= 0xff51afd7ed558ccdULL;
+  h ^= h >> 33;
+  h *= 0xc4ceb9fe1a85ec53ULL;
+  h ^= h >> 33;
+  return h;
 }
 
 // shift_ab = A (T_b - T_a), px.
@@ -551,10 +571,25 @@ TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma
     }
 
     // Every candidate located by the template match (one per anchor pixel:
-    // a SIFT keypoint may repeat, or coincide with a corner).
+    // a SIFT keypoint may repeat, or coincide with a corner), the Harris ones
+    // by CornerPriority until max_matches_per_pair are located; then back in
+    // todo's order, which RANSAC samples in (a pair that locates fewer keeps
+    // the matches and the result it had without the limit).
+    std::vector<int> order(todo.size());
+    std::iota(order.begin(), order.end(), 0);
+    {
+      std::vector<std::uint64_t> priority;
+      for (const Candidate& c : todo) priority.push_back(CornerPriority(ta, c.pixel));
+      std::stable_sort(order.begin(), order.end(),
+                       [&](int x, int y) { return priority[x] < priority[y]; });
+    }
     std::vector<Match> matches;
+    std::vector<int> todo_index;  // of matches[k]
+    int num_harris_located = 0;
     std::set<long long> seen;
-    for (const Candidate& c : todo) {
+    for (const int index : order) {
+      const Candidate& c = todo[index];
+      if (!c.sift && num_harris_located >= options.max_matches_per_pair) continue;
       Match m;
       m.tile_a = ta;
       m.tile_b = tb;
@@ -570,6 +605,17 @@ TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma
       m.q_b = pm.q_px;
       m.covariance_px2 = pm.covariance_px2;
       matches.push_back(m);
+      todo_index.push_back(index);
+      if (!c.sift) ++num_harris_located;
+    }
+    {
+      std::vector<int> by_todo(matches.size());
+      std::iota(by_todo.begin(), by_todo.end(), 0);
+      std::sort(by_todo.begin(), by_todo.end(),
+                [&](int x, int y) { return todo_index[x] < todo_index[y]; });
+      std::vector<Match> in_todo_order;
+      for (const int k : by_todo) in_todo_order.push_back(std::move(matches[k]));
+      matches = std::move(in_todo_order);
     }
     pair.num_matched = static_cast<int>(matches.size());
     std::vector<Match> kept = plane_inliers(matches, &rng);
