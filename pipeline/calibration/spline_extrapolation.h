@@ -27,9 +27,9 @@
 // Where the marks were, on a lens the parametric model cannot represent,
 // sigma_s << sigma_p and the spline is unchanged (to (sigma_s / sigma_p)^2 of
 // the difference; on one it can, the two are averaged there too); far beyond
-// them it follows the parametric model. The spline's projection is linear in its control points (q = f (u +
-// du(u)) + c, du a B-spline of u), so one least-squares step is the exact
-// minimum; the core (f, c) is kept.
+// them it follows the parametric model. The spline's projection is linear in
+// its control points (q = f (u + du(u)) + c, du a B-spline of u), so one
+// least-squares step is the exact minimum; the core (f, c) is kept.
 //
 // The result is no longer mrcal's optimum of its own problem: the solve
 // record keeps the extrapolated intrinsics, whose projection of the marks is

@@ -308,9 +308,8 @@ TEST(RegisterTiles, TagGateSkipsTheDemoAndKeepsEveryMarkersTag) {
 // every candidate located.
 TEST(RegisterTiles, MatchCapKeepsTheTracksViewsAndTheHoles) {
   const Rendered r = Render("demo-1");
+  const TileRegistration capped = Register(r);
   RegisterTilesOptions options;
-  const TileRegistration capped =
-      RegisterTiles(r.tiles, r.commanded_mm, r.truth.table_sigma_mm, r.truth.camera.model, options);
   options.max_matches_per_pair = options.max_corners_per_pair;
   const TileRegistration all =
       RegisterTiles(r.tiles, r.commanded_mm, r.truth.table_sigma_mm, r.truth.camera.model, options);

@@ -30,6 +30,7 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/timing.h"
+#include "pipeline/orchestration/calibration_report.h"
 #include "pipeline/orchestration/stage.h"
 #include "pipeline/orchestration/svg_plots.h"
 
@@ -71,44 +72,6 @@ ReportValue Uncertainty(const UncertaintySummary& u) {
                       {"typical_px", u.typical_px},
                       {"worst_px", u.worst_px},
                       {"observed_sigma_px", u.observed_sigma_px}};
-}
-
-ReportValue LensChoice(const LensModelChoice& lens) {
-  ReportObject choice{{"lens_model", lens.lens_model}, {"forced", lens.forced}, {"why", lens.why}};
-  if (!lens.candidates.empty()) {
-    ReportValue::Array candidates;
-    for (const LensCandidate& c : lens.candidates) {
-      candidates.emplace_back(ReportObject{{"lens_model", c.lens_model},
-                                           {"num_params", c.num_params},
-                                           {"usable", c.usable},
-                                           {"rms_px", c.rms_px},
-                                           {"num_measurements", c.num_measurements},
-                                           {"num_states", c.num_states},
-                                           {"sigma_px", c.sigma_px}});
-    }
-    choice.emplace_back(
-        "criterion",
-        "residual structure: OPENCV8 and a splined model solved on all images; the splined "
-        "model is chosen only if its residual drop passes an F-test (extra sum of squares) and "
-        "the misfit it removes is a set fraction of the noise or more (both levels in 'why'); "
-        "sigma_px = rms sqrt(M / (M - P))");
-    choice.emplace_back("candidates", candidates);
-  }
-  const SplineExtrapolation& e = lens.extrapolation;
-  if (e.applied || !e.why_not.empty()) {
-    ReportObject beyond{{"applied", e.applied}};
-    if (e.applied) {
-      beyond.emplace_back("follows", e.parametric_model);
-      beyond.emplace_back("max_change_px", e.max_change_px);
-      beyond.emplace_back("max_change_at_marks_px", e.max_change_at_marks_px);
-      if (e.num_without_parametric_ray > 0)
-        beyond.emplace_back("grid_points_without_its_ray", e.num_without_parametric_ray);
-    } else {
-      beyond.emplace_back("why_not", e.why_not);
-    }
-    choice.emplace_back("spline_beyond_marks", beyond);
-  }
-  return choice;
 }
 
 ReportValue StudyReport(const ImageCountStudy& study) {
@@ -292,7 +255,7 @@ void CalibrateFromImages(StageContext& context) {
                                        {"q_px", ReportValue::Array{o.q_px.x(), o.q_px.y()}}});
   }
   report.extra.emplace_back("outliers", outliers);
-  report.extra.emplace_back("lens_model_choice", LensChoice(summary.lens));
+  report.extra.emplace_back("lens_model_choice", LensChoiceReport(summary.lens));
   report.extra.emplace_back("perspective_bias_correction",
                             ReportObject{{"rounds", summary.bias.rounds},
                                          {"rms_px", summary.bias.rms_px},
@@ -378,6 +341,44 @@ void ReuseCameraModel(StageContext& context, const fs::path& from) {
 }
 
 }  // namespace
+
+ReportValue LensChoiceReport(const LensModelChoice& lens) {
+  ReportObject choice{{"lens_model", lens.lens_model}, {"forced", lens.forced}, {"why", lens.why}};
+  if (!lens.candidates.empty()) {
+    ReportValue::Array candidates;
+    for (const LensCandidate& c : lens.candidates) {
+      candidates.emplace_back(ReportObject{{"lens_model", c.lens_model},
+                                           {"num_params", c.num_params},
+                                           {"usable", c.usable},
+                                           {"rms_px", c.rms_px},
+                                           {"num_measurements", c.num_measurements},
+                                           {"num_states", c.num_states},
+                                           {"sigma_px", c.sigma_px}});
+    }
+    choice.emplace_back(
+        "criterion",
+        "residual structure: OPENCV8 and a splined model solved on all images; the splined "
+        "model is chosen only if its residual drop passes an F-test (extra sum of squares) and "
+        "the misfit it removes is a set fraction of the noise or more (both levels in 'why'); "
+        "sigma_px = rms sqrt(M / (M - P))");
+    choice.emplace_back("candidates", candidates);
+  }
+  const SplineExtrapolation& e = lens.extrapolation;
+  if (e.applied || !e.why_not.empty()) {
+    ReportObject beyond{{"applied", e.applied}};
+    if (e.applied) {
+      beyond.emplace_back("follows", e.parametric_model);
+      beyond.emplace_back("max_change_px", e.max_change_px);
+      beyond.emplace_back("max_change_at_marks_px", e.max_change_at_marks_px);
+      if (e.num_without_parametric_ray > 0)
+        beyond.emplace_back("grid_points_without_its_ray", e.num_without_parametric_ray);
+    } else {
+      beyond.emplace_back("why_not", e.why_not);
+    }
+    choice.emplace_back("spline_beyond_marks", beyond);
+  }
+  return choice;
+}
 
 void RunCalibrateStage(StageContext& context) {
   const Project& project = context.project;
