@@ -77,7 +77,9 @@ struct MarkRefinementOptions {
   double min_contrast = 0.04;        // |outside - inside| below this: fail (image units)
   double min_inlier_fraction = 0.6;  // fraction of cast rays that must end as inliers
   int max_passes = 5;                // edge passes, each along the previous fit's normals
-  double converged_px = 2e-4;        // stop when a pass moves the centre less, px
+  // Stop when a pass, or the passes still to come (predicted from the last
+  // two moves, which shrink geometrically), move the centre less, px.
+  double converged_px = 2e-4;
 
   std::string Check() const;
 };
@@ -93,6 +95,7 @@ struct MarkFit {
   double contrast = 0.0;
   double edge_sigma_px = 0.0;
   int num_edge_points = 0;
+  int num_passes = 0;  // edge passes made
   int num_inliers = 0;
 };
 

@@ -155,6 +155,49 @@ TEST(SubpixelEdges, NoiseFreeCentreErrorIsTiny) {
   RecordProperty("worst_centre_error_px", std::to_string(worst));
 }
 
+// The passes stop once the moves still to come, predicted from the last two,
+// are below converged_px: the centre is then within converged_px of where
+// every pass settles, a pass sooner than where a pass itself first moves it
+// less than converged_px (but never before the second pass). Sharp marks
+// contract ~1000x per pass here, blurred ones ~8x.
+TEST(SubpixelEdges, PassesStopWhereTheMovesToComeAreBelowTolerance) {
+  const MarkRefinementOptions options;
+  constexpr int kPasses = 6;
+  int passes = 0, passes_to_small_moves = 0;
+  for (double psf : {0.7, 1.5}) {
+    for (int k = 0; k < 4; ++k) {
+      const Ellipse truth = Ellipse::FromAxes({60.0 + 0.213 * k, 58.0 + 0.117 * k}, 19.0,
+                                              19.0 * (0.75 + 0.05 * k), 0.7 * k);
+      const ImageF image = RenderEllipse(truth, 120, 116, 0.12, 0.85, psf);
+      // centres[n]: after n + 1 passes, none stopped early.
+      std::vector<Eigen::Vector2d> centres;
+      MarkRefinementOptions every_pass;
+      every_pass.converged_px = 1e-12;
+      for (every_pass.max_passes = 1; every_pass.max_passes <= kPasses; ++every_pass.max_passes) {
+        const MarkFit fit = RefineEllipticalMark(image, Rough(truth), every_pass);
+        ASSERT_TRUE(fit.ok) << fit.why_failed;
+        centres.push_back(fit.ellipse.centre_px);
+      }
+      int passes_to_a_small_move = kPasses;
+      for (int n = 1; n < kPasses; ++n) {
+        if ((centres[n] - centres[n - 1]).norm() < options.converged_px) {
+          passes_to_a_small_move = n + 1;
+          break;
+        }
+      }
+      const MarkFit mark = RefineEllipticalMark(image, Rough(truth), options);
+      ASSERT_TRUE(mark.ok) << mark.why_failed;
+      EXPECT_LT((mark.ellipse.centre_px - centres.back()).norm(), options.converged_px)
+          << "psf " << psf << " k " << k;
+      EXPECT_LE(mark.num_passes, std::max(2, passes_to_a_small_move - 1))
+          << "psf " << psf << " k " << k;
+      passes += mark.num_passes;
+      passes_to_small_moves += passes_to_a_small_move;
+    }
+  }
+  EXPECT_LT(passes, passes_to_small_moves);
+}
+
 TEST(SubpixelEdges, EdgeWidthMeasuresTheBlur) {
   const Ellipse truth = Ellipse::FromAxes({60.2, 58.4}, 20.0, 16.0, 0.3);
   double previous = 0.0;
