@@ -406,10 +406,8 @@ struct FinalOutcome {
   // their views put them, else where near_px does, within a quarter of the
   // diameter (project-format.md).
   std::vector<OrthoDisc> holes_to_keep_whole;
-  // The tiles' exposure, estimated on the registered scene, and what the
-  // mosaic's interpolator samples of them (InterpolatorSamples), both during
-  // the solves (their single thread leaves a core free).
-  ExposureSummary exposure;
+  // What the mosaic's interpolator samples of the tiles (InterpolatorSamples),
+  // computed during the solves, whose single thread leaves a core free.
   std::vector<ImageF> samples;
   double fit_seconds = 0.0;      // the ties' hole fits
   double overlap_seconds = 0.0;  // the held tiles' overlap alignments
@@ -483,12 +481,12 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
   result.overlap_seconds = SecondsSince(overlap_start);
 
-  OrthoOptions beside_options = ortho_options;
-  beside_options.num_threads = std::max(1, num_threads - 1);
-  std::future<void> beside_solves = std::async(std::launch::async, [&] {
-    result.exposure = EstimateTileExposure(geometry, tiles, beside_options);
-    result.samples = InterpolatorSamples(tiles, beside_options);
-  });
+  // On every thread: the core the solves leave while they run, both after.
+  OrthoOptions samples_options = ortho_options;
+  samples_options.num_threads = num_threads;
+  std::future<std::vector<ImageF>> samples_beside =
+      std::async(std::launch::async,
+                 [&tiles, samples_options] { return InterpolatorSamples(tiles, samples_options); });
   TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
                                            options, ties, tie_options);
   // Table positions the features contradict (table_prior_check.h): every
@@ -533,7 +531,7 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
     }
   }
   result.adjusted = std::move(tied.adjusted);
-  beside_solves.get();
+  result.samples = samples_beside.get();
   result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
   result.overlap_report =
       OverlapTiesReport(project, overlap_ties, first_overlap_observation,
@@ -652,6 +650,18 @@ void RunMosaicStage(StageContext& context) {
   const std::vector<PairScatter> pair_scatter = WeightPairsByScatter(
       registration.track_anchor_observation, registration.scene.residual_px, &registration.input);
 
+  // The tiles' exposure for the mosaic, on the registered scene (gains and
+  // vignetting do not move with the final adjustment's hundredths of a
+  // pixel), on a thread of its own: it takes what the plate search and the
+  // hole ties leave of the cores.
+  OrthoOptions exposure_ortho;
+  exposure_ortho.gsd_mm = project.mosaic_gsd_mm;
+  exposure_ortho.num_threads = 1;
+  std::future<ExposureSummary> exposure_beside = std::async(
+      std::launch::async,
+      [geometry = ComputeOrthoGeometry(camera, registration.scene, exposure_ortho), &tiles,
+       exposure_ortho] { return EstimateTileExposure(geometry, tiles, exposure_ortho); });
+
   // The final adjustment: the plate on the part, the intrinsics prior.
   PlateOnPart plate;
   if (project.board) {
@@ -743,9 +753,10 @@ void RunMosaicStage(StageContext& context) {
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = project.mosaic_gsd_mm;
   ortho_options.num_threads = context.num_threads;
-  OrthoResult ortho = Orthorectify(scene_camera, registration.scene, tiles, ortho_options,
-                                   final_outcome.holes_to_keep_whole,
-                                   {&final_outcome.exposure, &final_outcome.samples});
+  const ExposureSummary exposure = exposure_beside.get();
+  OrthoResult ortho =
+      Orthorectify(scene_camera, registration.scene, tiles, ortho_options,
+                   final_outcome.holes_to_keep_whole, {&exposure, &final_outcome.samples});
   final_outcome.samples = {};  // the tiles' coefficients (the demo's: 69 MB) serve no later step
   spdlog::info("mosaic: {}", ortho.summary.brief);
   if (!ortho.summary.usable) {
