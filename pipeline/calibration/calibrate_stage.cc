@@ -384,19 +384,8 @@ void ExtrapolateSpline(const CalibrationResult& working, double working_sigma_px
     } else {
       result->camera.intrinsics = extrapolation.intrinsics;
       result->record.camera.intrinsics = extrapolation.intrinsics;
-      lens->why += fmt::format(
-          "; beyond the marks, where its 1-sigma exceeds that of {}'s fit (its misfit {:.3f} px "
-          "and its own uncertainty), the spline follows that fit (moved by up to {:.3f} px; "
-          "{:.4f} px at the marks)",
-          working.camera.lens_model, working_sigma_px, extrapolation.max_change_px,
-          extrapolation.max_change_at_marks_px);
-      if (extrapolation.num_without_parametric_ray > 0) {
-        lens->why += fmt::format(
-            " except at {} of the {} x {} grid's points, where that fit has no ray (beyond its "
-            "fold)",
-            extrapolation.num_without_parametric_ray, options.spline_extrapolation.grid_nx,
-            options.spline_extrapolation.grid_ny);
-      }
+      lens->why += "; " + DescribeSplineExtrapolation(extrapolation, working_sigma_px,
+                                                      options.spline_extrapolation);
     }
   }
   lens->extrapolation = std::move(extrapolation);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include <fmt/format.h>
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 
@@ -146,6 +147,24 @@ SplineExtrapolation ExtrapolateSplineByParametric(
     result.max_change_at_marks_px = change.tail(marks_cam.cols()).maxCoeff();
   result.applied = true;
   return result;
+}
+
+std::string DescribeSplineExtrapolation(const SplineExtrapolation& extrapolation,
+                                        double parametric_sigma_px,
+                                        const SplineExtrapolationOptions& options) {
+  if (!extrapolation.applied) return "";
+  std::string text = fmt::format(
+      "beyond the marks, where its 1-sigma exceeds that of {}'s fit (its misfit {:.3f} px and "
+      "its own uncertainty), the spline follows that fit (moved by up to {:.3f} px; {:.4f} px at "
+      "the marks)",
+      extrapolation.parametric_model, parametric_sigma_px, extrapolation.max_change_px,
+      extrapolation.max_change_at_marks_px);
+  if (extrapolation.num_without_parametric_ray > 0) {
+    text += fmt::format(
+        " except at {} of the {} x {} grid's points, where that fit has no ray (beyond its fold)",
+        extrapolation.num_without_parametric_ray, options.grid_nx, options.grid_ny);
+  }
+  return text;
 }
 
 Eigen::Matrix3Xd InlierMarksInCamera(const CalibrationResult& result) {

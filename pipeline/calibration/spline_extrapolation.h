@@ -88,6 +88,14 @@ SplineExtrapolation ExtrapolateSplineByParametric(
     double parametric_sigma_px, double distance_mm, const Eigen::Matrix3Xd& marks_cam,
     const SplineExtrapolationOptions& options = {});
 
+// What an applied `extrapolation` did, for the lens choice's why: where the
+// spline follows the parametric fit (whose residual sigma is
+// `parametric_sigma_px`), how far it moved, and at how many grid points of
+// `options` that fit has no ray. Empty if it was not applied.
+std::string DescribeSplineExtrapolation(const SplineExtrapolation& extrapolation,
+                                        double parametric_sigma_px,
+                                        const SplineExtrapolationOptions& options = {});
+
 // The solve's inlier marks through its solved poses, in the camera frame
 // (3 x N, mm): ExtrapolateSplineByParametric's marks_cam.
 Eigen::Matrix3Xd InlierMarksInCamera(const CalibrationResult& result);

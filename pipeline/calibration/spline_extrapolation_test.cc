@@ -5,6 +5,7 @@
 #include <optional>
 #include <vector>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/calibrate.h"
@@ -111,6 +112,10 @@ TEST_F(SplineExtrapolationTest, FollowsAParametricFitThatIsSurerBeyondTheMarks) 
       spline_beyond, opencv8_beyond, extrapolated_beyond, spline_among, extrapolated_among,
       extrapolation.max_change_at_marks_px);
   EXPECT_LT(extrapolated_beyond, 0.2 * spline_beyond);
+  const std::string described =
+      DescribeSplineExtrapolation(extrapolation, s.opencv8.rms_px, SplineExtrapolationOptions());
+  EXPECT_NE(described.find("the spline follows that fit"), std::string::npos) << described;
+  EXPECT_EQ(described.find("except at"), std::string::npos) << described;
   EXPECT_LT(extrapolated_beyond, 2.0 * opencv8_beyond + kNoisePx);
   // Among the marks no farther from the truth (here, where the fit is the
   // truth, closer: 0.146 -> 0.010 px).
@@ -153,6 +158,12 @@ TEST_F(SplineExtrapolationTest, AParametricModelThatFoldsIsNoTargetBeyondItsFold
   EXPECT_GT(without_ray, 0);
   EXPECT_LT(without_ray, options.grid_nx * options.grid_ny / 2);
   EXPECT_EQ(extrapolation.num_without_parametric_ray, without_ray);
+  // The lens choice's why names them.
+  const std::string described = DescribeSplineExtrapolation(extrapolation, misfit_px, options);
+  const std::string clause =
+      fmt::format("except at {} of the {} x {} grid's points, where that fit has no ray",
+                  without_ray, options.grid_nx, options.grid_ny);
+  EXPECT_NE(described.find(clause), std::string::npos) << described;
   EXPECT_TRUE(extrapolation.intrinsics.allFinite());
   // Among the marks, where the spline is far surer than either fit, it stays.
   EXPECT_LT(extrapolation.max_change_at_marks_px, 3 * kNoisePx);
