@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <map>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -34,8 +35,8 @@ struct Calibrated {
   CalibrationStageSummary summary;
   double distance_mm = 0.0;
   double truth_diff_px = 0.0;  // calibrated vs true projection, rms over the imager
-  OpenCvCalibration opencv;    // OpenCV's findCirclesGrid + calibrateCamera, same images
-  double opencv_truth_diff_px = 0.0;
+  // OpenCvTruthDiffPx's, once asked for.
+  mutable std::optional<double> opencv_truth_diff_px;
   // At each point of the uncertainty grid, the calibrated projection's
   // distance from the truth (after the rigid fit) over the stated
   // worst-direction 1-sigma there.
@@ -53,10 +54,7 @@ double PooledRmsZ(const std::vector<const Calibrated*>& calibrated) {
   return n > 0 ? std::sqrt(sum2 / static_cast<double>(n)) : 0.0;
 }
 
-// One calibration per (preset, seed, images, board) per process. OpenCV's
-// calibration of the same images is the baseline for dot boards only: its
-// findChessboardCorners took 60-150 s on a rendered image with the board
-// partly outside it or absent (adapters/opencv/plate_detector.h).
+// One calibration per (preset, seed, images, board) per process.
 const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed,
                             int num_calib_images = 20, BoardType board = BoardType::kCaltab) {
   static std::map<std::string, std::unique_ptr<Calibrated>> cache;
@@ -71,26 +69,13 @@ const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed,
     // the stage's own choice, as for a project.yaml without camera.lens_model.
     entry->project.camera.lens_model.reset();
     std::vector<NamedImage> images;
-    std::vector<GrayImage> pixels;
-    std::vector<std::string> names;
-    for (const auto& path : entry->project.calib_images) {
+    for (const auto& path : entry->project.calib_images)
       images.push_back({path.filename().string(), ReadGrayImage(path)});
-      pixels.push_back(images.back().image);
-      names.push_back(images.back().name);
-    }
     entry->summary = RunCalibration(images, *entry->project.board, entry->project.camera, {});
-    if (board != BoardType::kChessboard) {
-      entry->opencv = OpenCvCalibrate(pixels, names, *entry->project.board);
-      EXPECT_TRUE(entry->opencv.usable) << entry->opencv.brief;
-    }
     EXPECT_TRUE(entry->summary.usable) << entry->summary.brief;
     entry->distance_mm = WorkingDistanceMm(entry->summary.result);
     entry->truth_diff_px = ProjectionDiffRms(entry->summary.result.camera,
                                              entry->sim.truth.camera.model, entry->distance_mm);
-    if (entry->opencv.usable) {
-      entry->opencv_truth_diff_px = ProjectionDiffRms(
-          entry->opencv.camera, entry->sim.truth.camera.model, entry->distance_mm);
-    }
     if (entry->summary.usable && entry->summary.uncertainty.available) {
       // The error over the stage's uncertainty grid, in its sigmas.
       const UncertaintySummary& u = entry->summary.uncertainty;
@@ -105,15 +90,38 @@ const Calibrated& Calibrate(const std::string& preset, std::uint64_t seed,
               << entry->summary.bias.max_px << " px\n  vs truth at " << entry->distance_mm
               << " mm: " << entry->truth_diff_px << " px rms; " << entry->summary.total_seconds
               << " s (detection " << entry->summary.detection_seconds << " s, lens choice "
-              << entry->summary.lens_choice_seconds << " s)\n  OpenCV: " << entry->opencv.brief
-              << "; vs truth " << entry->opencv_truth_diff_px << " px rms ("
-              << entry->opencv.detection_seconds + entry->opencv.solve_seconds << " s)\n";
+              << entry->summary.lens_choice_seconds << " s)\n";
     for (const LensCandidate& candidate : entry->summary.lens.candidates) {
       std::cout << "  candidate " << candidate.lens_model << ": rms " << candidate.rms_px
                 << " px, sigma " << candidate.sigma_px << " px\n";
     }
   }
   return *entry;
+}
+
+// OpenCV's findCirclesGrid + calibrateCamera of the same images against the
+// truth (rms over the imager, px): issue 3's baseline, for dot boards only
+// (its findChessboardCorners took 60-150 s on a rendered image with the board
+// partly outside it or absent, adapters/opencv/plate_detector.h). Made when
+// first asked for: 1.5-2.5 s a project, which the tests that do not compare
+// with it need not spend.
+double OpenCvTruthDiffPx(const Calibrated& c) {
+  if (!c.opencv_truth_diff_px) {
+    std::vector<GrayImage> pixels;
+    std::vector<std::string> names;
+    for (const auto& path : c.project.calib_images) {
+      pixels.push_back(ReadGrayImage(path));
+      names.push_back(path.filename().string());
+    }
+    const OpenCvCalibration opencv = OpenCvCalibrate(pixels, names, *c.project.board);
+    EXPECT_TRUE(opencv.usable) << opencv.brief;
+    c.opencv_truth_diff_px =
+        opencv.usable ? ProjectionDiffRms(opencv.camera, c.sim.truth.camera.model, c.distance_mm)
+                      : INFINITY;
+    std::cout << "  OpenCV: " << opencv.brief << "; vs truth " << *c.opencv_truth_diff_px
+              << " px rms (" << opencv.detection_seconds + opencv.solve_seconds << " s)\n";
+  }
+  return *c.opencv_truth_diff_px;
 }
 
 // Our solve of the same bias-corrected observations with a fixed lens model,
@@ -139,7 +147,7 @@ TEST(CalibrationOnSimulatedProjects, DemoProjectionMatchesTheTruth) {
   ASSERT_TRUE(c.summary.usable);
   EXPECT_LE(c.truth_diff_px, 0.007);
   // Issue 3's "Checked by": at most 0.75x OpenCV's on the same images.
-  EXPECT_LE(c.truth_diff_px, 0.75 * c.opencv_truth_diff_px);
+  EXPECT_LE(c.truth_diff_px, 0.75 * OpenCvTruthDiffPx(c));
   // The stage's own uncertainty is of the size of the error it makes.
   EXPECT_TRUE(c.summary.uncertainty.available);
   EXPECT_LT(c.summary.uncertainty.typical_px, 0.02);
@@ -246,7 +254,7 @@ TEST(CalibrationOnSimulatedProjects, CirclesGridCalibratesAsTheCaltab) {
   ASSERT_TRUE(circles.summary.usable);
   EXPECT_EQ(circles.summary.result.record.images.size(), 18u);
   EXPECT_NEAR(circles.truth_diff_px, caltab.truth_diff_px, 0.05 * caltab.truth_diff_px);
-  EXPECT_LE(circles.truth_diff_px, 0.75 * circles.opencv_truth_diff_px);
+  EXPECT_LE(circles.truth_diff_px, 0.75 * OpenCvTruthDiffPx(circles));
 }
 
 TEST(CalibrationOnSimulatedProjects, PartlyVisibleAndPlateAbsentImagesAreRejectedWithReasons) {
@@ -289,7 +297,7 @@ TEST(CalibrationOnSimulatedProjects, LensMismatchChoosesASplinedModelSeveralTime
   const double opencv8 = FixedModelTruthDiff(c, "LENSMODEL_OPENCV8");
   // Issue 3's "Checked by": at most 0.3x OpenCV's on such a lens; and our
   // own OPENCV5/8 solves of the same observations do no better than OpenCV.
-  EXPECT_LE(c.truth_diff_px, 0.3 * c.opencv_truth_diff_px);
+  EXPECT_LE(c.truth_diff_px, 0.3 * OpenCvTruthDiffPx(c));
   EXPECT_LE(c.truth_diff_px, 0.3 * std::min(opencv5, opencv8));
 }
 
@@ -305,7 +313,7 @@ TEST(CalibrationOnSimulatedProjects, LensMismatchWithFewImagesStillChoosesASplin
   // Over the whole imager, corners the marks never reached included (these
   // dominate here): still better than OpenCV's and our own OPENCV5 solve (an
   // OPENCV8 fit folds over there: its difference is NaN).
-  EXPECT_LT(c.truth_diff_px, c.opencv_truth_diff_px);
+  EXPECT_LT(c.truth_diff_px, OpenCvTruthDiffPx(c));
   EXPECT_LT(c.truth_diff_px, FixedModelTruthDiff(c, "LENSMODEL_OPENCV5"));
 }
 
@@ -369,7 +377,7 @@ TEST(CalibrationOnSimulatedProjects, SplineThatLeavesTheBorderUnmappedIsWidened)
   Eigen::Matrix2Xd corners(2, 4);
   corners << 0, 1599, 0, 1599, 0, 0, 1199, 1199;
   EXPECT_FALSE(FirstUnmappedPixel(c.summary.result.camera, corners, 0.01).has_value());
-  EXPECT_LT(c.truth_diff_px, c.opencv_truth_diff_px);
+  EXPECT_LT(c.truth_diff_px, OpenCvTruthDiffPx(c));
 }
 
 // Lens-mismatch seed 341 (20 images): after the lens choice the spline's
@@ -409,9 +417,9 @@ TEST(CalibrationOnSimulatedProjects, SplineBeyondTheMarksFollowsTheWorkingModels
   const double plain_diff_px =
       ProjectionDiffRms(plain.result.camera, c.sim.truth.camera.model, c.distance_mm);
   std::cout << "over the imager vs truth: " << c.truth_diff_px << " px, mrcal's extrapolation "
-            << plain_diff_px << " px, OpenCV " << c.opencv_truth_diff_px << " px\n";
+            << plain_diff_px << " px, OpenCV " << OpenCvTruthDiffPx(c) << " px\n";
   EXPECT_LT(c.truth_diff_px, 0.5 * plain_diff_px);
-  EXPECT_LT(c.truth_diff_px, 0.6 * c.opencv_truth_diff_px);
+  EXPECT_LT(c.truth_diff_px, 0.6 * OpenCvTruthDiffPx(c));
 
   // The inlier marks through both cameras, from the same solved poses.
   const Eigen::Matrix3Xd marks = InlierMarksInCamera(c.summary.result);
