@@ -387,7 +387,8 @@ ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapT
 
 // The final adjustment (the plate on the part, the intrinsics prior) with
 // the holes of project.yaml's features that several tiles see whole as tie
-// points (pipeline/measure/hole_ties.h), fitted on the registered scene: a
+// points (pipeline/measure/hole_ties.h), fitted on the registered scene
+// (`geometry`: the mosaic's grid on it, ComputeOrthoGeometry): a
 // view's centre is an image position, which the final adjustment's small
 // changes of the scene leave as it is. A tie the solve finds inconsistent is
 // dropped and the solve run again; the kept ties' tracks join
@@ -414,16 +415,13 @@ struct FinalOutcome {
   double solve_seconds = 0.0;    // the final adjustment's solves
 };
 FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<ImageF>& tiles,
-                                      const CameraModel& camera, const PlateOnPart& plate,
-                                      const IntrinsicsPrior& prior,
+                                      const CameraModel& camera, const OrthoGeometry& geometry,
+                                      const PlateOnPart& plate, const IntrinsicsPrior& prior,
                                       const FinalAdjustmentOptions& options, int num_threads,
                                       TileRegistration* registration) {
   const auto start = std::chrono::steady_clock::now();
   const PlaneScene& registered = registration->scene;
   const MrcalLensProjection lens(camera);
-  OrthoOptions ortho_options;
-  ortho_options.gsd_mm = project.mosaic_gsd_mm;
-  const OrthoGeometry geometry = ComputeOrthoGeometry(camera, registered, ortho_options);
   std::vector<TieHole> holes;
   std::vector<std::string> names;
   for (const FeatureSpec& feature : project.features) {
@@ -482,7 +480,7 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   result.overlap_seconds = SecondsSince(overlap_start);
 
   // On every thread: the core the solves leave while they run, both after.
-  OrthoOptions samples_options = ortho_options;
+  OrthoOptions samples_options;
   samples_options.num_threads = num_threads;
   std::future<std::vector<ImageF>> samples_beside =
       std::async(std::launch::async,
@@ -654,13 +652,16 @@ void RunMosaicStage(StageContext& context) {
   // vignetting do not move with the final adjustment's hundredths of a
   // pixel), on a thread of its own: it takes what the plate search and the
   // hole ties leave of the cores.
+  // The mosaic's grid on the registered scene serves it and the hole ties.
   OrthoOptions exposure_ortho;
   exposure_ortho.gsd_mm = project.mosaic_gsd_mm;
   exposure_ortho.num_threads = 1;
-  std::future<ExposureSummary> exposure_beside = std::async(
-      std::launch::async,
-      [geometry = ComputeOrthoGeometry(camera, registration.scene, exposure_ortho), &tiles,
-       exposure_ortho] { return EstimateTileExposure(geometry, tiles, exposure_ortho); });
+  const OrthoGeometry registered_geometry =
+      ComputeOrthoGeometry(camera, registration.scene, exposure_ortho);
+  std::future<ExposureSummary> exposure_beside =
+      std::async(std::launch::async, [&registered_geometry, &tiles, exposure_ortho] {
+        return EstimateTileExposure(registered_geometry, tiles, exposure_ortho);
+      });
 
   // The final adjustment: the plate on the part, the intrinsics prior.
   PlateOnPart plate;
@@ -680,8 +681,9 @@ void RunMosaicStage(StageContext& context) {
   final_options.bundle = register_options.bundle;
   if (context.progress)
     context.progress(num_tiles + 1, num_tiles + 4, "tie holes, final adjustment");
-  FinalOutcome final_outcome = FinalAdjustmentWithHoles(
-      project, tiles, camera, plate, prior, final_options, context.num_threads, &registration);
+  FinalOutcome final_outcome =
+      FinalAdjustmentWithHoles(project, tiles, camera, registered_geometry, plate, prior,
+                               final_options, context.num_threads, &registration);
   FinalAdjustment& adjusted = final_outcome.adjusted;
   spdlog::info("mosaic: holes: {}", final_outcome.ties_brief);
   spdlog::info("mosaic: overlaps: {}", final_outcome.overlap_brief);
