@@ -19,6 +19,20 @@ std::string GaussNewtonOptions::Check() const {
   return what.str();
 }
 
+Eigen::MatrixXd DenseNormalMatrix(const Eigen::SparseMatrix<double, Eigen::RowMajor>& J) {
+  using Entry = Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator;
+  Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(J.cols(), J.cols());
+  for (Eigen::Index row = 0; row < J.outerSize(); ++row) {
+    for (Entry a(J, row); a; ++a) {
+      // Columns ascend within a row: b from a on falls on or below the diagonal.
+      double* lower = normal.col(a.col()).data();
+      for (Entry b = a; b; ++b) lower[b.col()] += a.value() * b.value();
+    }
+  }
+  normal.triangularView<Eigen::StrictlyUpper>() = normal.transpose();
+  return normal;
+}
+
 GaussNewtonSummary MinimizeByGaussNewton(const ResidualsAndJacobian& residuals,
                                          const GaussNewtonOptions& options,
                                          Eigen::VectorXd* state) {
@@ -47,7 +61,7 @@ GaussNewtonSummary MinimizeByGaussNewton(const ResidualsAndJacobian& residuals,
 
   while (summary.iterations < options.max_iterations) {
     const Eigen::VectorXd gradient = J.transpose() * r;  // half the cost's
-    const Eigen::LDLT<Eigen::MatrixXd> ldlt(Eigen::MatrixXd(J.transpose() * J));
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(DenseNormalMatrix(J));
     if (ldlt.info() != Eigen::Success) break;
     const Eigen::VectorXd step = -ldlt.solve(gradient);
     if (!step.allFinite()) break;

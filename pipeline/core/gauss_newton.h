@@ -54,6 +54,12 @@ struct GaussNewtonSummary {
 using ResidualsAndJacobian = std::function<bool(const Eigen::VectorXd& state, Eigen::VectorXd* r,
                                                 Eigen::SparseMatrix<double, Eigen::RowMajor>* J)>;
 
+// J'J, dense, of a sparse row-major J, summed row by row into its lower
+// triangle: Eigen's sparse product goes through a sparse accumulator, 3x
+// slower on a splined calibration's J (1924 x 268, 39k non-zeros: 1.0 ms
+// against 0.36), and the normal matrix is dense there anyway.
+Eigen::MatrixXd DenseNormalMatrix(const Eigen::SparseMatrix<double, Eigen::RowMajor>& J);
+
 // Minimises |r(state)|^2 from *state, in place.
 GaussNewtonSummary MinimizeByGaussNewton(const ResidualsAndJacobian& residuals,
                                          const GaussNewtonOptions& options, Eigen::VectorXd* state);

@@ -1,5 +1,6 @@
 #include "pipeline/core/gauss_newton.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <gtest/gtest.h>
@@ -104,6 +105,29 @@ TEST(GaussNewton, StopsWhereTheResidualsCannotBeEvaluated) {
   EXPECT_FALSE(summary.converged);
   EXPECT_EQ(summary.iterations, 0);
   EXPECT_EQ(state, Eigen::VectorXd(Eigen::Vector2d(0.3, 0.0)));
+}
+
+// Against the dense product, on a banded J with empty rows and columns, both
+// compressed and with room left in its rows (uncompressed).
+TEST(DenseNormalMatrix, EqualsTheDenseProduct) {
+  Eigen::SparseMatrix<double, Eigen::RowMajor> J(40, 12);
+  J.reserve(Eigen::VectorXi::Constant(40, 6));
+  for (int row = 0; row < 40; ++row) {
+    if (row % 7 == 3) continue;
+    for (int col = row % 9; col < std::min(12, row % 9 + 4); ++col) {
+      if (col == 10) continue;
+      J.insert(row, col) = std::sin(1.0 + row * 12 + col);
+    }
+  }
+  const Eigen::MatrixXd dense = Eigen::MatrixXd(J);
+  const Eigen::MatrixXd expected = dense.transpose() * dense;
+  ASSERT_FALSE(J.isCompressed());
+  EXPECT_LE((DenseNormalMatrix(J) - expected).cwiseAbs().maxCoeff(), 1e-14);
+  J.makeCompressed();
+  const Eigen::MatrixXd normal = DenseNormalMatrix(J);
+  EXPECT_LE((normal - expected).cwiseAbs().maxCoeff(), 1e-14);
+  EXPECT_EQ(normal, normal.transpose());
+  EXPECT_EQ(normal.col(10).squaredNorm(), 0.0);
 }
 
 TEST(GaussNewtonOptions, InvalidOptionsAreNamed) {
