@@ -576,6 +576,150 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   return result;
 }
 
+// COLMAP's verified SIFT matches between the tiles, where the features use
+// them (none for Harris alone); throws StageFailedError if COLMAP fails.
+std::vector<ColmapPairMatches> SiftMatches(const StageContext& context) {
+  if (context.mosaic_features == FeatureSource::kHarris) return {};
+  std::vector<fs::path> tile_paths;
+  for (const TilePosition& tile : context.project.tiles)
+    tile_paths.push_back(context.project.TilePath(tile.image));
+  ColmapSiftOptions sift_options;
+  sift_options.num_threads = context.num_threads;
+  const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, sift_options);
+  spdlog::info("mosaic: {}", sift.brief);
+  if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
+  return sift.matches.pairs;
+}
+
+// The table's scatter about the features against table.sigma_mm (a check,
+// warned about where it fails), and the sigma the priors were weighed by
+// (FinalAdjustmentWithHoles).
+ReportValue TableSigmaCheck(const Project& project, const PlaneBundleInput& input,
+                            const PlaneScene& adjusted) {
+  const double used_sigma_mm = input.table_sigma_mm;
+  const TableSigmaEstimate table_sigma =
+      EstimateTableSigma(input.commanded_table_pos_mm, adjusted.table_pos_mm, adjusted.covariance,
+                         used_sigma_mm, input.tiles_without_table_prior);
+  if (!table_sigma.ok) return "no estimate: no covariance or too few table positions checked";
+  const bool consistent = TableSigmaConsistent(table_sigma, project.table_sigma_mm);
+  if (!consistent) {
+    spdlog::warn(
+        "mosaic: the table positions scatter {:.4f} mm about where the features put the tiles, "
+        "{:.1f} times table.sigma_mm {} ({:.1f} dof), which no wrong position explains: the "
+        "adjustment weighs them, and every sigma's table part assumes, {:.4f} mm; check "
+        "table.sigma_mm and table.csv",
+        table_sigma.sigma_mm, table_sigma.sigma_mm / project.table_sigma_mm, project.table_sigma_mm,
+        table_sigma.redundancy, used_sigma_mm);
+  }
+  return ReportObject{{"stated_mm", project.table_sigma_mm},
+                      {"estimated_mm", table_sigma.sigma_mm},
+                      {"redundancy", table_sigma.redundancy},
+                      {"consistent", consistent},
+                      {"used_mm", used_sigma_mm}};
+}
+
+// The table positions the features contradicted, left out of the
+// adjustment: warned about and reported.
+ReportValue::Array PriorsLeftOut(const Project& project, const TileRegistration& registration,
+                                 const std::vector<std::pair<TablePriorTest, double>>& left_out) {
+  ReportValue::Array rows;
+  for (const auto& [test, bound] : left_out) {
+    const Eigen::Vector2d off = registration.table_adjustment_mm[test.tile];
+    spdlog::warn(
+        "mosaic: {}: the features place it {:.3f} mm ({:+.3f}, {:+.3f}) from its table.csv "
+        "position, beyond table.sigma_mm {} (w^2 {:.1f}, bound {:.1f}): that position is left out "
+        "of the adjustment; check table.csv",
+        project.tiles[test.tile].image, off.norm(), off.x(), off.y(), project.table_sigma_mm,
+        test.w2, bound);
+    rows.emplace_back(ReportObject{{"image", project.tiles[test.tile].image},
+                                   {"adjusted_minus_commanded_mm", Pair(off)},
+                                   {"w2", test.w2},
+                                   {"bound", bound}});
+  }
+  return rows;
+}
+
+ReportValue::Array HeldTilesReport(const Project& project, const TileRegistration& registration) {
+  ReportValue::Array held;
+  for (int tile : registration.tiles_held_by_prior) {
+    held.emplace_back(
+        ReportObject{{"image", project.tiles[tile].image}, {"why", WhyHeld(registration, tile)}});
+  }
+  return held;
+}
+
+// Why the orthorectification failed: its brief, and the tiles the exposure
+// fit found nothing in with the likely cause.
+std::string WhyOrthoFailed(const Project& project, const std::vector<ImageF>& tiles,
+                           const OrthoSummary& summary) {
+  std::string why = summary.brief;
+  const ExposureOptions exposure_options;
+  for (const int i : summary.exposure.tiles_without_samples) {
+    const double median = MedianOfImage(tiles[i]);
+    const char* cause = median < exposure_options.min_value ? "a black or underexposed image?"
+                        : median > exposure_options.max_value
+                            ? "a white or saturated image?"
+                            : "where it overlaps the others it is all black or saturated";
+    why += fmt::format(
+        "; {} has no pixel between {:.0f} % and {:.0f} % of full scale where it overlaps "
+        "another tile (median {:.1f} %): {}",
+        project.tiles[i].image, 100.0 * exposure_options.min_value,
+        100.0 * exposure_options.max_value, 100.0 * median, cause);
+  }
+  return why;
+}
+
+// mosaic/scene.json's content: the adjusted scene without its tracks (they
+// go to colmap/), and what the measure stage checks it against.
+SavedScene SceneToSave(const Project& project, const CameraModel& camera,
+                       const TileRegistration& registration, const FinalAdjustment& adjusted) {
+  SavedScene saved;
+  saved.scene = registration.scene;
+  saved.scene.track_xy_mm.resize(2, 0);
+  for (const TilePosition& tile : project.tiles) {
+    saved.tile_images.push_back(tile.image);
+    saved.commanded_table_pos_mm.push_back(tile.table_pos_mm);
+  }
+  saved.tiles_held_by_prior = registration.tiles_held_by_prior;
+  saved.tiles_without_table_prior = registration.input.tiles_without_table_prior;
+  saved.table_sigma_mm = registration.input.table_sigma_mm;  // as weighed
+  saved.rms_px = registration.rms_px;
+  saved.lens_model = camera.lens_model;
+  saved.intrinsics_refined = adjusted.intrinsics_refined;
+  if (adjusted.intrinsics_refined)
+    saved.intrinsics_information = adjusted.input.intrinsics_information;
+  return saved;
+}
+
+ReportValue ExposureReport(const ExposureSummary& exposure) {
+  return ReportObject{{"brief", exposure.brief},
+                      {"converged", exposure.converged},
+                      {"relative_sigma_before", exposure.relative_sigma_before},
+                      {"relative_sigma_after", exposure.relative_sigma_after},
+                      {"max_pair_step_before", exposure.max_pair_step_before},
+                      {"max_pair_step_after", exposure.max_pair_step_after}};
+}
+
+ReportValue OrthoReport(const OrthoSummary& summary) {
+  return ReportObject{{"brief", summary.brief},
+                      {"covered_fraction", summary.covered_fraction},
+                      {"clipped_fraction", summary.clipped_fraction},
+                      {"tile_px_per_mosaic_px", summary.tile_px_per_mosaic_px},
+                      {"lens_table_max_error_px", summary.lens_table_max_error_px},
+                      {"features_kept_whole", summary.features_kept_whole},
+                      {"features_blended", summary.features_blended}};
+}
+
+ReportValue ColmapReport(const ColmapExportSummary& colmap) {
+  return ReportObject{{"dir", kColmapDirName},
+                      {"camera_model", colmap.camera_model},
+                      {"undistorted", colmap.undistorted},
+                      {"images", colmap.num_images},
+                      {"points", colmap.num_points},
+                      {"observations", colmap.num_observations},
+                      {"mean_point_error_px", colmap.mean_point_error_px}};
+}
+
 }  // namespace
 
 RegisterTilesOptions MosaicRegistrationOptions(const StageContext& context) {
@@ -618,28 +762,10 @@ void RunMosaicStage(StageContext& context) {
   CheckTileSizes(project, tiles, camera);
   const double read_seconds = SecondsSince(stage_start);
 
-  std::vector<Eigen::Vector2d> commanded_mm;
-  std::vector<std::string> image_names;
-  for (const TilePosition& tile : project.tiles) {
-    commanded_mm.push_back(tile.table_pos_mm);
-    image_names.push_back(tile.image);
-  }
   const int num_tiles = static_cast<int>(tiles.size());
   if (context.progress) context.progress(num_tiles, num_tiles + 4, "register tiles");
-  std::vector<ColmapPairMatches> sift_matches;
-  if (context.mosaic_features != FeatureSource::kHarris) {
-    std::vector<fs::path> tile_paths;
-    for (const TilePosition& tile : project.tiles)
-      tile_paths.push_back(project.TilePath(tile.image));
-    ColmapSiftOptions sift_options;
-    sift_options.num_threads = context.num_threads;
-    const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, sift_options);
-    spdlog::info("mosaic: {}", sift.brief);
-    if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
-    sift_matches = sift.matches.pairs;
-  }
   TileRegistration registration =
-      RegisterTiles(prepared_tiles.prepared, project.table_sigma_mm, camera, sift_matches);
+      RegisterTiles(prepared_tiles.prepared, project.table_sigma_mm, camera, SiftMatches(context));
   prepared_tiles.prepared = {};  // its matching images (the demo's: 143 MB) serve no later step
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
@@ -699,44 +825,9 @@ void RunMosaicStage(StageContext& context) {
   registration.bundle = adjusted.summary;
   registration.rms_px = adjusted.summary.final_rms_px;
   registration.table_adjustment_mm = adjusted.summary.table_adjustment_mm;
-  // The table's scatter about the features against table.sigma_mm (a
-  // check); the sigma the priors were weighed by (FinalAdjustmentWithHoles).
-  const double used_sigma_mm = registration.input.table_sigma_mm;
-  const TableSigmaEstimate table_sigma = EstimateTableSigma(
-      registration.input.commanded_table_pos_mm, adjusted.scene.table_pos_mm,
-      adjusted.scene.covariance, used_sigma_mm, registration.input.tiles_without_table_prior);
-  ReportValue table_sigma_check = "no estimate: no covariance or too few table positions checked";
-  if (table_sigma.ok) {
-    const bool consistent = TableSigmaConsistent(table_sigma, project.table_sigma_mm);
-    if (!consistent) {
-      spdlog::warn(
-          "mosaic: the table positions scatter {:.4f} mm about where the features put the tiles, "
-          "{:.1f} times table.sigma_mm {} ({:.1f} dof), which no wrong position explains: the "
-          "adjustment weighs them, and every sigma's table part assumes, {:.4f} mm; check "
-          "table.sigma_mm and table.csv",
-          table_sigma.sigma_mm, table_sigma.sigma_mm / project.table_sigma_mm,
-          project.table_sigma_mm, table_sigma.redundancy, used_sigma_mm);
-    }
-    table_sigma_check = ReportObject{{"stated_mm", project.table_sigma_mm},
-                                     {"estimated_mm", table_sigma.sigma_mm},
-                                     {"redundancy", table_sigma.redundancy},
-                                     {"consistent", consistent},
-                                     {"used_mm", used_sigma_mm}};
-  }
-  ReportValue::Array priors_left_out;
-  for (const auto& [test, bound] : final_outcome.table_priors_left_out) {
-    const Eigen::Vector2d off = registration.table_adjustment_mm[test.tile];
-    spdlog::warn(
-        "mosaic: {}: the features place it {:.3f} mm ({:+.3f}, {:+.3f}) from its table.csv "
-        "position, beyond table.sigma_mm {} (w^2 {:.1f}, bound {:.1f}): that position is left out "
-        "of the adjustment; check table.csv",
-        project.tiles[test.tile].image, off.norm(), off.x(), off.y(), project.table_sigma_mm,
-        test.w2, bound);
-    priors_left_out.emplace_back(ReportObject{{"image", project.tiles[test.tile].image},
-                                              {"adjusted_minus_commanded_mm", Pair(off)},
-                                              {"w2", test.w2},
-                                              {"bound", bound}});
-  }
+  ReportValue table_sigma_check = TableSigmaCheck(project, registration.input, adjusted.scene);
+  ReportValue::Array priors_left_out =
+      PriorsLeftOut(project, registration, final_outcome.table_priors_left_out);
   registration.plane_tilt_deg = adjusted.summary.plane_tilt_deg;
   const ReportValue working_distance =
       WorkingDistanceReport(adjusted.scene, rt_cam_from_plates, project);
@@ -761,25 +852,8 @@ void RunMosaicStage(StageContext& context) {
                    final_outcome.holes_to_keep_whole, {&exposure, &final_outcome.samples});
   final_outcome.samples = {};  // the tiles' coefficients (the demo's: 69 MB) serve no later step
   spdlog::info("mosaic: {}", ortho.summary.brief);
-  if (!ortho.summary.usable) {
-    // Name the tiles the exposure fit found nothing in, and the likely cause.
-    std::string why = ortho.summary.brief;
-    const ExposureOptions exposure_options;
-    for (const int i : ortho.summary.exposure.tiles_without_samples) {
-      const double median = MedianOfImage(tiles[i]);
-      const char* cause = median < exposure_options.min_value
-                              ? "a black or underexposed image?"
-                          : median > exposure_options.max_value
-                              ? "a white or saturated image?"
-                              : "where it overlaps the others it is all black or saturated";
-      why += fmt::format(
-          "; {} has no pixel between {:.0f} % and {:.0f} % of full scale where it overlaps "
-          "another tile (median {:.1f} %): {}",
-          project.tiles[i].image, 100.0 * exposure_options.min_value,
-          100.0 * exposure_options.max_value, 100.0 * median, cause);
-    }
-    throw StageFailedError(Stage::kMosaic, why);
-  }
+  if (!ortho.summary.usable)
+    throw StageFailedError(Stage::kMosaic, WhyOrthoFailed(project, tiles, ortho.summary));
 
   if (context.progress) context.progress(num_tiles + 3, num_tiles + 4, "write mosaic");
   const auto write_start = std::chrono::steady_clock::now();
@@ -801,32 +875,17 @@ void RunMosaicStage(StageContext& context) {
   MosaicReport report = OrthoMosaicReport(mosaic_path, grid);
   report.rms_px = registration.rms_px;
 
-  SavedScene saved;
-  saved.scene = registration.scene;
-  saved.scene.track_xy_mm.resize(2, 0);  // the tracks go to colmap/
-  saved.tile_images = image_names;
-  saved.commanded_table_pos_mm = commanded_mm;
-  saved.tiles_held_by_prior = registration.tiles_held_by_prior;
-  saved.tiles_without_table_prior = registration.input.tiles_without_table_prior;
-  saved.table_sigma_mm = registration.input.table_sigma_mm;  // as weighed
-  saved.rms_px = registration.rms_px;
-  saved.lens_model = camera.lens_model;
-  saved.intrinsics_refined = adjusted.intrinsics_refined;
-  if (adjusted.intrinsics_refined)
-    saved.intrinsics_information = adjusted.input.intrinsics_information;
   fs::create_directories(context.staging_dir / "mosaic");
-  WriteSceneJson(saved, context.staging_dir / kSceneName);
+  WriteSceneJson(SceneToSave(project, camera, registration, adjusted),
+                 context.staging_dir / kSceneName);
 
+  std::vector<std::string> image_names;
+  for (const TilePosition& tile : project.tiles) image_names.push_back(tile.image);
   const ColmapExportSummary colmap =
       WriteColmapModel(context.staging_dir / kColmapDirName, scene_camera, registration.scene,
                        registration.input.observations, image_names);
   const double write_seconds = SecondsSince(write_start);
 
-  ReportValue::Array held;
-  for (int tile : registration.tiles_held_by_prior) {
-    held.emplace_back(
-        ReportObject{{"image", project.tiles[tile].image}, {"why", WhyHeld(registration, tile)}});
-  }
   const Eigen::Matrix2d& a = registration.image_px_per_table_mm;
   report.extra = ReportObject{
       {"brief", registration.brief},
@@ -851,33 +910,15 @@ void RunMosaicStage(StageContext& context) {
       {"overlap_ties", std::move(final_outcome.overlap_report)},
       {"pairs", PairsReport(project, registration, pair_scatter)},
       {"tiles", TilesReport(project, registration, ortho.summary)},
-      {"tiles_held_by_prior", held},
+      {"tiles_held_by_prior", HeldTilesReport(project, registration)},
       {"table_priors_left_out", std::move(priors_left_out)},
       {"table_sigma_check", std::move(table_sigma_check)},
       {"working_distance_check", working_distance},
-      {"exposure",
-       ReportObject{{"brief", ortho.summary.exposure.brief},
-                    {"converged", ortho.summary.exposure.converged},
-                    {"relative_sigma_before", ortho.summary.exposure.relative_sigma_before},
-                    {"relative_sigma_after", ortho.summary.exposure.relative_sigma_after},
-                    {"max_pair_step_before", ortho.summary.exposure.max_pair_step_before},
-                    {"max_pair_step_after", ortho.summary.exposure.max_pair_step_after}}},
-      {"ortho", ReportObject{{"brief", ortho.summary.brief},
-                             {"covered_fraction", ortho.summary.covered_fraction},
-                             {"clipped_fraction", ortho.summary.clipped_fraction},
-                             {"tile_px_per_mosaic_px", ortho.summary.tile_px_per_mosaic_px},
-                             {"lens_table_max_error_px", ortho.summary.lens_table_max_error_px},
-                             {"features_kept_whole", ortho.summary.features_kept_whole},
-                             {"features_blended", ortho.summary.features_blended}}},
+      {"exposure", ExposureReport(ortho.summary.exposure)},
+      {"ortho", OrthoReport(ortho.summary)},
       {"world_file", WorldFilePath(kMosaicName).string()},
       {"scene_file", kSceneName},
-      {"colmap", ReportObject{{"dir", kColmapDirName},
-                              {"camera_model", colmap.camera_model},
-                              {"undistorted", colmap.undistorted},
-                              {"images", colmap.num_images},
-                              {"points", colmap.num_points},
-                              {"observations", colmap.num_observations},
-                              {"mean_point_error_px", colmap.mean_point_error_px}}},
+      {"colmap", ColmapReport(colmap)},
       {"timings_s", ReportObject{{"read", read_seconds},
                                  {"features", registration.features_seconds},
                                  {"matching", registration.matching_seconds},
