@@ -276,11 +276,21 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
   return located;
 }
 
-}  // namespace
+// The mosaic stage's results the measure stage reads (its report section,
+// mosaic/scene.json, the mosaic), checked against each other and
+// project.yaml; throws InputError where they are missing or an out/ mixes
+// runs.
+struct MosaicResults {
+  SavedScene saved;
+  CameraModel camera;  // with the adjusted scene's intrinsics
+  GrayImage mosaic;
+  OrthoGrid grid;
+  double source_px = 1.0;  // raw tile pixels per mosaic pixel: how far its edge noise is correlated
+  OrthoGeometry geometry;  // the scene's mosaic grid, the one that made the mosaic
+};
 
-void RunMeasureStage(StageContext& context) {
+MosaicResults ReadMosaicResults(const StageContext& context) {
   const Project& project = context.project;
-  const auto stage_start = std::chrono::steady_clock::now();
   if (!context.report.mosaic) {
     throw InputError((context.out_dir / "report.json").string(),
                      "no mosaic for these inputs: run `omm mosaic` (or `omm run`) first");
@@ -295,32 +305,32 @@ void RunMeasureStage(StageContext& context) {
                      fmt::format("{} or {} is missing: run `omm mosaic` (or `omm run`) first",
                                  kSceneName, mosaic_report.file));
   }
-  const SavedScene saved = ReadSceneJson(scene_path);
+  MosaicResults results;
+  SavedScene& saved = results.saved;
+  saved = ReadSceneJson(scene_path);
   if (saved.lens_model.empty()) {
     throw InputError(scene_path.string(),
                      "no lens_model: written by an older omm; rerun `omm mosaic`");
   }
-  const CameraModel camera{saved.lens_model, saved.scene.intrinsics, project.image_width_px,
-                           project.image_height_px};
-  const MrcalLensProjection lens(camera);
-  const GrayImage mosaic =
+  results.camera = CameraModel{saved.lens_model, saved.scene.intrinsics, project.image_width_px,
+                               project.image_height_px};
+  const GrayImage& mosaic = results.mosaic =
       context.mosaic ? ToGrayImage(*context.mosaic) : ReadGrayImage(mosaic_path);
-  const OrthoGrid grid{mosaic_report.gsd_mm, mosaic_report.origin_mm, mosaic_report.size_px};
+  const OrthoGrid& grid = results.grid =
+      OrthoGrid{mosaic_report.gsd_mm, mosaic_report.origin_mm, mosaic_report.size_px};
   if (mosaic.width() != grid.size_px.x() || mosaic.height() != grid.size_px.y()) {
     throw InputError(mosaic_path.string(),
                      fmt::format("{}x{} px, but report.json's mosaic is {}x{} px", mosaic.width(),
                                  mosaic.height(), grid.size_px.x(), grid.size_px.y()));
   }
-  // Raw tile pixels per mosaic pixel: how far the mosaic's edge noise is correlated.
-  double source_px = 1.0;
   if (const ReportObject* ortho = AsObject(Member(mosaic_report.extra, "ortho"))) {
     if (const auto per_px = AsNumber(Member(*ortho, "tile_px_per_mosaic_px"));
         per_px && *per_px > 0.0)
-      source_px = 1.0 / *per_px;
+      results.source_px = 1.0 / *per_px;
   }
 
   // The tiles alone on the mosaic's grid need the scene, the tiles and the
-  // grid that made the mosaic: an out/ that mixes runs is refused.
+  // grid that made the mosaic.
   std::vector<std::string> project_tiles;
   for (const TilePosition& tile : project.tiles) project_tiles.push_back(tile.image);
   if (project_tiles != saved.tile_images) {
@@ -332,7 +342,8 @@ void RunMeasureStage(StageContext& context) {
   }
   OrthoOptions ortho_options;
   ortho_options.gsd_mm = grid.gsd_mm;
-  const OrthoGeometry geometry = ComputeOrthoGeometry(camera, saved.scene, ortho_options);
+  const OrthoGeometry& geometry = results.geometry =
+      ComputeOrthoGeometry(results.camera, saved.scene, ortho_options);
   if (geometry.grid.size_px != grid.size_px ||
       !geometry.grid.origin_mm.isApprox(grid.origin_mm, 1e-12)) {
     throw InputError(
@@ -343,43 +354,34 @@ void RunMeasureStage(StageContext& context) {
                     geometry.grid.origin_mm.x(), geometry.grid.origin_mm.y(), "report.json",
                     grid.size_px.x(), grid.size_px.y(), grid.origin_mm.x(), grid.origin_mm.y()));
   }
-  const std::shared_ptr<const std::vector<ImageF>> tiles =
-      context.tiles ? context.tiles
-                    : std::make_shared<const std::vector<ImageF>>(
-                          TileImages(project, camera, context.num_threads));
-  const std::optional<OrthoGeometry> fine = MeasurementGeometry(camera, saved.scene, geometry);
-  HoleViewInputs inputs{saved.scene,
-                        lens,
-                        fine ? *fine : geometry,
-                        camera,
-                        *tiles,
-                        TileExposures(mosaic_report, saved.tile_images),
-                        fine ? 1.0 / TilePxPerMosaicPx(*fine) : source_px,
-                        &mosaic.pixels};
-  if (fine) {
-    inputs.mosaic_grid = &geometry.grid;
-    inputs.mosaic_source_px = source_px;
-  }
+  return results;
+}
 
+// Every feature of project.yaml located and measured (LocateFeature), the
+// largest first: a hole's fits take time with its rim (0.006 s for 12 mm,
+// 0.04-0.08 s for 50-60 mm on lens-mismatch seed 284). Then the views that
+// resolve no bore wall, near a nadir, are measured again with the bore the
+// others resolved (inputs->bore_prior, BorePrior; MeasureCircle uses it only
+// where a narrow wall covers most of the rim); *bore_prior_report says what
+// the pool held.
+std::vector<LocatedFeature> LocateFeatures(const StageContext& context, const SavedScene& saved,
+                                           HoleViewInputs* inputs,
+                                           ReportObject* bore_prior_report) {
+  const Project& project = context.project;
   const int num_features = static_cast<int>(project.features.size());
   std::vector<LocatedFeature> located(num_features);
   std::mutex progress_mutex;
   int num_located = 0;
-  // Largest first: a hole's fits take time with its rim (0.006 s for 12 mm,
-  // 0.04-0.08 s for 50-60 mm on lens-mismatch seed 284).
   std::vector<double> diameters_mm;
   for (const FeatureSpec& spec : project.features) diameters_mm.push_back(spec.diameter_mm);
   const std::vector<int> largest_first = CostliestFirst(diameters_mm);
   ParallelFor(num_features, context.num_threads, [&](int n) {
     const int i = largest_first[n];
     const FeatureSpec& spec = project.features[i];
-    located[i] = LocateFeature(spec, inputs, saved);
+    located[i] = LocateFeature(spec, *inputs, saved);
     const std::lock_guard lock(progress_mutex);
     if (context.progress) context.progress(++num_located, num_features + 1, "located " + spec.name);
   });
-  // Views that resolve no bore wall, near a nadir, are measured again with
-  // the bore the others resolved (BorePrior; MeasureCircle uses it only
-  // where a narrow wall covers most of the rim).
   std::vector<BoreEvidence> bores;
   int views_with_k = 0, views_with_wall_level = 0;
   for (const LocatedFeature& feature : located) {
@@ -387,22 +389,106 @@ void RunMeasureStage(StageContext& context) {
     views_with_k += static_cast<int>(feature.bore.bottom_rim_scales.size());
     views_with_wall_level += static_cast<int>(feature.bore.wall_contrasts.size());
   }
-  ReportObject bore_prior_report{{"views_with_k", views_with_k},
-                                 {"views_with_wall_level", views_with_wall_level}};
-  inputs.bore_prior = PoolBorePrior(bores, kMinBorePriorViews);
-  if (inputs.bore_prior) {
-    bore_prior_report.emplace_back("bottom_rim_scale", inputs.bore_prior->bottom_rim_scale);
-    bore_prior_report.emplace_back("wall_contrast", inputs.bore_prior->wall_contrast);
-    bore_prior_report.emplace_back("wall_contrast_sigma", inputs.bore_prior->wall_contrast_sigma);
-    std::vector<int> unresolved;
-    for (int i = 0; i < num_features; ++i) {
-      if (located[i].bore.unresolved) unresolved.push_back(i);
-    }
-    ParallelFor(static_cast<int>(unresolved.size()), context.num_threads, [&](int j) {
-      const int i = unresolved[static_cast<size_t>(j)];
-      located[i] = LocateFeature(project.features[i], inputs, saved);
-    });
+  *bore_prior_report = ReportObject{{"views_with_k", views_with_k},
+                                    {"views_with_wall_level", views_with_wall_level}};
+  inputs->bore_prior = PoolBorePrior(bores, kMinBorePriorViews);
+  if (!inputs->bore_prior) return located;
+  bore_prior_report->emplace_back("bottom_rim_scale", inputs->bore_prior->bottom_rim_scale);
+  bore_prior_report->emplace_back("wall_contrast", inputs->bore_prior->wall_contrast);
+  bore_prior_report->emplace_back("wall_contrast_sigma", inputs->bore_prior->wall_contrast_sigma);
+  std::vector<int> unresolved;
+  for (int i = 0; i < num_features; ++i) {
+    if (located[i].bore.unresolved) unresolved.push_back(i);
   }
+  ParallelFor(static_cast<int>(unresolved.size()), context.num_threads, [&](int j) {
+    const int i = unresolved[static_cast<size_t>(j)];
+    located[i] = LocateFeature(project.features[i], *inputs, saved);
+  });
+  return located;
+}
+
+// One measurement of the located features (`by_name`: their indices), with
+// its sigma if the scene has a covariance, and its deviation from cmm.csv's
+// value where there is one; *made tells whether a value came out, *flagged
+// whether it is beyond kFlagSigmas of the CMM (warned about).
+MeasurementReport Measure(const MeasurementSpec& spec, const std::vector<LocatedFeature>& located,
+                          const std::map<std::string, int>& by_name,
+                          const MeasurementPropagation& propagation, bool have_covariance,
+                          const std::vector<CmmValue>& cmm_values, bool* made, bool* flagged) {
+  *made = *flagged = false;
+  MeasurementReport m;
+  m.name = spec.name;
+  m.type = spec.type;
+  std::vector<int> indices;
+  for (const std::string& name : spec.features) {
+    const LocatedFeature& feature = located[by_name.at(name)];
+    if (feature.value_index < 0) {
+      m.error = fmt::format("feature {}: {}", name, feature.report.error);
+      break;
+    }
+    indices.push_back(feature.value_index);
+  }
+  if (m.error.empty()) {
+    SigmaBreakdown sigma;
+    m.value_mm = spec.type == MeasurementType::kDistance
+                     ? propagation.Distance(indices[0], indices[1], &sigma)
+                     : propagation.Diameter(indices[0], &sigma);
+    if (have_covariance) {
+      m.sigma_mm = sigma.total_mm;
+      m.extra.emplace_back("sigma_breakdown_mm", BreakdownReport(sigma));
+    } else {
+      m.extra.emplace_back("sigma_note", "mosaic/scene.json has no covariance: sigma not computed");
+    }
+    *made = true;
+  }
+  for (const CmmValue& cmm : cmm_values) {
+    if (cmm.measurement != spec.name) continue;
+    m.cmm_mm = cmm.value_mm;
+    if (!m.value_mm) continue;
+    m.deviation_mm = *m.value_mm - cmm.value_mm;
+    if (!m.sigma_mm || !(*m.sigma_mm > 0.0)) continue;
+    m.deviation_sigma = *m.deviation_mm / *m.sigma_mm;
+    const bool beyond = std::abs(*m.deviation_sigma) > kFlagSigmas;
+    m.extra.emplace_back("beyond_3_sigma", beyond);
+    if (beyond) {
+      *flagged = true;
+      spdlog::warn("measure: {} deviates from the CMM by {:.4f} mm ({:.1f} sigma)", m.name,
+                   *m.deviation_mm, *m.deviation_sigma);
+    }
+  }
+  return m;
+}
+
+}  // namespace
+
+void RunMeasureStage(StageContext& context) {
+  const Project& project = context.project;
+  const auto stage_start = std::chrono::steady_clock::now();
+  const MosaicResults mosaic_stage = ReadMosaicResults(context);
+  const SavedScene& saved = mosaic_stage.saved;
+  const CameraModel& camera = mosaic_stage.camera;
+  const MrcalLensProjection lens(camera);
+  const std::shared_ptr<const std::vector<ImageF>> tiles =
+      context.tiles ? context.tiles
+                    : std::make_shared<const std::vector<ImageF>>(
+                          TileImages(project, camera, context.num_threads));
+  const std::optional<OrthoGeometry> fine =
+      MeasurementGeometry(camera, saved.scene, mosaic_stage.geometry);
+  HoleViewInputs inputs{saved.scene,
+                        lens,
+                        fine ? *fine : mosaic_stage.geometry,
+                        camera,
+                        *tiles,
+                        TileExposures(*context.report.mosaic, saved.tile_images),
+                        fine ? 1.0 / TilePxPerMosaicPx(*fine) : mosaic_stage.source_px,
+                        &mosaic_stage.mosaic.pixels};
+  if (fine) {
+    inputs.mosaic_grid = &mosaic_stage.geometry.grid;
+    inputs.mosaic_source_px = mosaic_stage.source_px;
+  }
+  ReportObject bore_prior_report;
+  std::vector<LocatedFeature> located = LocateFeatures(context, saved, &inputs, &bore_prior_report);
+  const int num_features = static_cast<int>(project.features.size());
   std::vector<CircleFeatureValue> values;
   std::map<std::string, int> by_name;
   for (int i = 0; i < num_features; ++i) {
@@ -444,50 +530,11 @@ void RunMeasureStage(StageContext& context) {
   std::vector<MeasurementReport> measurements;
   int num_made = 0, num_flagged = 0;
   for (const MeasurementSpec& spec : project.measurements) {
-    MeasurementReport m;
-    m.name = spec.name;
-    m.type = spec.type;
-    std::vector<int> indices;
-    for (const std::string& name : spec.features) {
-      const LocatedFeature& feature = located[by_name.at(name)];
-      if (feature.value_index < 0) {
-        m.error = fmt::format("feature {}: {}", name, feature.report.error);
-        break;
-      }
-      indices.push_back(feature.value_index);
-    }
-    if (m.error.empty()) {
-      SigmaBreakdown sigma;
-      m.value_mm = spec.type == MeasurementType::kDistance
-                       ? propagation.Distance(indices[0], indices[1], &sigma)
-                       : propagation.Diameter(indices[0], &sigma);
-      if (have_covariance) {
-        m.sigma_mm = sigma.total_mm;
-        m.extra.emplace_back("sigma_breakdown_mm", BreakdownReport(sigma));
-      } else {
-        m.extra.emplace_back("sigma_note",
-                             "mosaic/scene.json has no covariance: sigma not computed");
-      }
-      ++num_made;
-    }
-    for (const CmmValue& cmm : project.cmm) {
-      if (cmm.measurement != spec.name) continue;
-      m.cmm_mm = cmm.value_mm;
-      if (m.value_mm) {
-        m.deviation_mm = *m.value_mm - cmm.value_mm;
-        if (m.sigma_mm && *m.sigma_mm > 0.0) {
-          m.deviation_sigma = *m.deviation_mm / *m.sigma_mm;
-          const bool flagged = std::abs(*m.deviation_sigma) > kFlagSigmas;
-          m.extra.emplace_back("beyond_3_sigma", flagged);
-          if (flagged) {
-            ++num_flagged;
-            spdlog::warn("measure: {} deviates from the CMM by {:.4f} mm ({:.1f} sigma)", m.name,
-                         *m.deviation_mm, *m.deviation_sigma);
-          }
-        }
-      }
-    }
-    measurements.push_back(std::move(m));
+    bool made = false, flagged = false;
+    measurements.push_back(Measure(spec, located, by_name, propagation, have_covariance,
+                                   project.cmm, &made, &flagged));
+    num_made += made;
+    num_flagged += flagged;
   }
 
   std::vector<FeatureReport> features;
