@@ -340,6 +340,219 @@ bool SchurCovariance(ceres::Problem* problem,
   return true;
 }
 
+// What every build of a solve's Ceres problem reads.
+struct ProblemInputs {
+  const LensProjection& lens;
+  const PlaneBundleInput& input;
+  const PlaneBundleConfig& config;
+  const PlaneBundleOptions& options;
+  ceres::LossFunction* loss;                     // the robust observations'
+  const Eigen::VectorXd& calibrated_intrinsics;  // the intrinsics prior's mean
+  // Read for the intrinsics outside an observation's blocks (IntrinsicsBlocks).
+  const Eigen::VectorXd& initial_intrinsics;
+  bool has_observations;
+  std::atomic<int>* num_outside;  // steps that needed intrinsics outside an observation's blocks
+};
+
+// A solve's Ceres problem, on the parameter blocks of BlocksFromScene and
+// the scene's track points.
+struct BuiltProblem {
+  std::unique_ptr<ceres::Problem> problem;
+  std::vector<int> block_starts;  // the intrinsics' blocks: starts, {0, N} for one block
+  // Held intrinsics in blocks held constant: Ceres counts them in
+  // num_effective_parameters (a SubsetManifold's held values it does not).
+  int held_in_constant_blocks = 0;
+};
+
+// The problem with the intrinsics in the lens's blocks (split) or in one.
+BuiltProblem BuildProblem(const ProblemInputs& in, bool split, Blocks* scene_blocks,
+                          PlaneScene* scene) {
+  const LensProjection& lens = in.lens;
+  const PlaneBundleInput& input = in.input;
+  const PlaneBundleConfig& config = in.config;
+  const PlaneBundleOptions& options = in.options;
+  Blocks& b = *scene_blocks;
+  BuiltProblem built;
+  std::vector<int>& block_starts = built.block_starts;
+  block_starts = split ? lens.IntrinsicsBlockStarts() : std::vector<int>{0, lens.NumIntrinsics()};
+  const auto intrinsics_block = [&](size_t k) { return b.intrinsics.data() + block_starts[k]; };
+  // A track of exactly two observations (two tiles): the first has no loss.
+  // With both robust, a pair that disagreed by more than twice the loss scale
+  // had a segment of minima (both residuals on Huber's linear branch pulling
+  // opposite ways: the cost is flat between the ends where one of them is at
+  // the scale), and Ceres' model (it drops the loss's negative curvature)
+  // crawled along it: lens-mismatch's first solve hit 100 iterations. Without
+  // the first loss the minimum is the end where the first residual is at the
+  // scale, with the same cost and the same pull on the scene; a consistent
+  // pair is on the quadratic branch either way.
+  std::vector<int> num_used(input.num_tracks, 0), first_used(input.num_tracks, -1);
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    const TrackObservation& obs = input.observations[n];
+    if (obs.weight <= 0.0) continue;
+    if (num_used[obs.track]++ == 0) first_used[obs.track] = static_cast<int>(n);
+  }
+  const double inv_sigma = 1.0 / input.observation_sigma_px;
+  const int num_tiles = static_cast<int>(input.commanded_table_pos_mm.size());
+  const int num_plates = static_cast<int>(input.plates.size());
+  const size_t num_blocks = block_starts.size() - 1;
+  const Eigen::Matrix3d cam_from_part = RotationFromAngleAxis(Eigen::Vector3d(b.r.data()));
+  const Eigen::Vector3d t(b.t.data());
+  // An observation's intrinsics blocks, given its part-frame point.
+  std::vector<double*> blocks;
+  const auto intrinsics_of = [&](const Eigen::Vector3d& x_part) {
+    blocks.clear();
+    if (!split) {
+      blocks.push_back(b.intrinsics.data());
+      return IntrinsicsBlocks{};
+    }
+    IntrinsicsBlocks of{{}, in.initial_intrinsics.data(), in.num_outside};
+    for (int k : lens.IntrinsicsBlocksNear(cam_from_part * x_part + t, b.intrinsics.data(),
+                                           options.intrinsics_block_margin_px)) {
+      of.ranges.emplace_back(block_starts[k], block_starts[k + 1] - block_starts[k]);
+      blocks.push_back(intrinsics_block(k));
+    }
+    return of;
+  };
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  auto problem = std::make_unique<ceres::Problem>(problem_options);
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    const TrackObservation& obs = input.observations[n];
+    if (obs.weight <= 0.0) continue;
+    const bool robust = num_used[obs.track] != 2 || first_used[obs.track] != static_cast<int>(n);
+    double* table_pos = b.table_pos[obs.tile].data();
+    double* point = b.point(scene, obs.track);
+    IntrinsicsBlocks of = intrinsics_of(MovedTrackPoint(table_pos, point));
+    std::vector<double*> parameters = {b.r.data(), b.t.data(), table_pos, point};
+    parameters.insert(parameters.end(), blocks.begin(), blocks.end());
+    problem->AddResidualBlock(
+        new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma * obs.shape,
+                                  std::move(of)),
+        robust ? in.loss : nullptr, parameters);
+  }
+  for (const PlateMarkObservation& obs : input.plate_observations) {
+    if (obs.weight <= 0.0) continue;
+    const Eigen::Vector2d mark_uv = input.plates[obs.plate].mark_uv_mm.col(obs.mark);
+    double* table_pos = b.table_pos[obs.tile].data();
+    double* pose = b.plate_pose[obs.plate].data();
+    IntrinsicsBlocks of = intrinsics_of(MovedPlateMark(table_pos, pose, b.plate_height[obs.plate],
+                                                       b.plate_scale[obs.plate], mark_uv));
+    std::vector<double*> parameters = {b.r.data(),
+                                       b.t.data(),
+                                       table_pos,
+                                       pose,
+                                       &b.plate_height[obs.plate],
+                                       &b.plate_scale[obs.plate]};
+    parameters.insert(parameters.end(), blocks.begin(), blocks.end());
+    problem->AddResidualBlock(new PlateMarkReprojectionCost(lens, mark_uv, obs.q_px,
+                                                            obs.weight * inv_sigma, std::move(of)),
+                              in.loss, parameters);
+  }
+  for (int i = 0; i < num_tiles; ++i) {
+    if (std::binary_search(input.tiles_without_table_prior.begin(),
+                           input.tiles_without_table_prior.end(), i)) {
+      problem->AddParameterBlock(b.table_pos[i].data(), 2);
+    } else {
+      problem->AddResidualBlock(
+          new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
+          b.table_pos[i].data());
+    }
+    if (!config.refine_table_positions) problem->SetParameterBlockConstant(b.table_pos[i].data());
+  }
+  if (in.has_observations) {
+    if (!config.refine_plane_pose) {
+      problem->SetParameterBlockConstant(b.r.data());
+      problem->SetParameterBlockConstant(b.t.data());
+    } else if (config.gauge == PlaneGauge::kOriginOnOpticalAxis) {
+      problem->SetManifold(b.t.data(), new ceres::SubsetManifold(3, {0, 1}));
+    }
+    if (config.refine_intrinsics) {
+      std::vector<double*> all_blocks;
+      for (size_t k = 0; k < num_blocks; ++k) all_blocks.push_back(intrinsics_block(k));
+      problem->AddResidualBlock(
+          new IntrinsicsPriorCost(in.calibrated_intrinsics, input.intrinsics_information,
+                                  input.intrinsics_held, block_starts),
+          nullptr, all_blocks);
+      // The held intrinsics: each block's, in its own indices.
+      for (size_t k = 0; k < num_blocks; ++k) {
+        const int first = block_starts[k], size = block_starts[k + 1] - first;
+        std::vector<int> held;
+        for (int j : input.intrinsics_held)
+          if (j >= first && j < first + size) held.push_back(j - first);
+        if (static_cast<int>(held.size()) == size) {
+          problem->SetParameterBlockConstant(intrinsics_block(k));
+          built.held_in_constant_blocks += size;
+        } else if (!held.empty()) {
+          problem->SetManifold(intrinsics_block(k), new ceres::SubsetManifold(size, held));
+        }
+      }
+    } else {
+      problem->SetParameterBlockConstant(b.intrinsics.data());
+    }
+    if (config.gauge == PlaneGauge::kFixedTrack) {
+      problem->SetParameterBlockConstant(b.point(scene, config.gauge_track));
+    }
+  }
+  for (int g = 0; g < num_plates; ++g) {
+    if (!problem->HasParameterBlock(b.plate_pose[g].data())) continue;
+    if (input.plates[g].height_mm.has_value()) {
+      b.plate_height[g] = *input.plates[g].height_mm;
+      problem->SetParameterBlockConstant(&b.plate_height[g]);
+    }
+    if (!config.refine_plate_scale) problem->SetParameterBlockConstant(&b.plate_scale[g]);
+  }
+  built.problem = std::move(problem);
+  return built;
+}
+
+// The covariance of the scene vector (plane_scene.h's layout) and of
+// `tracks`' points into *scene (both left empty if it cannot be computed:
+// false), from the solved problem on b.
+bool CovarianceIntoScene(const BuiltProblem& built, Blocks* blocks, const std::vector<int>& tracks,
+                         int num_threads, PlaneScene* scene) {
+  Blocks& b = *blocks;
+  const int num_tiles = static_cast<int>(scene->table_pos_mm.size());
+  const int num_plates = static_cast<int>(scene->plates.size());
+  std::vector<std::pair<double*, int>> scene_blocks;  // block, offset in the scene vector
+  auto add_block = [&](double* block, int offset) {
+    if (built.problem->HasParameterBlock(block)) scene_blocks.push_back({block, offset});
+  };
+  add_block(b.r.data(), 0);
+  add_block(b.t.data(), 3);
+  for (int i = 0; i < num_tiles; ++i) add_block(b.table_pos[i].data(), 6 + 2 * i);
+  for (int g = 0; g < num_plates; ++g) {
+    const int offset = PlaneSceneCovariancePlateIndex(num_tiles, g);
+    add_block(b.plate_pose[g].data(), offset);
+    add_block(&b.plate_height[g], offset + 3);
+    add_block(&b.plate_scale[g], offset + 4);
+  }
+  for (size_t k = 0; k + 1 < built.block_starts.size(); ++k) {
+    add_block(b.intrinsics.data() + built.block_starts[k],
+              PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates) + built.block_starts[k]);
+  }
+  const int size = PlaneSceneCovarianceSize(num_tiles, num_plates, b.intrinsics.size());
+  scene->covariance.resize(0, 0);
+  scene->track_covariance_mm2.clear();
+  Eigen::MatrixXd scene_covariance;
+  std::vector<Eigen::Matrix2d> track_covariance;
+  if (!SchurCovariance(built.problem.get(), scene_blocks, b, scene, tracks, num_threads,
+                       &scene_covariance, &track_covariance))
+    return false;
+  scene->covariance = Eigen::MatrixXd::Zero(size, size);
+  for (size_t m = 0, row = 0; m < scene_blocks.size(); ++m) {
+    const int size_m = built.problem->ParameterBlockSize(scene_blocks[m].first);
+    for (size_t n = 0, col = 0; n < scene_blocks.size(); ++n) {
+      const int size_n = built.problem->ParameterBlockSize(scene_blocks[n].first);
+      scene->covariance.block(scene_blocks[m].second, scene_blocks[n].second, size_m, size_n) =
+          scene_covariance.block(row, col, size_m, size_n);
+      col += size_n;
+    }
+    row += size_m;
+  }
+  scene->track_covariance_mm2 = track_covariance;
+  return true;
+}
+
 }  // namespace
 
 PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundleInput& input,
@@ -371,23 +584,6 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   const double outlier_px = 3.0 * options.loss_scale_px;
   summary.initial_rms_px = Stats(input, *scene, outlier_px).rms_px;
 
-  std::unique_ptr<ceres::LossFunction> loss(MakeLoss(options, input.observation_sigma_px));
-  const double inv_sigma = 1.0 / input.observation_sigma_px;
-  // A track of exactly two observations (two tiles): the first has no loss.
-  // With both robust, a pair that disagreed by more than twice the loss scale
-  // had a segment of minima (both residuals on Huber's linear branch pulling
-  // opposite ways: the cost is flat between the ends where one of them is at
-  // the scale), and Ceres' model (it drops the loss's negative curvature)
-  // crawled along it: lens-mismatch's first solve hit 100 iterations. Without
-  // the first loss the minimum is the end where the first residual is at the
-  // scale, with the same cost and the same pull on the scene; a consistent
-  // pair is on the quadratic branch either way.
-  std::vector<int> num_used(input.num_tracks, 0), first_used(input.num_tracks, -1);
-  for (size_t n = 0; n < input.observations.size(); ++n) {
-    const TrackObservation& obs = input.observations[n];
-    if (obs.weight <= 0.0) continue;
-    if (num_used[obs.track]++ == 0) first_used[obs.track] = static_cast<int>(n);
-  }
   std::vector<int> tile_observations(num_tiles, 0);
   for (const TrackObservation& obs : input.observations) {
     if (obs.weight <= 0.0) continue;
@@ -417,127 +613,18 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   // outside an observation's blocks are read from `initial_intrinsics`; a
   // step that needs them fails (IntrinsicsBlocks), and then the solve runs
   // again with one block.
-  const std::vector<int> lens_block_starts = lens.IntrinsicsBlockStarts();
   const Eigen::VectorXd initial_intrinsics = b.intrinsics;
   std::atomic<int> num_outside{0};
-  // The intrinsics' blocks of the problem: starts, {0, N} for one block.
-  std::vector<int> block_starts;
-  // Held intrinsics in blocks held constant: Ceres counts them in
-  // num_effective_parameters (a SubsetManifold's held values it does not).
-  int held_in_constant_blocks = 0;
-  const auto intrinsics_block = [&](size_t k) { return b.intrinsics.data() + block_starts[k]; };
-  const auto build = [&](bool split) {
-    block_starts = split ? lens_block_starts : std::vector<int>{0, num_intrinsics};
-    held_in_constant_blocks = 0;
-    const size_t num_blocks = block_starts.size() - 1;
-    const Eigen::Matrix3d cam_from_part = RotationFromAngleAxis(Eigen::Vector3d(b.r.data()));
-    const Eigen::Vector3d t(b.t.data());
-    // An observation's intrinsics blocks, given its part-frame point.
-    std::vector<double*> blocks;
-    const auto intrinsics_of = [&](const Eigen::Vector3d& x_part) {
-      blocks.clear();
-      if (!split) {
-        blocks.push_back(b.intrinsics.data());
-        return IntrinsicsBlocks{};
-      }
-      IntrinsicsBlocks of{{}, initial_intrinsics.data(), &num_outside};
-      for (int k : lens.IntrinsicsBlocksNear(cam_from_part * x_part + t, b.intrinsics.data(),
-                                             options.intrinsics_block_margin_px)) {
-        of.ranges.emplace_back(block_starts[k], block_starts[k + 1] - block_starts[k]);
-        blocks.push_back(intrinsics_block(k));
-      }
-      return of;
-    };
-    ceres::Problem::Options problem_options;
-    problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-    auto problem = std::make_unique<ceres::Problem>(problem_options);
-    for (size_t n = 0; n < input.observations.size(); ++n) {
-      const TrackObservation& obs = input.observations[n];
-      if (obs.weight <= 0.0) continue;
-      const bool robust = num_used[obs.track] != 2 || first_used[obs.track] != static_cast<int>(n);
-      double* table_pos = b.table_pos[obs.tile].data();
-      double* point = b.point(scene, obs.track);
-      IntrinsicsBlocks of = intrinsics_of(MovedTrackPoint(table_pos, point));
-      std::vector<double*> parameters = {b.r.data(), b.t.data(), table_pos, point};
-      parameters.insert(parameters.end(), blocks.begin(), blocks.end());
-      problem->AddResidualBlock(
-          new TrackReprojectionCost(lens, obs.q_px, obs.weight * inv_sigma * obs.shape,
-                                    std::move(of)),
-          robust ? loss.get() : nullptr, parameters);
-    }
-    for (const PlateMarkObservation& obs : input.plate_observations) {
-      if (obs.weight <= 0.0) continue;
-      const Eigen::Vector2d mark_uv = input.plates[obs.plate].mark_uv_mm.col(obs.mark);
-      double* table_pos = b.table_pos[obs.tile].data();
-      double* pose = b.plate_pose[obs.plate].data();
-      IntrinsicsBlocks of = intrinsics_of(MovedPlateMark(table_pos, pose, b.plate_height[obs.plate],
-                                                         b.plate_scale[obs.plate], mark_uv));
-      std::vector<double*> parameters = {b.r.data(),
-                                         b.t.data(),
-                                         table_pos,
-                                         pose,
-                                         &b.plate_height[obs.plate],
-                                         &b.plate_scale[obs.plate]};
-      parameters.insert(parameters.end(), blocks.begin(), blocks.end());
-      problem->AddResidualBlock(new PlateMarkReprojectionCost(
-                                    lens, mark_uv, obs.q_px, obs.weight * inv_sigma, std::move(of)),
-                                loss.get(), parameters);
-    }
-    for (int i = 0; i < num_tiles; ++i) {
-      if (std::binary_search(input.tiles_without_table_prior.begin(),
-                             input.tiles_without_table_prior.end(), i)) {
-        problem->AddParameterBlock(b.table_pos[i].data(), 2);
-      } else {
-        problem->AddResidualBlock(
-            new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
-            b.table_pos[i].data());
-      }
-      if (!config.refine_table_positions) problem->SetParameterBlockConstant(b.table_pos[i].data());
-    }
-    if (has_observations) {
-      if (!config.refine_plane_pose) {
-        problem->SetParameterBlockConstant(b.r.data());
-        problem->SetParameterBlockConstant(b.t.data());
-      } else if (config.gauge == PlaneGauge::kOriginOnOpticalAxis) {
-        problem->SetManifold(b.t.data(), new ceres::SubsetManifold(3, {0, 1}));
-      }
-      if (config.refine_intrinsics) {
-        std::vector<double*> all_blocks;
-        for (size_t k = 0; k < num_blocks; ++k) all_blocks.push_back(intrinsics_block(k));
-        problem->AddResidualBlock(
-            new IntrinsicsPriorCost(calibrated_intrinsics, input.intrinsics_information,
-                                    input.intrinsics_held, block_starts),
-            nullptr, all_blocks);
-        // The held intrinsics: each block's, in its own indices.
-        for (size_t k = 0; k < num_blocks; ++k) {
-          const int first = block_starts[k], size = block_starts[k + 1] - first;
-          std::vector<int> held;
-          for (int j : input.intrinsics_held)
-            if (j >= first && j < first + size) held.push_back(j - first);
-          if (static_cast<int>(held.size()) == size) {
-            problem->SetParameterBlockConstant(intrinsics_block(k));
-            held_in_constant_blocks += size;
-          } else if (!held.empty()) {
-            problem->SetManifold(intrinsics_block(k), new ceres::SubsetManifold(size, held));
-          }
-        }
-      } else {
-        problem->SetParameterBlockConstant(b.intrinsics.data());
-      }
-      if (config.gauge == PlaneGauge::kFixedTrack) {
-        problem->SetParameterBlockConstant(b.point(scene, config.gauge_track));
-      }
-    }
-    for (int g = 0; g < num_plates; ++g) {
-      if (!problem->HasParameterBlock(b.plate_pose[g].data())) continue;
-      if (input.plates[g].height_mm.has_value()) {
-        b.plate_height[g] = *input.plates[g].height_mm;
-        problem->SetParameterBlockConstant(&b.plate_height[g]);
-      }
-      if (!config.refine_plate_scale) problem->SetParameterBlockConstant(&b.plate_scale[g]);
-    }
-    return problem;
-  };
+  const std::unique_ptr<ceres::LossFunction> loss(MakeLoss(options, input.observation_sigma_px));
+  const ProblemInputs problem_inputs{lens,
+                                     input,
+                                     config,
+                                     options,
+                                     loss.get(),
+                                     calibrated_intrinsics,
+                                     initial_intrinsics,
+                                     has_observations,
+                                     &num_outside};
 
   ceres::Solver::Options solver_options;
   solver_options.linear_solver_type = options.linear_solver == LinearSolver::kSparseSchur
@@ -560,7 +647,8 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   // layout, which differs between runs, the solution's last bits did. So
   // every scene block has a group of its own, in the scene vector's order.
   // The points share group 0: columns of one matrix, they are in track order.
-  const auto ordering_of = [&](const ceres::Problem& problem) {
+  const auto ordering_of = [&](const BuiltProblem& built) {
+    const ceres::Problem& problem = *built.problem;
     auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
     for (int k = 0; k < input.num_tracks; ++k) ordering->AddElementToGroup(b.point(scene, k), 0);
     int group = 1;
@@ -575,25 +663,27 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
       add_group(&b.plate_height[g]);
       add_group(&b.plate_scale[g]);
     }
-    for (size_t k = 0; k + 1 < block_starts.size(); ++k) add_group(intrinsics_block(k));
+    for (size_t k = 0; k + 1 < built.block_starts.size(); ++k)
+      add_group(b.intrinsics.data() + built.block_starts[k]);
     return ordering;
   };
-  const bool split = has_observations && config.refine_intrinsics && lens_block_starts.size() > 2;
-  std::unique_ptr<ceres::Problem> problem = build(split);
-  if (has_observations) solver_options.linear_solver_ordering = ordering_of(*problem);
+  const bool split =
+      has_observations && config.refine_intrinsics && lens.IntrinsicsBlockStarts().size() > 2;
+  BuiltProblem built = BuildProblem(problem_inputs, split, &b, scene);
+  if (has_observations) solver_options.linear_solver_ordering = ordering_of(built);
   ceres::Solver::Summary solver_summary;
-  ceres::Solve(solver_options, problem.get(), &solver_summary);
+  ceres::Solve(solver_options, built.problem.get(), &solver_summary);
   int iterations = static_cast<int>(solver_summary.iterations.size()) - 1;
   summary.intrinsics_block_exits = num_outside;
   if (num_outside > 0) {  // from where it stopped, with the intrinsics in one block
-    problem = build(false);
-    solver_options.linear_solver_ordering = ordering_of(*problem);
-    ceres::Solve(solver_options, problem.get(), &solver_summary);
+    built = BuildProblem(problem_inputs, false, &b, scene);
+    solver_options.linear_solver_ordering = ordering_of(built);
+    ceres::Solve(solver_options, built.problem.get(), &solver_summary);
     iterations += static_cast<int>(solver_summary.iterations.size()) - 1;
   }
   summary.iterations = iterations;
   summary.num_residuals = solver_summary.num_residuals;
-  summary.num_parameters = solver_summary.num_effective_parameters - held_in_constant_blocks;
+  summary.num_parameters = solver_summary.num_effective_parameters - built.held_in_constant_blocks;
   summary.solve_seconds = SecondsSince(start);
 
   BlocksToScene(b, scene);
@@ -616,48 +706,10 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   summary.unit_weight_sigma = dof > 0 ? std::sqrt(chi2 / dof) : 0.0;
   summary.plane_tilt_deg = PlaneTiltDeg(scene->cam_from_part_r);
 
-  // Covariance of the scene vector (plane_scene.h's layout) and chosen points.
   if (config.compute_covariance) {
     const Clock::time_point covariance_start = Clock::now();
-    std::vector<std::pair<double*, int>> scene_blocks;  // block, offset in the scene vector
-    auto add_block = [&](double* block, int offset) {
-      if (problem->HasParameterBlock(block)) scene_blocks.push_back({block, offset});
-    };
-    add_block(b.r.data(), 0);
-    add_block(b.t.data(), 3);
-    for (int i = 0; i < num_tiles; ++i) add_block(b.table_pos[i].data(), 6 + 2 * i);
-    for (int g = 0; g < num_plates; ++g) {
-      const int offset = PlaneSceneCovariancePlateIndex(num_tiles, g);
-      add_block(b.plate_pose[g].data(), offset);
-      add_block(&b.plate_height[g], offset + 3);
-      add_block(&b.plate_scale[g], offset + 4);
-    }
-    for (size_t k = 0; k + 1 < block_starts.size(); ++k) {
-      add_block(intrinsics_block(k),
-                PlaneSceneCovarianceIntrinsicsIndex(num_tiles, num_plates) + block_starts[k]);
-    }
-    const int size = PlaneSceneCovarianceSize(num_tiles, num_plates, num_intrinsics);
-    scene->covariance.resize(0, 0);
-    scene->track_covariance_mm2.clear();
-    Eigen::MatrixXd scene_covariance;
-    std::vector<Eigen::Matrix2d> track_covariance;
     summary.covariance_ok =
-        SchurCovariance(problem.get(), scene_blocks, b, scene, config.covariance_tracks,
-                        options.num_threads, &scene_covariance, &track_covariance);
-    if (summary.covariance_ok) {
-      scene->covariance = Eigen::MatrixXd::Zero(size, size);
-      for (size_t m = 0, row = 0; m < scene_blocks.size(); ++m) {
-        const int size_m = problem->ParameterBlockSize(scene_blocks[m].first);
-        for (size_t n = 0, col = 0; n < scene_blocks.size(); ++n) {
-          const int size_n = problem->ParameterBlockSize(scene_blocks[n].first);
-          scene->covariance.block(scene_blocks[m].second, scene_blocks[n].second, size_m, size_n) =
-              scene_covariance.block(row, col, size_m, size_n);
-          col += size_n;
-        }
-        row += size_m;
-      }
-      scene->track_covariance_mm2 = track_covariance;
-    }
+        CovarianceIntoScene(built, &b, config.covariance_tracks, options.num_threads, scene);
     summary.covariance_seconds = SecondsSince(covariance_start);
   }
 
