@@ -537,6 +537,127 @@ UncertaintySummary SummarizeUncertainty(const SolveRecord& record, double distan
   return SummarizeUncertainty(*uncertainty, record.camera, distance_mm, grid_nx, grid_ny);
 }
 
+namespace {
+
+// What the lens choice leaves besides the chosen solve.
+struct LensChoiceOutcome {
+  // The working model's solve and its residual sigma, kept when a spline is
+  // chosen (step 5).
+  std::optional<CalibrationResult> working_solve;
+  double working_sigma_px = 0.0;
+  // Why the camera cannot serve the tiles (UnmappedImageBorder), if checked:
+  // it unprojects the whole border, slowly through a spline.
+  std::optional<std::string> unmapped;
+};
+
+// Steps 3-4: the candidates solved on the working model's settled
+// observations (*corrected), the chosen one settled again and a chosen
+// spline widened while its border has a pixel no ray reaches. Updates
+// *result, *corrected, *corrections and summary's lens, bias, corner sigma
+// and choice time.
+LensChoiceOutcome ChooseLensModel(const std::vector<PlateObservation>& detections,
+                                  const BoardSpec& board, const CalibrationStageOptions& options,
+                                  const std::string& working_model,
+                                  CalibrationOptions solve_options, CalibrationResult* result,
+                                  std::vector<PlateObservation>* corrected,
+                                  std::vector<Eigen::Matrix2Xd>* corrections,
+                                  CalibrationStageSummary* summary) {
+  LensChoiceOutcome outcome;
+  const Clock::time_point choice_start = Clock::now();
+  const int sized_deg = SplinedFieldDeg(result->camera, *corrected, options.splined_fov_margin);
+  constexpr int kSplined = 1;  // the candidates' index of the spline
+  const std::vector<std::string> candidates = {
+      kWorkingLensModel, SplinedModel(result->camera, options.splined_nx, sized_deg)};
+  std::vector<CalibrationResult> solved;
+  for (const std::string& model : candidates) {
+    CalibrationOptions candidate_options = solve_options;
+    candidate_options.lens_model = model;
+    // The working model's candidate is `result`, solved on `corrected`
+    // already (SettleObservations).
+    solved.push_back(
+        model == working_model ? *result : CalibrateCamera(board, *corrected, candidate_options));
+    summary->lens.candidates.push_back(ScoreCandidate(model, solved.back()));
+  }
+  summary->lens.splined_fov_sized_deg = summary->lens.splined_fov_deg = sized_deg;
+  // Candidates are listed by increasing parameter count. Starting from the
+  // smallest usable one, a larger one replaces the current choice only if
+  // its fit is better by more than its extra parameters explain by chance,
+  // and by more than a trace of the noise.
+  int chosen = -1;
+  for (int k = 0; k < static_cast<int>(candidates.size()); ++k) {
+    const LensCandidate& c = summary->lens.candidates[k];
+    if (!c.usable) continue;
+    if (chosen < 0 || (ResidualsDropSignificantly(summary->lens.candidates[chosen], c,
+                                                  options.lens_choice_significance_z) &&
+                       ResidualsDropMaterially(summary->lens.candidates[chosen], c,
+                                               options.lens_choice_min_misfit_fraction))) {
+      chosen = k;
+    }
+  }
+  if (chosen >= 0) {
+    const LensCandidate& c = summary->lens.candidates[chosen];
+    summary->lens.lens_model = c.lens_model;
+    summary->lens.why = fmt::format(
+        "{} ({} parameters): residual sigma {:.4f} px (dof-corrected); no candidate with more "
+        "parameters lowers the residuals beyond chance (F-test, z = {:.2f}) and by a misfit of "
+        "{:.2f} of the noise or more",
+        c.lens_model, c.num_params, c.sigma_px, options.lens_choice_significance_z,
+        options.lens_choice_min_misfit_fraction);
+    for (const LensCandidate& other : summary->lens.candidates) {
+      if (&other != &c) {
+        summary->lens.why +=
+            fmt::format("; {} ({}) {:.4f} px", other.lens_model, other.num_params, other.sigma_px);
+      }
+    }
+    if (c.lens_model != working_model) {
+      *result = std::move(solved[chosen]);
+      if (summary->lens.candidates[0].usable) {
+        outcome.working_solve = std::move(solved[0]);
+        outcome.working_sigma_px = summary->lens.candidates[0].sigma_px;
+      }
+    }
+  }
+  if (summary->lens.why.empty()) summary->lens.why = "no candidate solved; kept " + working_model;
+  summary->lens_choice_seconds = SecondsSince(choice_start);
+  if (summary->lens.lens_model != working_model) {
+    // The observations settle again with the chosen model's camera and
+    // poses (`result`, solved on the working model's observations): the
+    // working model's bias corrections were off by up to 0.03 px on a
+    // lens it cannot represent, and one recorrection left them moving by
+    // as much; a chessboard's scatter about it was its misfit too.
+    solve_options.lens_model = summary->lens.lens_model;
+    SettleObservations(detections, board, solve_options, options, result, corrected, corrections,
+                       &summary->bias, &summary->corner_sigma_px);
+  }
+  if (chosen == kSplined) {
+    // The settled spline widened while its border has a pixel no ray
+    // reaches (step 4), each wider one solved on the settled observations.
+    const int max_deg = static_cast<int>(std::floor(sized_deg * options.splined_max_widening));
+    CalibrationOptions wider_options = solve_options;
+    outcome.unmapped = UnmappedImageBorder(result->camera, *corrected);
+    while (summary->lens.splined_fov_deg < max_deg && !outcome.unmapped->empty()) {
+      wider_options.lens_model =
+          SplinedModel(result->camera, options.splined_nx, summary->lens.splined_fov_deg + 1);
+      CalibrationResult wider = CalibrateCamera(board, *corrected, wider_options);
+      if (!wider.usable) break;
+      ++summary->lens.splined_fov_deg;
+      summary->lens.lens_model = wider_options.lens_model;
+      *result = std::move(wider);
+      outcome.unmapped = UnmappedImageBorder(result->camera, *corrected);
+    }
+    if (summary->lens.splined_fov_deg > sized_deg) {
+      summary->lens.why += fmt::format(
+          "; its knot field widened from {} deg (sized for the marks) to {} deg so that every "
+          "pixel of the image border maps: beyond the marks the lens is extrapolated, and "
+          "calibration images near the image's corners would measure it",
+          sized_deg, summary->lens.splined_fov_deg);
+    }
+  }
+  return outcome;
+}
+
+}  // namespace
+
 CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservation>& detections,
                                                 const BoardSpec& board, const CameraSpec& camera,
                                                 int width_px, int height_px,
@@ -576,12 +697,7 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
     return summary;
   }
 
-  // Why the camera cannot serve the tiles (UnmappedImageBorder), once known:
-  // it unprojects the whole border, slowly through a spline.
-  std::optional<std::string> unmapped;
-  // The working model's solve, kept when a spline is chosen (step 5).
-  std::optional<CalibrationResult> working_solve;
-  double working_sigma_px = 0.0;
+  LensChoiceOutcome choice;
   summary.lens.lens_model = working_model;
   summary.lens.forced = forced;
   if (forced) {
@@ -589,101 +705,13 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   } else if (!options.choose_lens_model) {
     summary.lens.why = "default (lens-model choice off)";
   } else {
-    const Clock::time_point choice_start = Clock::now();
-    const int sized_deg = SplinedFieldDeg(result.camera, corrected, options.splined_fov_margin);
-    constexpr int kSplined = 1;  // the candidates' index of the spline
-    const std::vector<std::string> candidates = {
-        kWorkingLensModel, SplinedModel(result.camera, options.splined_nx, sized_deg)};
-    std::vector<CalibrationResult> solved;
-    for (const std::string& model : candidates) {
-      CalibrationOptions candidate_options = solve_options;
-      candidate_options.lens_model = model;
-      // The working model's candidate is `result`, solved on `corrected`
-      // already (SettleObservations).
-      solved.push_back(
-          model == working_model ? result : CalibrateCamera(board, corrected, candidate_options));
-      summary.lens.candidates.push_back(ScoreCandidate(model, solved.back()));
-    }
-    summary.lens.splined_fov_sized_deg = summary.lens.splined_fov_deg = sized_deg;
-    // Candidates are listed by increasing parameter count. Starting from the
-    // smallest usable one, a larger one replaces the current choice only if
-    // its fit is better by more than its extra parameters explain by chance,
-    // and by more than a trace of the noise.
-    int chosen = -1;
-    for (int k = 0; k < static_cast<int>(candidates.size()); ++k) {
-      const LensCandidate& c = summary.lens.candidates[k];
-      if (!c.usable) continue;
-      if (chosen < 0 || (ResidualsDropSignificantly(summary.lens.candidates[chosen], c,
-                                                    options.lens_choice_significance_z) &&
-                         ResidualsDropMaterially(summary.lens.candidates[chosen], c,
-                                                 options.lens_choice_min_misfit_fraction))) {
-        chosen = k;
-      }
-    }
-    if (chosen >= 0) {
-      const LensCandidate& c = summary.lens.candidates[chosen];
-      summary.lens.lens_model = c.lens_model;
-      summary.lens.why = fmt::format(
-          "{} ({} parameters): residual sigma {:.4f} px (dof-corrected); no candidate with more "
-          "parameters lowers the residuals beyond chance (F-test, z = {:.2f}) and by a misfit of "
-          "{:.2f} of the noise or more",
-          c.lens_model, c.num_params, c.sigma_px, options.lens_choice_significance_z,
-          options.lens_choice_min_misfit_fraction);
-      for (const LensCandidate& other : summary.lens.candidates) {
-        if (&other != &c) {
-          summary.lens.why += fmt::format("; {} ({}) {:.4f} px", other.lens_model, other.num_params,
-                                          other.sigma_px);
-        }
-      }
-      if (c.lens_model != working_model) {
-        result = std::move(solved[chosen]);
-        if (summary.lens.candidates[0].usable) {
-          working_solve = std::move(solved[0]);
-          working_sigma_px = summary.lens.candidates[0].sigma_px;
-        }
-      }
-    }
-    if (summary.lens.why.empty()) summary.lens.why = "no candidate solved; kept " + working_model;
-    summary.lens_choice_seconds = SecondsSince(choice_start);
-    if (summary.lens.lens_model != working_model) {
-      // The observations settle again with the chosen model's camera and
-      // poses (`result`, solved on the working model's observations): the
-      // working model's bias corrections were off by up to 0.03 px on a
-      // lens it cannot represent, and one recorrection left them moving by
-      // as much; a chessboard's scatter about it was its misfit too.
-      solve_options.lens_model = summary.lens.lens_model;
-      SettleObservations(detections, board, solve_options, options, &result, &corrected,
-                         &corrections, &summary.bias, &summary.corner_sigma_px);
-    }
-    if (chosen == kSplined) {
-      // The settled spline widened while its border has a pixel no ray
-      // reaches (step 4), each wider one solved on the settled observations.
-      const int max_deg = static_cast<int>(std::floor(sized_deg * options.splined_max_widening));
-      CalibrationOptions wider_options = solve_options;
-      unmapped = UnmappedImageBorder(result.camera, corrected);
-      while (summary.lens.splined_fov_deg < max_deg && !unmapped->empty()) {
-        wider_options.lens_model =
-            SplinedModel(result.camera, options.splined_nx, summary.lens.splined_fov_deg + 1);
-        CalibrationResult wider = CalibrateCamera(board, corrected, wider_options);
-        if (!wider.usable) break;
-        ++summary.lens.splined_fov_deg;
-        summary.lens.lens_model = wider_options.lens_model;
-        result = std::move(wider);
-        unmapped = UnmappedImageBorder(result.camera, corrected);
-      }
-      if (summary.lens.splined_fov_deg > sized_deg) {
-        summary.lens.why += fmt::format(
-            "; its knot field widened from {} deg (sized for the marks) to {} deg so that every "
-            "pixel of the image border maps: beyond the marks the lens is extrapolated, and "
-            "calibration images near the image's corners would measure it",
-            sized_deg, summary.lens.splined_fov_deg);
-      }
-    }
+    choice = ChooseLensModel(detections, board, options, working_model, solve_options, &result,
+                             &corrected, &corrections, &summary);
   }
 
-  if (!unmapped) unmapped = UnmappedImageBorder(result.camera, corrected);
-  if (!unmapped->empty()) {
-    summary.brief = "calibration unusable: " + *unmapped;
+  if (!choice.unmapped) choice.unmapped = UnmappedImageBorder(result.camera, corrected);
+  if (!choice.unmapped->empty()) {
+    summary.brief = "calibration unusable: " + *choice.unmapped;
     if (summary.lens.splined_fov_sized_deg > 0 && summary.lens.lens_model != kWorkingLensModel) {
       summary.brief += fmt::format(
           " (its knot field widened from {} to {} deg; the lens choice widens it up to {:.2f} "
@@ -701,10 +729,10 @@ CalibrationStageSummary CalibrateFromDetections(const std::vector<PlateObservati
   std::string why_no_uncertainty;
   const std::optional<CalibrationUncertainty> uncertainty =
       CalibrationUncertainty::Compute(result.record, 0.0, &why_no_uncertainty);
-  if (working_solve && options.extrapolate_spline_by_working_model) {
+  if (choice.working_solve && options.extrapolate_spline_by_working_model) {
     if (uncertainty) {
-      ExtrapolateSpline(*working_solve, working_sigma_px, *uncertainty, corrected, options,
-                        &result, &summary.lens);
+      ExtrapolateSpline(*choice.working_solve, choice.working_sigma_px, *uncertainty, corrected,
+                        options, &result, &summary.lens);
     } else {
       summary.lens.extrapolation.why_not = "no projection uncertainty: " + why_no_uncertainty;
     }
