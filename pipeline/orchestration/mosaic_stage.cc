@@ -414,6 +414,46 @@ struct FinalOutcome {
   double overlap_seconds = 0.0;  // the held tiles' overlap alignments
   double solve_seconds = 0.0;    // the final adjustment's solves
 };
+// The report of the hole ties (`names`: the holes' features) in the final
+// adjustment `tied` (its residuals: residual_px): each kept tie's tiles and
+// residual, the dropped ones, and *brief.
+ReportValue HoleTiesReport(const Project& project, const TiedAdjustment& tied,
+                           const Eigen::Matrix2Xd& residual_px, const std::vector<HoleTie>& ties,
+                           const std::vector<std::string>& names, bool no_holes,
+                           std::string* brief) {
+  ReportValue::Array rows;
+  int index = tied.first_tie_observation;
+  for (const HoleTie& tie : tied.kept) {
+    ReportValue::Array images;
+    double sum_squares = 0.0;
+    for (const int tile : tie.tiles) {
+      images.emplace_back(project.tiles[tile].image);
+      sum_squares += residual_px.col(index++).squaredNorm();
+    }
+    rows.emplace_back(
+        ReportObject{{"feature", names[tie.hole]},
+                     {"images", std::move(images)},
+                     {"rms_px", std::sqrt(sum_squares / static_cast<double>(tie.tiles.size()))}});
+  }
+  ReportValue::Array dropped;
+  for (const int t : tied.dropped) dropped.emplace_back(names[ties[t].hole]);
+  if (tied.ties_failed) {
+    *brief = "the adjustment with them failed (" + tied.failure + "): not used";
+  } else if (no_holes) {
+    *brief = "no feature to tie with";
+  } else if (ties.empty()) {
+    *brief = "no hole seen whole by two tiles or more";
+  } else {
+    *brief = fmt::format("{} hole{} seen whole by two tiles or more tie them", tied.kept.size(),
+                         tied.kept.size() == 1 ? "" : "s");
+  }
+  if (!dropped.empty()) {
+    *brief += fmt::format("; {} dropped: their views disagree beyond their sigma", dropped.size());
+  }
+  return ReportObject{
+      {"brief", *brief}, {"ties", std::move(rows)}, {"dropped", std::move(dropped)}};
+}
+
 FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<ImageF>& tiles,
                                       const CameraModel& camera, const OrthoGeometry& geometry,
                                       const PlateOnPart& plate, const IntrinsicsPrior& prior,
@@ -535,44 +575,14 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
       OverlapTiesReport(project, overlap_ties, first_overlap_observation,
                         result.adjusted.scene.residual_px, &result.overlap_brief);
 
-  ReportValue::Array rows;
-  int index = tied.first_tie_observation;
-  for (const HoleTie& tie : tied.kept) {
-    ReportValue::Array images;
-    double sum_squares = 0.0;
-    for (const int tile : tie.tiles) {
-      images.emplace_back(project.tiles[tile].image);
-      sum_squares += result.adjusted.scene.residual_px.col(index++).squaredNorm();
-    }
-    rows.emplace_back(
-        ReportObject{{"feature", names[tie.hole]},
-                     {"images", std::move(images)},
-                     {"rms_px", std::sqrt(sum_squares / static_cast<double>(tie.tiles.size()))}});
-  }
-  ReportValue::Array dropped;
-  for (const int t : tied.dropped) dropped.emplace_back(names[ties[t].hole]);
+  result.ties_report = HoleTiesReport(project, tied, result.adjusted.scene.residual_px, ties, names,
+                                      holes.empty(), &result.ties_brief);
   // The tracks (the plate's observations stay the final adjustment's).
   registration->input.observations = result.adjusted.input.observations;
   registration->input.num_tracks = result.adjusted.input.num_tracks;
   // Held by the table prior alone: what the final solve saw no observation
   // of (no match, tie or plate mark).
   registration->tiles_held_by_prior = result.adjusted.summary.tiles_without_observations;
-  if (tied.ties_failed) {
-    result.ties_brief = "the adjustment with them failed (" + tied.failure + "): not used";
-  } else if (holes.empty()) {
-    result.ties_brief = "no feature to tie with";
-  } else if (ties.empty()) {
-    result.ties_brief = "no hole seen whole by two tiles or more";
-  } else {
-    result.ties_brief = fmt::format("{} hole{} seen whole by two tiles or more tie them",
-                                    tied.kept.size(), tied.kept.size() == 1 ? "" : "s");
-  }
-  if (!dropped.empty()) {
-    result.ties_brief +=
-        fmt::format("; {} dropped: their views disagree beyond their sigma", dropped.size());
-  }
-  result.ties_report = ReportObject{
-      {"brief", result.ties_brief}, {"ties", std::move(rows)}, {"dropped", std::move(dropped)}};
   return result;
 }
 
