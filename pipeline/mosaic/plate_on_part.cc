@@ -218,6 +218,68 @@ int AlignMarkOrder(const BoardSpec& board, const CameraModel& camera, const Plan
   return best;
 }
 
+namespace {
+
+// Step 3 in a tile where the plate is cut: every mark predicted through
+// cam_from_plate and located there (a dot's ellipse fitted, a chessboard's
+// corner refined as DetectPlate refines it) into *q_px and *sigma_px, which
+// stay 0 where it is not found.
+void LocateMarksOfACutPlate(const ImageF& tile, const BoardSpec& board, const CameraModel& camera,
+                            const PlaneScene& scene, const Eigen::Isometry3d& cam_from_plate,
+                            const PlateOnPartOptions& options, Eigen::Matrix2Xd* q_px,
+                            Eigen::VectorXd* sigma_px) {
+  const int num_marks = static_cast<int>(q_px->cols());
+  const bool dots = board.type != BoardType::kChessboard;
+  const Eigen::Matrix3d rot = RotationFromAngleAxis(scene.cam_from_part_r);
+  const double radius_mm = 0.5 * board.dot_diameter_mm;
+  const Eigen::Matrix3Xd p_cam = cam_from_plate * BoardPoints(board);
+  if ((p_cam.row(2).array() <= 0).any()) return;
+  Eigen::Matrix2Xd predicted;
+  Eigen::MatrixXd dq_dp, dq_dintrinsics;
+  if (!ProjectPoints(camera, p_cam, &predicted, &dq_dp, &dq_dintrinsics)) return;
+  if (!dots) {
+    // The corners' spacing: the image of one pitch along the plate's x.
+    const double spacing_px =
+        (dq_dp.block<2, 3>(0, 0) * cam_from_plate.linear().col(0) * board.pitch_mm).norm();
+    Eigen::Matrix2Xd refined;
+    std::vector<bool> found;
+    RefineChessboardCorners(tile, predicted, spacing_px, options.border_margin_px,
+                            options.max_offset_px, &refined, &found);
+    for (int m = 0; m < num_marks; ++m) {
+      if (!found[static_cast<size_t>(m)]) continue;
+      q_px->col(m) = refined.col(m);
+      (*sigma_px)(m) = std::max(options.detection.chessboard_sigma_px, options.min_mark_sigma_px);
+    }
+    return;
+  }
+  for (int m = 0; m < num_marks; ++m) {
+    // The dot's image: the circle through the local affine of the plane.
+    const Eigen::Matrix2d j =
+        dq_dp.block<2, 3>(2 * Eigen::Index{m}, 0) * rot.leftCols<2>() * radius_mm;
+    const Eigen::Matrix2d shape = (j * j.transpose()).inverse();
+    Ellipse rough;
+    rough.centre_px = predicted.col(m);
+    rough.shape = shape;
+    const double a = rough.SemiMajorPx(), b = rough.SemiMinorPx();
+    const double reach = a + options.max_offset_px + options.refinement.edges.ray_half_length_px +
+                         options.border_margin_px;
+    const Eigen::Vector2d c = predicted.col(m);
+    if (c.x() - reach < 0 || c.y() - reach < 0 || c.x() + reach > camera.width_px - 1 ||
+        c.y() + reach > camera.height_px - 1)
+      continue;
+    rough.centre_px = DarkCentroid(tile, c, a, options.max_offset_px);
+    const MarkFit fit = RefineEllipticalMark(tile, rough, options.refinement);
+    if (!fit.ok || (fit.ellipse.centre_px - c).norm() > options.max_offset_px ||
+        std::abs(fit.ellipse.SemiMajorPx() / a - 1) > 0.2 ||
+        std::abs(fit.ellipse.SemiMinorPx() / b - 1) > 0.2)
+      continue;
+    q_px->col(m) = fit.ellipse.centre_px;
+    (*sigma_px)(m) = std::max(fit.sigma_px, options.min_mark_sigma_px);
+  }
+}
+
+}  // namespace
+
 PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
                             const CameraModel& camera, const PlaneBundleInput& registered_input,
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options) {
@@ -297,59 +359,13 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
     result.initial_pose = seeded.plates[0];
   }
 
-  // 3. Marks predicted where the plate is cut: a dot's ellipse fitted, a
-  // chessboard's corner refined as DetectPlate refines it.
-  const bool dots = board.type != BoardType::kChessboard;
-  const Eigen::Matrix3d rot = RotationFromAngleAxis(registered_scene.cam_from_part_r);
-  const double radius_mm = 0.5 * board.dot_diameter_mm;
+  // 3. Marks predicted where the plate is cut.
   for (int i = 0; i < num_tiles; ++i) {
     if (whole[i].usable) continue;
-    const Eigen::Isometry3d cam_from_plate =
-        CamFromPlate(registered_scene, result.initial_pose, registered_scene.table_pos_mm[i]);
-    const Eigen::Matrix3Xd p_cam = cam_from_plate * BoardPoints(board);
-    if ((p_cam.row(2).array() <= 0).any()) continue;
-    Eigen::Matrix2Xd predicted;
-    Eigen::MatrixXd dq_dp, dq_dintrinsics;
-    if (!ProjectPoints(camera, p_cam, &predicted, &dq_dp, &dq_dintrinsics)) continue;
-    if (!dots) {
-      // The corners' spacing: the image of one pitch along the plate's x.
-      const double spacing_px =
-          (dq_dp.block<2, 3>(0, 0) * cam_from_plate.linear().col(0) * board.pitch_mm).norm();
-      Eigen::Matrix2Xd refined;
-      std::vector<bool> found;
-      RefineChessboardCorners(tiles[i], predicted, spacing_px, options.border_margin_px,
-                              options.max_offset_px, &refined, &found);
-      for (int m = 0; m < num_marks; ++m) {
-        if (!found[static_cast<size_t>(m)]) continue;
-        q_px[i].col(m) = refined.col(m);
-        sigma_px[i](m) = std::max(options.detection.chessboard_sigma_px, options.min_mark_sigma_px);
-      }
-      continue;
-    }
-    for (int m = 0; m < num_marks; ++m) {
-      // The dot's image: the circle through the local affine of the plane.
-      const Eigen::Matrix2d j =
-          dq_dp.block<2, 3>(2 * Eigen::Index{m}, 0) * rot.leftCols<2>() * radius_mm;
-      const Eigen::Matrix2d shape = (j * j.transpose()).inverse();
-      Ellipse rough;
-      rough.centre_px = predicted.col(m);
-      rough.shape = shape;
-      const double a = rough.SemiMajorPx(), b = rough.SemiMinorPx();
-      const double reach = a + options.max_offset_px + options.refinement.edges.ray_half_length_px +
-                           options.border_margin_px;
-      const Eigen::Vector2d c = predicted.col(m);
-      if (c.x() - reach < 0 || c.y() - reach < 0 || c.x() + reach > camera.width_px - 1 ||
-          c.y() + reach > camera.height_px - 1)
-        continue;
-      rough.centre_px = DarkCentroid(tiles[i], c, a, options.max_offset_px);
-      const MarkFit fit = RefineEllipticalMark(tiles[i], rough, options.refinement);
-      if (!fit.ok || (fit.ellipse.centre_px - c).norm() > options.max_offset_px ||
-          std::abs(fit.ellipse.SemiMajorPx() / a - 1) > 0.2 ||
-          std::abs(fit.ellipse.SemiMinorPx() / b - 1) > 0.2)
-        continue;
-      q_px[i].col(m) = fit.ellipse.centre_px;
-      sigma_px[i](m) = std::max(fit.sigma_px, options.min_mark_sigma_px);
-    }
+    LocateMarksOfACutPlate(
+        tiles[i], board, camera, registered_scene,
+        CamFromPlate(registered_scene, result.initial_pose, registered_scene.table_pos_mm[i]),
+        options, &q_px[i], &sigma_px[i]);
   }
 
   // 4. Perspective bias of every centre, with the tile's plate pose.
@@ -394,7 +410,7 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
         "(mosaic.plate_height_mm sets it)";
   }
   result.found = true;
-  result.sigma_assumed = !dots;
+  result.sigma_assumed = board.type == BoardType::kChessboard;
   std::ostringstream brief;
   brief << "plate on the part: whole in " << result.whole_in_tiles.size() << " tile(s), "
         << result.observations.size() << " marks in " << num_seen << " tile(s); height "
