@@ -393,10 +393,9 @@ std::string CalibrationSection(const Report& report, const ReportHtmlInputs& inp
   return out;
 }
 
-std::string MosaicSection(const Report& report) {
-  std::string out = "<h2 id=\"mosaic\">Mosaic registration</h2>\n";
-  if (!report.mosaic) return out + Missing("The mosaic stage has not run.");
-  const MosaicReport& m = *report.mosaic;
+// The mosaic's facts: its grid, the registration's summary, the scale and
+// the checks on the table and the working distance.
+std::string MosaicFacts(const MosaicReport& m) {
   const ReportObject& extra = m.extra;
   Facts facts;
   facts.Add("rms reprojection residual", fmt::format("{:.4f} px", m.rms_px));
@@ -450,8 +449,12 @@ std::string MosaicSection(const Report& report) {
   }
   if (const ReportObject* exposure = AsObject(Member(extra, "exposure")))
     facts.Add("exposure", Text(Member(*exposure, "brief")));
-  out += facts.Html();
+  return facts.Html();
+}
 
+// The tile pairs: candidates, matches, residuals, usable.
+std::string PairsTable(const ReportObject& extra) {
+  std::string out;
   if (const ReportValue::Array* pairs = AsArray(Member(extra, "pairs"))) {
     out += "<h3>Tile pairs</h3>\n";
     Table table({"tile a", "tile b", "predicted overlap", "candidates", "matched", "inliers",
@@ -475,6 +478,12 @@ std::string MosaicSection(const Report& report) {
     }
     out += table.Html("pairs-table");
   }
+  return out;
+}
+
+// The holes that tie the tiles, and those dropped.
+std::string HoleTiesTables(const ReportObject& extra) {
+  std::string out;
   if (const ReportObject* hole_ties = AsObject(Member(extra, "hole_ties"))) {
     out += "<h3>Holes tying the tiles</h3>\n<p>" + Text(Member(*hole_ties, "brief")) + "</p>\n";
     const ReportValue::Array* ties = AsArray(Member(*hole_ties, "ties"));
@@ -499,6 +508,12 @@ std::string MosaicSection(const Report& report) {
       out += "<p>Dropped (their views disagree beyond their sigma): " + names + "</p>\n";
     }
   }
+  return out;
+}
+
+// The overlaps of held or weakly tied tiles aligned directly.
+std::string OverlapTiesTable(const ReportObject& extra) {
+  std::string out;
   if (const ReportObject* overlap_ties = AsObject(Member(extra, "overlap_ties"))) {
     const ReportValue::Array* ties = AsArray(Member(*overlap_ties, "ties"));
     if (ties != nullptr && !ties->empty()) {
@@ -526,6 +541,12 @@ std::string MosaicSection(const Report& report) {
       out += table.Html("overlap-ties-table");
     }
   }
+  return out;
+}
+
+// Each tile's adjusted minus commanded table position.
+std::string TilesTable(const ReportObject& extra) {
+  std::string out;
   if (const ReportValue::Array* tiles = AsArray(Member(extra, "tiles"))) {
     out += "<h3>Tiles: adjusted minus commanded table position</h3>\n";
     Table table(
@@ -550,6 +571,12 @@ std::string MosaicSection(const Report& report) {
     }
     out += table.Html("tiles-table");
   }
+  return out;
+}
+
+// The table positions the features contradicted, left out.
+std::string PriorsLeftOutTable(const ReportObject& extra) {
+  std::string out;
   const ReportValue::Array* left_out = AsArray(Member(extra, "table_priors_left_out"));
   if (left_out != nullptr && !left_out->empty()) {
     out +=
@@ -572,6 +599,12 @@ std::string MosaicSection(const Report& report) {
     }
     out += table.Html("priors-left-out-table");
   }
+  return out;
+}
+
+// The tiles held by their table prior alone, and why.
+std::string HeldTilesTable(const ReportObject& extra) {
+  std::string out;
   if (const ReportValue::Array* held = AsArray(Member(extra, "tiles_held_by_prior"))) {
     out += "<h3>Tiles held by the table prior alone</h3>\n";
     if (held->empty()) {
@@ -585,6 +618,12 @@ std::string MosaicSection(const Report& report) {
       out += table.Html("held-table");
     }
   }
+  return out;
+}
+
+// The exposure compensation, before and after.
+std::string ExposureFacts(const ReportObject& extra) {
+  std::string out;
   if (const ReportObject* exposure = AsObject(Member(extra, "exposure"))) {
     out += "<h3>Exposure compensation</h3>\n";
     Facts e;
@@ -598,6 +637,15 @@ std::string MosaicSection(const Report& report) {
     out += e.Html();
   }
   return out;
+}
+
+std::string MosaicSection(const Report& report) {
+  std::string out = "<h2 id=\"mosaic\">Mosaic registration</h2>\n";
+  if (!report.mosaic) return out + Missing("The mosaic stage has not run.");
+  const ReportObject& extra = report.mosaic->extra;
+  return out + MosaicFacts(*report.mosaic) + PairsTable(extra) + HoleTiesTables(extra) +
+         OverlapTiesTable(extra) + TilesTable(extra) + PriorsLeftOutTable(extra) +
+         HeldTilesTable(extra) + ExposureFacts(extra);
 }
 
 // The file `name` (relative to out/, as the report names it) in the first of
