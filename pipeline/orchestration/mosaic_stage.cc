@@ -886,14 +886,12 @@ void RunMosaicStage(StageContext& context) {
   report.rms_px = registration.rms_px;
 
   fs::create_directories(context.staging_dir / "mosaic");
-  WriteSceneJson(SceneToSave(project, camera, registration, adjusted),
-                 context.staging_dir / kSceneName);
+  const SavedScene saved = SceneToSave(project, camera, registration, adjusted);
+  WriteSceneJson(saved, context.staging_dir / kSceneName);
 
-  std::vector<std::string> image_names;
-  for (const TilePosition& tile : project.tiles) image_names.push_back(tile.image);
   const ColmapExportSummary colmap =
       WriteColmapModel(context.staging_dir / kColmapDirName, scene_camera, registration.scene,
-                       registration.input.observations, image_names);
+                       registration.input.observations, saved.tile_images);
   const double write_seconds = SecondsSince(write_start);
 
   const Eigen::Matrix2d& a = registration.image_px_per_table_mm;
