@@ -66,6 +66,15 @@ class MosaicStageTest : public ::testing::Test {
   void SetUp() override { ASSERT_EQ(error_, nullptr) << *error_; }
 
   static fs::path ProjectDir() { return dir_->path() / "demo"; }
+  // The rendered project copied into `name`, with `camera` as its
+  // out/camera.cameramodel.
+  static fs::path CopyWithCamera(const std::string& name, const CameraModel& camera) {
+    const fs::path dir = dir_->path() / name;
+    testing::CopyProject(sim_->project_dir, dir);
+    fs::create_directories(dir / "out");
+    WriteCameraModel(dir / "out" / "camera.cameramodel", camera);
+    return dir;
+  }
   static fs::path Out() { return ProjectDir() / "out"; }
   static const SimulationTruth& Truth() { return sim_->truth; }
 
@@ -321,13 +330,25 @@ std::string MosaicStageFailure(const fs::path& dir) {
   return why;
 }
 
+// Runs the mosaic stage of the project in `dir`, which must refuse its
+// input before it writes a mosaic; returns the error.
+InputError MosaicStageInputError(const fs::path& dir) {
+  RunOptions mosaic_only;
+  mosaic_only.stages = {Stage::kMosaic};
+  try {
+    RunProject(LoadProject(dir), mosaic_only);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_FALSE(fs::exists(dir / "out" / "mosaic.png"));
+    return e;
+  }
+  return InputError("", "");
+}
+
 // Two tiles that do not overlap (opposite corners of the 3 x 3 grid): the
 // stage fails on the data, says why, and out/ gets nothing.
 TEST_F(MosaicStageTest, TilesThatDoNotOverlapFailTheStage) {
-  const fs::path dir = dir_->path() / "apart";
-  testing::CopyProject(sim_->project_dir, dir);
-  fs::create_directories(dir / "out");
-  WriteCameraModel(dir / "out" / "camera.cameramodel", Truth().camera.model);
+  const fs::path dir = CopyWithCamera("apart", Truth().camera.model);
   std::string table = "image,x_mm,y_mm\n";
   for (const TileTruth& tile : Truth().tiles) {
     const bool corner =
@@ -371,25 +392,31 @@ TEST_F(MosaicStageTest, BlankTileIsRefusedByName) {
 // Tiles of another size than the calibrated imager (out/'s camera from
 // another camera or mode) are refused by name before any work on them.
 TEST_F(MosaicStageTest, TilesOfAnotherSizeThanTheCameraAreRefusedByName) {
-  const fs::path dir = dir_->path() / "other_imager";
-  testing::CopyProject(sim_->project_dir, dir);
-  fs::create_directories(dir / "out");
   CameraModel camera = Truth().camera.model;
   camera.width_px /= 2;
   camera.height_px /= 2;
-  WriteCameraModel(dir / "out" / "camera.cameramodel", camera);
-  RunOptions mosaic_only;
-  mosaic_only.stages = {Stage::kMosaic};
-  try {
-    RunProject(LoadProject(dir), mosaic_only);
-    FAIL() << "no error";
-  } catch (const InputError& e) {
-    EXPECT_EQ(e.where(), (dir / "tiles" / Truth().tiles[0].image).string());
-    EXPECT_NE(std::string(e.what()).find("but the calibrated camera's imager is 800x600 px"),
-              std::string::npos)
-        << e.what();
-  }
-  EXPECT_FALSE(fs::exists(dir / "out" / "mosaic.png"));
+  const fs::path dir = CopyWithCamera("other_imager", camera);
+  const InputError e = MosaicStageInputError(dir);
+  EXPECT_EQ(e.where(), (dir / "tiles" / Truth().tiles[0].image).string());
+  EXPECT_NE(std::string(e.what()).find("but the calibrated camera's imager is 800x600 px"),
+            std::string::npos)
+      << e.what();
+}
+
+// mosaic.gsd_mm typed 0.001 for 0.1: the mosaic would have been ~200 Gpx,
+// and the kernel killed omm after minutes. The key is named, with a gsd that
+// fits, as soon as the registration has placed the tiles.
+TEST_F(MosaicStageTest, GsdFarFinerThanTheTilesIsRefusedByKey) {
+  const fs::path dir = CopyWithCamera("fine_gsd", Truth().camera.model);
+  testing::ReplaceInFile(dir / "project.yaml", "gsd_mm: 0.15", "gsd_mm: 0.001");
+  const InputError e = MosaicStageInputError(dir);
+  EXPECT_EQ(e.where(), (dir / "project.yaml").string());
+  const std::string what = e.what();
+  EXPECT_NE(what.find("key 'mosaic.gsd_mm': a gsd of 0.001 mm makes a mosaic of"),
+            std::string::npos)
+      << what;
+  EXPECT_NE(what.find("mm or more fits"), std::string::npos) << what;
+  EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
 }
 
 // The centre tile recorded as `recorded` of its pixels (16-bit), the

@@ -10,6 +10,7 @@
 #include <optional>
 #include <stdexcept>
 
+#include <fmt/format.h>
 #include <Eigen/Geometry>
 
 #include "adapters/mrcal/lens.h"
@@ -28,12 +29,42 @@ std::string OrthoOptions::Check() const {
     return "whole_margin_px must be >= 0 and finite";
   if (const std::string e = exposure.Check(); !e.empty()) return "exposure: " + e;
   if (num_threads < 1) return "num_threads must be >= 1";
+  if (max_pixels < 1) return "max_pixels must be >= 1";
   return "";
 }
+
+MosaicTooLargeError::MosaicTooLargeError(double gsd, const Eigen::Vector2d& size,
+                                         std::int64_t limit, double tile_pixel, double min_gsd)
+    : InputError("", fmt::format("a gsd of {:g} mm makes a mosaic of {:.0f} x {:.0f} px ({:.0f} "
+                                 "Mpx), more than the {:.0f} Mpx it may have; a tile pixel is "
+                                 "{:.3g} mm on the part: a gsd of {:g} mm or more fits",
+                                 gsd, size.x(), size.y(), 1e-6 * size.prod(),
+                                 1e-6 * static_cast<double>(limit), tile_pixel, min_gsd)),
+      gsd_mm(gsd),
+      size_px(size),
+      max_pixels(limit),
+      tile_pixel_mm(tile_pixel),
+      min_gsd_mm(min_gsd) {}
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Area of a simple polygon (2 x N vertices in order, either sense).
+double PolygonArea(const Eigen::Matrix2Xd& polygon) {
+  double twice = 0.0;
+  for (Eigen::Index k = 0, n = polygon.cols(); k < n; ++k) {
+    const Eigen::Vector2d a = polygon.col(k), b = polygon.col((k + 1) % n);
+    twice += a.x() * b.y() - b.x() * a.y();
+  }
+  return 0.5 * std::abs(twice);
+}
+
+// x > 0 rounded up to two significant digits.
+double RoundUpTo2Digits(double x) {
+  const double unit = std::pow(10.0, std::floor(std::log10(x)) - 1.0);
+  return std::ceil(x / unit) * unit;
+}
 
 // The (2r+1)^2 box mean of `image` (borders replicated) bilinearly
 // interpolated at q (q in [0, W - 1) x [0, H - 1)): one (2r+2)^2 stencil
@@ -194,8 +225,18 @@ OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& 
   const double gsd = options.gsd_mm;
   grid.gsd_mm = gsd;
   grid.origin_mm = {std::floor(lo.x() / gsd) * gsd, std::ceil(hi.y() / gsd) * gsd};
-  grid.size_px = {static_cast<int>(std::ceil((hi.x() - grid.origin_mm.x()) / gsd)),
-                  static_cast<int>(std::ceil((grid.origin_mm.y() - lo.y()) / gsd))};
+  const Eigen::Vector2d size_px(std::ceil((hi.x() - grid.origin_mm.x()) / gsd),
+                                std::ceil((grid.origin_mm.y() - lo.y()) / gsd));
+  if (!(size_px.prod() <= static_cast<double>(options.max_pixels))) {
+    // The pixel count goes as 1 / gsd^2 (the ceilings add a row and a
+    // column at most: 1 % covers them), rounded up to two digits.
+    const double min_gsd =
+        RoundUpTo2Digits(1.01 * gsd * std::sqrt(size_px.prod() / options.max_pixels));
+    const double tile_pixel_mm = std::sqrt(PolygonArea(geometry.tiles[0].footprint_mm) /
+                                           ((camera.width_px - 3.0) * (camera.height_px - 3.0)));
+    throw MosaicTooLargeError(gsd, size_px, options.max_pixels, tile_pixel_mm, min_gsd);
+  }
+  grid.size_px = size_px.cast<int>();
 
   for (int i = 0; i < num_tiles; ++i) {
     TileOrthoMap& map = geometry.tiles[i];

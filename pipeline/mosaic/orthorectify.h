@@ -52,6 +52,7 @@
 #include <Eigen/Core>
 
 #include "pipeline/core/camera.h"
+#include "pipeline/core/error.h"
 #include "pipeline/core/image.h"
 #include "pipeline/core/plane_scene.h"
 #include "pipeline/mosaic/exposure_compensation.h"
@@ -111,9 +112,27 @@ struct OrthoOptions {
   // Rows, and the exposure fit's passes (exposure.num_threads is set from
   // this), are split between threads; the result does not depend on it.
   int num_threads = 2;
+  // The largest mosaic made, pixels: omm's image readers refuse larger
+  // images (kMaxImagePixels), so `omm measure` could not read it back. A
+  // caller lowers it to what the machine's memory holds.
+  std::int64_t max_pixels = kMaxImagePixels;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
+};
+
+// ComputeOrthoGeometry's refusal of a gsd_mm that would make a mosaic of
+// more than max_pixels (a gsd far finer than the tiles resolve): bad input,
+// project.yaml's mosaic.gsd_mm. It says the size and the finest gsd that fits.
+class MosaicTooLargeError : public InputError {
+ public:
+  MosaicTooLargeError(double gsd, const Eigen::Vector2d& size, std::int64_t limit,
+                      double tile_pixel, double min_gsd);
+  double gsd_mm;
+  Eigen::Vector2d size_px;  // the mosaic's width and height at gsd_mm
+  std::int64_t max_pixels;
+  double tile_pixel_mm;  // a tile pixel's size on the part (its footprint's)
+  double min_gsd_mm;     // the finest gsd whose mosaic has <= max_pixels
 };
 
 // Where one tile's scene puts the mosaic's pixels.

@@ -12,6 +12,7 @@
 #include <random>
 #include <stdexcept>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "adapters/mrcal/lens.h"
@@ -164,6 +165,48 @@ TEST(OrthoGeometry, GridCoversTheFootprints) {
       EXPECT_LE(m.y(), grid.size_px.y() - 0.5);
     }
   }
+}
+
+// A gsd far finer than the tiles resolve (a typing error: 0.001 for 0.1)
+// asked for a 200-Gpx mosaic, and the kernel killed omm for want of memory.
+// It is refused before any allocation, with the tile pixel's size on the
+// part (the simulator's truth) and a gsd that fits, which does.
+TEST(OrthoGeometry, MosaicOfMoreThanMaxPixelsIsRefusedWithAGsdThatFits) {
+  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  const CameraModel& camera = plan.truth.camera.model;
+  const PlaneScene scene = TruthPlaneScene(plan.truth);
+  OrthoOptions options;
+  options.gsd_mm = 0.15;
+  const Eigen::Vector2i size_px = ComputeOrthoGeometry(camera, scene, options).grid.size_px;
+  // A tile pixel on the part at the image centre: the plane's distance / f.
+  const Eigen::Isometry3d& cam_from_part = plan.truth.cam_from_part;
+  const double distance_mm =
+      std::abs(cam_from_part.linear().col(2).dot(cam_from_part.translation()));
+  const double tile_pixel_mm = distance_mm / camera.intrinsics(0);
+
+  options.max_pixels = std::int64_t{size_px.x()} * size_px.y() / 5;
+  try {
+    ComputeOrthoGeometry(camera, scene, options);
+    ADD_FAILURE() << "no error";
+  } catch (const MosaicTooLargeError& e) {
+    EXPECT_EQ(e.size_px, size_px.cast<double>());
+    // The footprint's mean pixel: the distortion makes it 0.8 % larger here.
+    EXPECT_NEAR(e.tile_pixel_mm, tile_pixel_mm, 0.02 * tile_pixel_mm);
+    // sqrt(5) times coarser, rounded up to two digits.
+    EXPECT_GE(e.min_gsd_mm, 0.15 * std::sqrt(5.0));
+    EXPECT_LE(e.min_gsd_mm, 0.15 * std::sqrt(5.0) * 1.06);
+    EXPECT_NE(std::string(e.what()).find("a gsd of " + fmt::format("{:g}", e.min_gsd_mm) +
+                                         " mm or more fits"),
+              std::string::npos)
+        << e.what();
+    options.gsd_mm = e.min_gsd_mm;
+    const Eigen::Vector2i fits = ComputeOrthoGeometry(camera, scene, options).grid.size_px;
+    EXPECT_LE(std::int64_t{fits.x()} * fits.y(), options.max_pixels);
+  }
+  // Beyond int's range, refused as well.
+  options = {};
+  options.gsd_mm = 1e-9;
+  EXPECT_THROW(ComputeOrthoGeometry(camera, scene, options), MosaicTooLargeError);
 }
 
 // A lens model that maps no ray to the image's corners (here a radial
