@@ -404,19 +404,23 @@ TEST_F(MosaicStageTest, TilesOfAnotherSizeThanTheCameraAreRefusedByName) {
 }
 
 // mosaic.gsd_mm typed 0.001 for 0.1: the mosaic would have been ~200 Gpx,
-// and the kernel killed omm after minutes. The key is named, with a gsd that
-// fits, as soon as the registration has placed the tiles.
-TEST_F(MosaicStageTest, GsdFarFinerThanTheTilesIsRefusedByKey) {
-  const fs::path dir = CopyWithCamera("fine_gsd", Truth().camera.model);
-  testing::ReplaceInFile(dir / "project.yaml", "gsd_mm: 0.15", "gsd_mm: 0.001");
-  const InputError e = MosaicStageInputError(dir);
-  EXPECT_EQ(e.where(), (dir / "project.yaml").string());
-  const std::string what = e.what();
-  EXPECT_NE(what.find("key 'mosaic.gsd_mm': a gsd of 0.001 mm makes a mosaic of"),
-            std::string::npos)
-      << what;
-  EXPECT_NE(what.find("mm or more fits"), std::string::npos) << what;
-  EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
+// and the kernel killed omm after minutes; typed 50 for 0.05, the stage
+// failed naming every tile "all black or saturated". The key is named, with
+// a gsd that fits, as soon as the registration has placed the tiles.
+TEST_F(MosaicStageTest, GsdOutOfRangeIsRefusedByKey) {
+  for (const auto& [gsd, fits] :
+       {std::pair{"0.001", "mm or more fits"}, {"50", "mm or less fits"}}) {
+    const fs::path dir = CopyWithCamera(std::string("gsd_") + gsd, Truth().camera.model);
+    testing::ReplaceInFile(dir / "project.yaml", "gsd_mm: 0.15", std::string("gsd_mm: ") + gsd);
+    const InputError e = MosaicStageInputError(dir);
+    EXPECT_EQ(e.where(), (dir / "project.yaml").string());
+    const std::string what = e.what();
+    EXPECT_NE(what.find(std::string("key 'mosaic.gsd_mm': a gsd of ") + gsd + " mm makes a mosaic"),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find(fits), std::string::npos) << what;
+    EXPECT_FALSE(fs::exists(dir / "out" / "report.json"));
+  }
 }
 
 // The centre tile recorded as `recorded` of its pixels (16-bit), the

@@ -30,21 +30,15 @@ std::string OrthoOptions::Check() const {
   if (const std::string e = exposure.Check(); !e.empty()) return "exposure: " + e;
   if (num_threads < 1) return "num_threads must be >= 1";
   if (max_pixels < 1) return "max_pixels must be >= 1";
+  if (!(max_tile_px_per_mosaic_px >= 1.0)) return "max_tile_px_per_mosaic_px must be >= 1";
   return "";
 }
 
-MosaicTooLargeError::MosaicTooLargeError(double gsd, const Eigen::Vector2d& size,
-                                         std::int64_t limit, double tile_pixel, double min_gsd)
-    : InputError("", fmt::format("a gsd of {:g} mm makes a mosaic of {:.0f} x {:.0f} px ({:.0f} "
-                                 "Mpx), more than the {:.0f} Mpx it may have; a tile pixel is "
-                                 "{:.3g} mm on the part: a gsd of {:g} mm or more fits",
-                                 gsd, size.x(), size.y(), 1e-6 * size.prod(),
-                                 1e-6 * static_cast<double>(limit), tile_pixel, min_gsd)),
-      gsd_mm(gsd),
-      size_px(size),
-      max_pixels(limit),
+GsdError::GsdError(const std::string& why, bool is_too_fine, double tile_pixel, double fitting_gsd)
+    : InputError("", why),
+      too_fine(is_too_fine),
       tile_pixel_mm(tile_pixel),
-      min_gsd_mm(min_gsd) {}
+      fitting_gsd_mm(fitting_gsd) {}
 
 namespace {
 
@@ -60,10 +54,10 @@ double PolygonArea(const Eigen::Matrix2Xd& polygon) {
   return 0.5 * std::abs(twice);
 }
 
-// x > 0 rounded up to two significant digits.
-double RoundUpTo2Digits(double x) {
+// x > 0 rounded up or down to two significant digits.
+double RoundTo2Digits(double x, bool up) {
   const double unit = std::pow(10.0, std::floor(std::log10(x)) - 1.0);
-  return std::ceil(x / unit) * unit;
+  return (up ? std::ceil(x / unit) : std::floor(x / unit)) * unit;
 }
 
 // The (2r+1)^2 box mean of `image` (borders replicated) bilinearly
@@ -157,9 +151,13 @@ void OrthoGeometry::TileRowPixels(int tile, int row, int col0, int n,
   // Segment by segment: pixel k lies between nodes j and j + 1, j = k / kStep + 1.
   for (int j = 1, k0 = 0; k0 < n; ++j, k0 += kStep) {
     const int k1 = std::min(n, k0 + kStep);
-    const bool ok = nok[j - 1] && nok[j] && nok[j + 1] && nok[j + 2];
-    std::fill(valid->begin() + k0, valid->begin() + k1, ok);
-    if (!ok) continue;
+    if (!(nok[j - 1] && nok[j] && nok[j + 1] && nok[j + 2])) {
+      // Nodes beyond the lens table's reach (a gsd of many tile pixels puts
+      // them far outside the image): each pixel from the table itself.
+      for (int k = k0; k < k1; ++k) (*valid)[k] = TilePixel(tile, col0 + k, row, &(*q_px)[k]);
+      continue;
+    }
+    std::fill(valid->begin() + k0, valid->begin() + k1, true);
     for (int k = k0; k < k1; ++k) {
       const double* wk = w[k - k0];
       (*q_px)[k] = wk[0] * nq[j - 1] + wk[1] * nq[j] + wk[2] * nq[j + 1] + wk[3] * nq[j + 2];
@@ -227,14 +225,30 @@ OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& 
   grid.origin_mm = {std::floor(lo.x() / gsd) * gsd, std::ceil(hi.y() / gsd) * gsd};
   const Eigen::Vector2d size_px(std::ceil((hi.x() - grid.origin_mm.x()) / gsd),
                                 std::ceil((grid.origin_mm.y() - lo.y()) / gsd));
+  const double tile_pixel_mm = std::sqrt(PolygonArea(geometry.tiles[0].footprint_mm) /
+                                         ((camera.width_px - 3.0) * (camera.height_px - 3.0)));
+  if (gsd > options.max_tile_px_per_mosaic_px * tile_pixel_mm) {
+    const double max_gsd =
+        RoundTo2Digits(0.99 * options.max_tile_px_per_mosaic_px * tile_pixel_mm, false);
+    throw GsdError(fmt::format("a gsd of {:g} mm makes a mosaic pixel {:.0f} tile pixels wide, "
+                               "more than the {:g} it may be; a tile pixel is {:.3g} mm on the "
+                               "part: a gsd of {:g} mm or less fits",
+                               gsd, gsd / tile_pixel_mm, options.max_tile_px_per_mosaic_px,
+                               tile_pixel_mm, max_gsd),
+                   false, tile_pixel_mm, max_gsd);
+  }
   if (!(size_px.prod() <= static_cast<double>(options.max_pixels))) {
     // The pixel count goes as 1 / gsd^2 (the ceilings add a row and a
-    // column at most: 1 % covers them), rounded up to two digits.
+    // column at most: 1 % covers them).
     const double min_gsd =
-        RoundUpTo2Digits(1.01 * gsd * std::sqrt(size_px.prod() / options.max_pixels));
-    const double tile_pixel_mm = std::sqrt(PolygonArea(geometry.tiles[0].footprint_mm) /
-                                           ((camera.width_px - 3.0) * (camera.height_px - 3.0)));
-    throw MosaicTooLargeError(gsd, size_px, options.max_pixels, tile_pixel_mm, min_gsd);
+        RoundTo2Digits(1.01 * gsd * std::sqrt(size_px.prod() / options.max_pixels), true);
+    throw GsdError(
+        fmt::format("a gsd of {:g} mm makes a mosaic of {:.0f} x {:.0f} px ({:.0f} "
+                    "Mpx), more than the {:.0f} Mpx it may have; a tile pixel is "
+                    "{:.3g} mm on the part: a gsd of {:g} mm or more fits",
+                    gsd, size_px.x(), size_px.y(), 1e-6 * size_px.prod(),
+                    1e-6 * static_cast<double>(options.max_pixels), tile_pixel_mm, min_gsd),
+        true, tile_pixel_mm, min_gsd);
   }
   grid.size_px = size_px.cast<int>();
 

@@ -116,23 +116,26 @@ struct OrthoOptions {
   // images (kMaxImagePixels), so `omm measure` could not read it back. A
   // caller lowers it to what the machine's memory holds.
   std::int64_t max_pixels = kMaxImagePixels;
+  // The coarsest mosaic pixel, in tile pixels. At 16 the demo, lens-mismatch
+  // and low-texture-exposure projects measure as at 1; at ~140 the mosaic's
+  // rims and overlaps are too few pixels for the measure stage and the
+  // exposure fit (orthorectify_test.cc).
+  double max_tile_px_per_mosaic_px = 16.0;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
 };
 
-// ComputeOrthoGeometry's refusal of a gsd_mm that would make a mosaic of
-// more than max_pixels (a gsd far finer than the tiles resolve): bad input,
-// project.yaml's mosaic.gsd_mm. It says the size and the finest gsd that fits.
-class MosaicTooLargeError : public InputError {
+// ComputeOrthoGeometry's refusal of options.gsd_mm (project.yaml's
+// mosaic.gsd_mm): too fine, a mosaic of more than max_pixels (a gsd far finer
+// than the tiles resolve); or too coarse, mosaic pixels of more than
+// max_tile_px_per_mosaic_px tile pixels. It says why, and a gsd that fits.
+class GsdError : public InputError {
  public:
-  MosaicTooLargeError(double gsd, const Eigen::Vector2d& size, std::int64_t limit,
-                      double tile_pixel, double min_gsd);
-  double gsd_mm;
-  Eigen::Vector2d size_px;  // the mosaic's width and height at gsd_mm
-  std::int64_t max_pixels;
-  double tile_pixel_mm;  // a tile pixel's size on the part (its footprint's)
-  double min_gsd_mm;     // the finest gsd whose mosaic has <= max_pixels
+  GsdError(const std::string& why, bool too_fine, double tile_pixel, double fitting_gsd);
+  bool too_fine;
+  double tile_pixel_mm;   // a tile pixel's size on the part (the footprint's mean)
+  double fitting_gsd_mm;  // the finest (too_fine) or coarsest gsd that fits
 };
 
 // Where one tile's scene puts the mosaic's pixels.
@@ -165,8 +168,9 @@ struct OrthoGeometry {
   }
   // Tile pixels of the mosaic pixels (col0 + k, row), k < n: the lens table
   // at every kRowNodeStep-th column, 1-D Catmull-Rom between (the map is
-  // smooth along a row: its error is below 1e-5 px; orthorectify_test.cc).
-  // valid[k] is false where the table does not cover a node.
+  // smooth along a row: its error is below 1e-5 px; orthorectify_test.cc),
+  // or TilePixel itself where the table does not cover a node between
+  // which a pixel lies. valid[k] is false where TilePixel's would be.
   static constexpr int kRowNodeStep = 8;
   void TileRowPixels(int tile, int row, int col0, int n, std::vector<Eigen::Vector2d>* q_px,
                      std::vector<char>* valid) const;

@@ -79,21 +79,22 @@ std::int64_t MosaicPixelLimit() {
                   static_cast<std::int64_t>(static_cast<double>(memory) / kBytesPerMosaicPixel));
 }
 
-// The mosaic's geometry on `scene`; a gsd finer than the machine can make a
-// mosaic of is project.yaml's error.
+// The mosaic's geometry on `scene`; a gsd out of range is project.yaml's
+// error.
 OrthoGeometry MosaicGeometry(const Project& project, const CameraModel& camera,
                              const PlaneScene& scene, const OrthoOptions& options) {
   try {
     return ComputeOrthoGeometry(camera, scene, options);
-  } catch (const MosaicTooLargeError& e) {
+  } catch (const GsdError& e) {
+    const double memory = static_cast<double>(PhysicalMemoryBytes());
     throw InputError(
         (project.dir / "project.yaml").string(),
-        fmt::format("key 'mosaic.gsd_mm': {} (omm's image readers take {:.0f} Mpx; this "
-                    "machine's {:.1f} GB of memory hold {:.0f} Mpx at {:g} bytes each)",
-                    e.what(), 1e-6 * static_cast<double>(kMaxImagePixels),
-                    1e-9 * static_cast<double>(PhysicalMemoryBytes()),
-                    1e-6 * static_cast<double>(PhysicalMemoryBytes()) / kBytesPerMosaicPixel,
-                    kBytesPerMosaicPixel));
+        "key 'mosaic.gsd_mm': " + std::string(e.what()) +
+            (e.too_fine ? fmt::format(" (omm's image readers take {:.0f} Mpx; this machine's "
+                                      "{:.1f} GB of memory hold {:.0f} Mpx at {:g} bytes each)",
+                                      1e-6 * static_cast<double>(kMaxImagePixels), 1e-9 * memory,
+                                      1e-6 * memory / kBytesPerMosaicPixel, kBytesPerMosaicPixel)
+                        : ""));
   }
 }
 
