@@ -206,6 +206,12 @@ std::future<TimedPrior> CalibrationPrior(const StageContext& context, CameraMode
 // scale: beyond any height the plate may stand at (its unknown height moves
 // the scale by h / d: 5 mm at 400 mm is 12 500 ppm), a units error.
 constexpr double kPlateScaleUnitsPpm = 1e5;
+// The table's variance component (FinalAdjustmentWithHoles): priors this
+// many times looser show a scatter that stiff ones hide; the estimate is
+// repeated until it moves by less than kTableSigmaSettled.
+constexpr double kLooseTableSigmaFactor = 100.0;
+constexpr double kTableSigmaSettled = 0.02;
+constexpr int kMaxTableSigmaPasses = 8;
 
 // report.mosaic.working_distance_check (working_distance.h), and a warning
 // when the part is far from where the calibration saw its plate.
@@ -585,21 +591,49 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   result.table_priors_left_out = wrong.found;
   // A table that scatters more than table.sigma_mm says, and no wrong
   // position explains it: its priors are weighed by the scatter estimated
-  // (their variance component) and the solve run again, so that the
-  // covariance, and so every sigma's table part, rests on what the data
-  // show. Never narrower than stated: the test is one-sided.
-  const TableSigmaEstimate scatter = EstimateTableSigma(
-      input.commanded_table_pos_mm, tied.adjusted.scene.table_pos_mm,
-      tied.adjusted.scene.covariance, input.table_sigma_mm, input.tiles_without_table_prior);
-  if (!TableSigmaConsistent(scatter, input.table_sigma_mm)) {
-    PlaneBundleInput widened = input;
-    widened.table_sigma_mm = scatter.sigma_mm;
-    TiedAdjustment retried =
-        AdjustWithHoleTies(camera, widened, registered, plate, prior, options, ties, tie_options);
-    if (retried.adjusted.summary.usable) {
-      input.table_sigma_mm = scatter.sigma_mm;
+  // (their variance component), so that the covariance, and so every sigma's
+  // table part, rests on what the data show. Never narrower than stated: the
+  // test is one-sided.
+  const auto solve_weighed_by = [&](double sigma_mm) {
+    PlaneBundleInput weighed = input;
+    weighed.table_sigma_mm = sigma_mm;
+    return AdjustWithHoleTies(camera, weighed, registered, plate, prior, options, ties,
+                              tie_options);
+  };
+  const auto scatter_of = [&](const TiedAdjustment& t, double sigma_mm) {
+    return EstimateTableSigma(input.commanded_table_pos_mm, t.adjusted.scene.table_pos_mm,
+                              t.adjusted.scene.covariance, sigma_mm,
+                              input.tiles_without_table_prior);
+  };
+  const double stated_mm = input.table_sigma_mm;
+  TableSigmaEstimate scatter = scatter_of(tied, stated_mm);
+  if (!scatter.ok) {
+    // Priors so stiff that the features check no position (redundancy < 1):
+    // a table stated to 0.1 um that scatters 20 um was held to its
+    // positions, and the measurements were off by up to 6 of their sigmas.
+    // Seen with priors 100x looser, the scatter has its full redundancy.
+    const TiedAdjustment loose = solve_weighed_by(kLooseTableSigmaFactor * stated_mm);
+    if (loose.adjusted.summary.usable)
+      scatter = scatter_of(loose, kLooseTableSigmaFactor * stated_mm);
+  }
+  if (scatter.ok && !TableSigmaConsistent(scatter, stated_mm)) {
+    // Each estimate rests on the weights it was solved with: too stiff ones
+    // squeeze the positions' scatter, so the estimate is repeated until it
+    // stands (stated 0.0005 mm on markers seed 283, which scatters 0.017,
+    // one pass weighed it 0.009; from 0.02 or looser, one pass suffices).
+    double used_mm = stated_mm;
+    for (int pass = 0; pass < kMaxTableSigmaPasses && scatter.ok &&
+                       scatter.sigma_mm > (1.0 + kTableSigmaSettled) * used_mm;
+         ++pass) {
+      TiedAdjustment retried = solve_weighed_by(scatter.sigma_mm);
+      if (!retried.adjusted.summary.usable) break;
+      used_mm = scatter.sigma_mm;
       tied = std::move(retried);
+      scatter = scatter_of(tied, used_mm);
+      spdlog::info("mosaic: table priors weighed by {:.4f} mm (pass {}): they scatter {:.4f} mm",
+                   used_mm, pass + 1, scatter.sigma_mm);
     }
+    input.table_sigma_mm = used_mm;
   }
   result.adjusted = std::move(tied.adjusted);
   result.samples = samples_beside.get();
