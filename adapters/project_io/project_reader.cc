@@ -14,6 +14,7 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "adapters/mrcal/lens.h"
 #include "adapters/opencv/image_io.h"
 #include "adapters/openssl/sha256.h"
 #include "adapters/project_io/text_file.h"
@@ -183,9 +184,13 @@ CameraSpec ReadCamera(const YamlReader& yaml, const YAML::Node& node) {
       yaml.Positive(yaml.Required(node, "camera", "focal_length_mm"), "camera.focal_length_mm");
   if (node["lens_model"].IsDefined() && !node["lens_model"].IsNull()) {
     const std::string model = yaml.String(node["lens_model"], "camera.lens_model");
-    if (model.rfind("LENSMODEL_", 0) != 0) {
+    // Checked here, not first by the calibration (which named neither the
+    // file's path nor the line).
+    if (!IsValidLensModel(model)) {
       yaml.Fail(node["lens_model"], "camera.lens_model",
-                fmt::format("expected a mrcal lens-model name such as LENSMODEL_OPENCV8, got '{}'",
+                fmt::format("expected a mrcal lens model, configured where it needs it, such as "
+                            "LENSMODEL_OPENCV8 or LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_"
+                            "Ny=12_fov_x_deg=100; got '{}'",
                             model));
     }
     camera.lens_model = model;

@@ -187,9 +187,21 @@ TEST_F(ProjectReaderTest, CameraGammaOutOfRangeIsRejected) {
   ExpectError({"camera.gamma", "[0.2, 5]"});
 }
 
-TEST_F(ProjectReaderTest, LensModelMustBeAMrcalName) {
-  Replace("project.yaml", "focal_length_mm: 12", "focal_length_mm: 12\n  lens_model: OPENCV8");
-  ExpectError({"camera.lens_model", "LENSMODEL_"});
+// Not a mrcal name, an unknown one, and a splined model without its
+// configuration: each refused on its line (the unknown one used to reach the
+// calibration, which named neither the file's path nor the line).
+TEST_F(ProjectReaderTest, LensModelMustBeAMrcalModelItCanUse) {
+  for (const std::string model : {"OPENCV8", "LENSMODEL_FOO", "LENSMODEL_SPLINED_STEREOGRAPHIC"}) {
+    WriteProjectFiles(project_);
+    Replace("project.yaml", "focal_length_mm: 12", "focal_length_mm: 12\n  lens_model: " + model);
+    ExpectError({"project.yaml:", "camera.lens_model", "'" + model + "'", "LENSMODEL_OPENCV8"});
+  }
+  WriteProjectFiles(project_);
+  Replace("project.yaml", "focal_length_mm: 12",
+          "focal_length_mm: 12\n  lens_model: LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_"
+          "fov_x_deg=100");
+  EXPECT_EQ(LoadProject(project_.dir).camera.lens_model,
+            "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=100");
 }
 
 TEST_F(ProjectReaderTest, UnknownBoardTypeSuggests) {
