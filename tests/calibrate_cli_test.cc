@@ -16,6 +16,7 @@
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 namespace omm {
 namespace {
@@ -97,6 +98,35 @@ TEST_F(CalibrateCliTest, WritesTheCameraSolveRecordPlotAndReport) {
                           "lens_model_choice", "perspective_bias_correction", "residuals_plot"}) {
     EXPECT_NE(Member(report.calibration->extra, key), nullptr) << key;
   }
+}
+
+// The calibrated focal length against project.yaml's (camera.focal_length_mm
+// 12, the rendered lens 12.16 mm: consistent), and a focal length typed 50
+// for 12: warned about and reported, the calibration unchanged.
+TEST_F(CalibrateCliTest, FocalLengthFarFromTheStatedOneIsWarnedAbout) {
+  ASSERT_EQ(calibrate_->exit_code, 0) << calibrate_->output;
+  const double truth_mm = testing::SimulatedProject("demo", 1).truth.camera.focal_length_mm;
+  const auto check_of = [](const fs::path& project) {
+    const Report report = ReadReportJson(project / "out" / "report.json");
+    const ReportObject* check =
+        report.calibration ? AsObject(Member(report.calibration->extra, "focal_length_check"))
+                           : nullptr;
+    return check ? *check : ReportObject{};
+  };
+  const ReportObject right = check_of(Calibrated());
+  EXPECT_EQ(AsBool(Member(right, "consistent")), true);
+  EXPECT_NEAR(AsNumber(Member(right, "calibrated_mm")).value_or(0.0), truth_mm, 0.001 * truth_mm);
+  EXPECT_THAT(calibrate_->output, Not(HasSubstr("calibrated focal length")));
+
+  const fs::path typed = dir_->path() / "focal_50";
+  testing::CopyProject(testing::SimulatedProject("demo", 1).project_dir, typed);
+  testing::ReplaceInFile(typed / "project.yaml", "focal_length_mm: 12", "focal_length_mm: 50");
+  const auto result = testing::RunOmm("calibrate " + Quoted(typed));
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("project.yaml's camera.focal_length_mm is 50"));
+  const ReportObject wrong = check_of(typed);
+  EXPECT_EQ(AsBool(Member(wrong, "consistent")), false);
+  EXPECT_NEAR(AsNumber(Member(wrong, "calibrated_mm")).value_or(0.0), truth_mm, 0.001 * truth_mm);
 }
 
 // Progress as each calibration image's plate is searched, from the first to

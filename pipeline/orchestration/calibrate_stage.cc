@@ -166,6 +166,31 @@ CalibrationReport ReportFromSolve(const fs::path& staging_dir, const Calibration
   return report;
 }
 
+// project.yaml's focal length and pixel pitch only seed the solve. A
+// calibrated focal length far from theirs says that one of them is not this
+// camera's (copied from another project, a lens changed): warned about, as
+// the report of a camera taken for another misleads whoever reads it. A lens's
+// nominal focal length is good to a few percent.
+constexpr double kFocalLengthTolerance = 0.15;
+
+ReportObject FocalLengthCheck(const CameraSpec& stated, const CameraModel& calibrated) {
+  const double pitch_mm = 1e-3 * stated.pixel_pitch_um;
+  const double calibrated_mm =
+      0.5 * (calibrated.intrinsics(0) + calibrated.intrinsics(1)) * pitch_mm;
+  const bool consistent =
+      std::abs(calibrated_mm / stated.focal_length_mm - 1.0) <= kFocalLengthTolerance;
+  if (!consistent) {
+    spdlog::warn(
+        "calibrate: the calibrated focal length is {:.2f} mm at camera.pixel_pitch_um {:g}, but "
+        "project.yaml's camera.focal_length_mm is {:g} ({:.2f} times): are both this camera's?",
+        calibrated_mm, stated.pixel_pitch_um, stated.focal_length_mm,
+        calibrated_mm / stated.focal_length_mm);
+  }
+  return ReportObject{{"stated_mm", stated.focal_length_mm},
+                      {"calibrated_mm", calibrated_mm},
+                      {"consistent", consistent}};
+}
+
 void RunStudy(StageContext& context, const CalibrationStageSummary& summary) {
   const Project& project = context.project;
   Eigen::VectorXd sigma;
@@ -256,6 +281,8 @@ void CalibrateFromImages(StageContext& context) {
   }
   report.extra.emplace_back("outliers", outliers);
   report.extra.emplace_back("lens_model_choice", LensChoiceReport(summary.lens));
+  report.extra.emplace_back("focal_length_check",
+                            FocalLengthCheck(context.project.camera, summary.result.camera));
   report.extra.emplace_back("perspective_bias_correction",
                             ReportObject{{"rounds", summary.bias.rounds},
                                          {"rms_px", summary.bias.rms_px},
