@@ -129,6 +129,20 @@ TEST_F(CalibrateCliTest, FocalLengthFarFromTheStatedOneIsWarnedAbout) {
   EXPECT_NEAR(AsNumber(Member(wrong, "calibrated_mm")).value_or(0.0), truth_mm, 0.001 * truth_mm);
 }
 
+// board.pitch_mm typed 10 for the caltab's 12.5: no image's plate is found
+// whole, and the failure asks whether the board is the plate in calib/.
+TEST_F(CalibrateCliTest, ABoardThatIsNotThePlateIsSuggested) {
+  const fs::path typed = dir_->path() / "pitch_10";
+  testing::CopyProject(testing::SimulatedProject("demo", 1).project_dir, typed);
+  testing::ReplaceInFile(typed / "project.yaml", "pitch_mm: 12.5", "pitch_mm: 10");
+  const auto result = testing::RunOmm("calibrate " + Quoted(typed));
+  EXPECT_EQ(result.exit_code, 1) << result.output;
+  EXPECT_THAT(result.output,
+              HasSubstr("is project.yaml's board (caltab of 7 x 7 marks, pitch 10 mm) the plate "
+                        "in calib/?"));
+  EXPECT_FALSE(fs::exists(typed / "out"));
+}
+
 // Progress as each calibration image's plate is searched, from the first to
 // the last of the demo's 20 (the log shows every tenth of them).
 TEST_F(CalibrateCliTest, ReportsProgressPerCalibrationImage) {

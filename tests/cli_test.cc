@@ -125,6 +125,7 @@ TEST_F(CliTest, PlainImagesFailCalibrationWithTheirReasons) {
   EXPECT_THAT(result.output, HasSubstr("stage 'calibrate' failed"));
   // One line per reason, not per image.
   EXPECT_THAT(result.output, HasSubstr("; plate not found: calib_01.png, calib_02.png"));
+  EXPECT_THAT(result.output, HasSubstr("is project.yaml's board (caltab of 7 x 7 marks, pitch"));
   EXPECT_FALSE(fs::exists(project_.OutDir()));
   // No calibrated camera: the mosaic stage says which stage must run first.
   const auto mosaic = testing::RunOmm("mosaic " + Quoted(project_.dir));

@@ -249,6 +249,16 @@ void CalibrateFromImages(StageContext& context) {
       if (group_images.size() > shown)
         why += fmt::format(" and {} more", group_images.size() - shown);
     }
+    // In no image at all: the plate may not be the one project.yaml
+    // describes (a pitch of 10 mm for 12.5 found 5 of the caltab's 49 marks).
+    const bool none_found = std::none_of(summary.detections.begin(), summary.detections.end(),
+                                         [](const PlateObservation& o) { return o.usable; });
+    if (none_found && !summary.detections.empty()) {
+      const BoardSpec& board = *context.project.board;
+      why += fmt::format(
+          "; is project.yaml's board ({} of {} x {} marks, pitch {:g} mm) the plate in calib/?",
+          BoardTypeName(board.type), board.cols, board.rows, board.pitch_mm);
+    }
     throw StageFailedError(Stage::kCalibrate, why);
   }
   spdlog::info("calibrate: {}", summary.lens.why);
