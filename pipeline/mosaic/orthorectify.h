@@ -119,7 +119,7 @@ struct OrthoOptions {
   // The coarsest mosaic pixel, in tile pixels. At 16 the demo, lens-mismatch
   // and low-texture-exposure projects measure as at 1; at ~140 the mosaic's
   // rims and overlaps are too few pixels for the measure stage and the
-  // exposure fit (orthorectify_test.cc).
+  // exposure fit (pipeline/mosaic/README.md, "The mosaic's pixel size").
   double max_tile_px_per_mosaic_px = 16.0;
 
   // Empty if valid, else what is wrong.
@@ -168,9 +168,9 @@ struct OrthoGeometry {
   }
   // Tile pixels of the mosaic pixels (col0 + k, row), k < n: the lens table
   // at every kRowNodeStep-th column, 1-D Catmull-Rom between (the map is
-  // smooth along a row: its error is below 1e-5 px; orthorectify_test.cc),
-  // or TilePixel itself where the table does not cover a node between
-  // which a pixel lies. valid[k] is false where TilePixel's would be.
+  // smooth along a row: its error is below 1e-5 px; orthorectify_test.cc);
+  // where the table does not cover one of the four nodes around a pixel,
+  // TilePixel itself. valid[k] is false where TilePixel's is.
   static constexpr int kRowNodeStep = 8;
   void TileRowPixels(int tile, int row, int col0, int n, std::vector<Eigen::Vector2d>* q_px,
                      std::vector<char>* valid) const;
