@@ -303,6 +303,31 @@ TEST(ReportHtml, ScaleFromTheTableAloneIsSaid) {
                         "&lt;46&gt; ppm)"));
 }
 
+// table.sigma_mm stated 5 mm for a table that scatters 0.0207 (15 dof): the
+// check is one-sided, so it is consistent, and the page says how much less
+// the positions scatter; at 0.03 stated it says nothing more.
+TEST(ReportHtml, ATableScatteringFarLessThanStatedIsSaid) {
+  for (const auto& [stated_mm, said] : {std::pair{5.0, true}, {0.03, false}}) {
+    Report report = FullReport();
+    for (auto& [key, value] : report.mosaic->extra) {
+      if (key == "table_sigma_check") {
+        value = ReportObject{{"stated_mm", stated_mm},
+                             {"estimated_mm", 0.0207},
+                             {"redundancy", 15.0},
+                             {"consistent", true},
+                             {"used_mm", stated_mm}};
+      }
+    }
+    const std::string html = ReportHtml(report, FullInputs());
+    EXPECT_THAT(html, HasSubstr(" dof): consistent")) << stated_mm;
+    EXPECT_EQ(html.find("the positions scatter 241.5 times less than table.sigma_mm") !=
+                  std::string::npos,
+              said)
+        << stated_mm;
+    EXPECT_EQ(html.find("times less than table.sigma_mm") != std::string::npos, said) << stated_mm;
+  }
+}
+
 TEST(ReportHtml, OnlyCalibrationRan) {
   Report report = FullReport();
   report.mosaic.reset();

@@ -13,6 +13,7 @@
 #include "adapters/opencv/image_io.h"
 #include "adapters/project_io/text_file.h"
 #include "pipeline/core/error.h"
+#include "pipeline/core/statistics.h"
 
 namespace omm {
 namespace {
@@ -392,6 +393,23 @@ std::string CalibrationSection(const Report& report, const ReportHtmlInputs& inp
   }
   return out;
 }
+// Where the table scatters significantly less than table.sigma_mm (below
+// the chi-square's 0.1 % quantile): said, not acted on. The sigmas keep the
+// stated sigma, which may hold what the scatter cannot show (a scale error
+// common to every position); a smaller one would make them smaller.
+std::string ScatterFarBelowStated(const ReportObject& table) {
+  const std::optional<double> estimated = AsNumber(Member(table, "estimated_mm"));
+  const std::optional<double> stated = AsNumber(Member(table, "stated_mm"));
+  const std::optional<double> redundancy = AsNumber(Member(table, "redundancy"));
+  if (!estimated || !stated || !redundancy || !(*stated > 0.0) || !(*redundancy >= 1.0)) return "";
+  const double ratio = *estimated / *stated;
+  const int dof = static_cast<int>(std::lround(*redundancy));
+  if (!(*redundancy * ratio * ratio < ChiSquareQuantile(0.001, dof))) return "";
+  return fmt::format(
+      "; the positions scatter {:.1f} times less than table.sigma_mm, which the sigmas' table "
+      "parts keep (a scale error common to every position would not show in the scatter)",
+      1.0 / ratio);
+}
 
 // The mosaic's facts: its grid, the registration's summary, the scale and
 // the checks on the table and the working distance.
@@ -429,7 +447,7 @@ std::string MosaicFacts(const MosaicReport& m) {
               NumberOf(*table, "estimated_mm", 4) + " mm against table.sigma_mm " +
                   NumberOf(*table, "stated_mm", 4) + " mm (" + NumberOf(*table, "redundancy", 1) +
                   " dof): " +
-                  (consistent ? "consistent"
+                  (consistent ? "consistent" + ScatterFarBelowStated(*table)
                    : Member(*table, "used_mm") != nullptr
                        ? "<b>too large: the priors are weighed by, and the sigmas' table parts "
                          "assume, " +
