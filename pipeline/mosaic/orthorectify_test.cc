@@ -167,19 +167,26 @@ TEST(OrthoGeometry, GridCoversTheFootprints) {
   }
 }
 
+// The default (demo) plan's truth camera and plane scene.
+struct DemoTruth {
+  SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  const CameraModel& camera = plan.truth.camera.model;
+  PlaneScene scene = TruthPlaneScene(plan.truth);
+};
+
 // A gsd far finer than the tiles resolve (a typing error: 0.001 for 0.1)
 // asked for a 200-Gpx mosaic, and the kernel killed omm for want of memory.
 // It is refused before any allocation, with the tile pixel's size on the
 // part (the simulator's truth) and a gsd that fits, which does.
 TEST(OrthoGeometry, MosaicOfMoreThanMaxPixelsIsRefusedWithAGsdThatFits) {
-  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
-  const CameraModel& camera = plan.truth.camera.model;
-  const PlaneScene scene = TruthPlaneScene(plan.truth);
+  const DemoTruth demo;
+  const CameraModel& camera = demo.camera;
+  const PlaneScene& scene = demo.scene;
   OrthoOptions options;
   options.gsd_mm = 0.15;
   const Eigen::Vector2i size_px = ComputeOrthoGeometry(camera, scene, options).grid.size_px;
   // A tile pixel on the part at the image centre: the plane's distance / f.
-  const Eigen::Isometry3d& cam_from_part = plan.truth.cam_from_part;
+  const Eigen::Isometry3d& cam_from_part = demo.plan.truth.cam_from_part;
   const double distance_mm =
       std::abs(cam_from_part.linear().col(2).dot(cam_from_part.translation()));
   const double tile_pixel_mm = distance_mm / camera.intrinsics(0);
@@ -218,9 +225,9 @@ TEST(OrthoGeometry, MosaicOfMoreThanMaxPixelsIsRefusedWithAGsdThatFits) {
 // than max_tile_px_per_mosaic_px tile pixels is refused with the coarsest
 // gsd that fits, which does.
 TEST(OrthoGeometry, MosaicPixelOfTooManyTilePixelsIsRefusedWithAGsdThatFits) {
-  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
-  const CameraModel& camera = plan.truth.camera.model;
-  const PlaneScene scene = TruthPlaneScene(plan.truth);
+  const DemoTruth demo;
+  const CameraModel& camera = demo.camera;
+  const PlaneScene& scene = demo.scene;
   OrthoOptions options;
   options.gsd_mm = 50.0;
   try {
@@ -246,9 +253,9 @@ TEST(OrthoGeometry, MosaicPixelOfTooManyTilePixelsIsRefusedWithAGsdThatFits) {
 // tile's border, beyond the lens table's reach at a coarse gsd: at 2.5 mm on
 // the demo (17 tile px a pixel) 82 % of the grid was drawn instead of 92 %.
 TEST(Orthorectify, EveryPixelATileSeesIsDrawnAtAnyGsd) {
-  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
-  const CameraModel& camera = plan.truth.camera.model;
-  const PlaneScene scene = TruthPlaneScene(plan.truth);
+  const DemoTruth demo;
+  const CameraModel& camera = demo.camera;
+  const PlaneScene& scene = demo.scene;
   const std::vector<ImageF> tiles(scene.table_pos_mm.size(),
                                   ImageF::Constant(camera.height_px, camera.width_px, 0.5f));
   OrthoOptions options;

@@ -607,7 +607,11 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   };
   const double stated_mm = input.table_sigma_mm;
   TableSigmaEstimate scatter = scatter_of(tied, stated_mm);
-  if (!scatter.ok) {
+  // Looser priors can check positions only beyond the gauge's 4 dof (shift,
+  // turn, scale): 3 tiles with priors or more.
+  const size_t num_with_prior =
+      input.commanded_table_pos_mm.size() - input.tiles_without_table_prior.size();
+  if (!scatter.ok && num_with_prior >= 3) {
     // Priors so stiff that the features check no position (redundancy < 1):
     // a table stated to 0.1 um that scatters 20 um was held to its
     // positions, and on markers seed 101 the measurements were off by up to
