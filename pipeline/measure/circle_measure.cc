@@ -726,6 +726,218 @@ EdgeErrorSpectrum EstimateEdgeErrorSpectrum(const CircleFit& fit, int num_wedges
   return spectrum;
 }
 
+// The bore's bottom rim as the passes learn it (header): with a nadir, the
+// top rim scaled by k about it, k fitted to `points`; without one, a free
+// circle.
+struct BottomRim {
+  std::optional<Circle> free;
+  std::optional<double> scale;
+  Eigen::Matrix2Xd points;
+
+  bool Known() const { return free.has_value() || scale.has_value(); }
+  std::optional<Circle> Below(const Circle& top,
+                              const std::optional<Eigen::Vector2d>& nadir) const {
+    if (!scale) return free;
+    return Circle{*nadir + *scale * (top.centre - *nadir), *scale * top.radius};
+  }
+};
+
+// Wedges that could give a rim edge: all but the narrow-wall ones left out.
+int UsableWedges(const CircleMeasurement& result) {
+  return result.num_wedges - (result.narrow_wall_skipped ? result.num_narrow_wall : 0);
+}
+
+// A pass's wedges: those whose rim edge the circle fit takes, and those that
+// resolved the bottom rim.
+struct WedgeSelection {
+  std::vector<int> rim;
+  std::vector<int> bottom_rim;
+};
+
+// Sorts a pass's wedges, counting them into `result`.
+WedgeSelection SelectWedges(const EdgePass& pass, CircleMeasurement* result) {
+  const int num = static_cast<int>(pass.wedges.size());
+  result->num_wedges = num;
+  result->num_uncovered = 0;
+  result->num_narrow_wall = 0;
+  for (const WedgeEdge& w : pass.wedges) result->num_narrow_wall += w.narrow ? 1 : 0;
+  // Left out while the rest spans half the rim or more; else the fit
+  // keeps them (the header's limit).
+  result->narrow_wall_skipped =
+      result->num_narrow_wall > 0 && 2 * result->num_narrow_wall <= num && !result->bore_prior_used;
+  WedgeSelection selection;
+  for (int k = 0; k < num; ++k) {
+    const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
+    if (w.uncovered) ++result->num_uncovered;
+    if (w.ok && !(w.narrow && result->narrow_wall_skipped)) selection.rim.push_back(k);
+    if (w.inner_ok) selection.bottom_rim.push_back(k);
+  }
+  result->num_edge_points = static_cast<int>(selection.rim.size());
+  return selection;
+}
+
+// Why a pass's edges cannot place the hole ("" when they can).
+std::string PassError(const CircleMeasurement& result, const CircleMeasureOptions& options) {
+  if (result.num_uncovered > options.max_uncovered_fraction * result.num_wedges) {
+    char text[128];
+    std::snprintf(text, sizeof(text), "cut by the mosaic border (%.0f%% of the rim not covered)",
+                  100.0 * result.num_uncovered / result.num_wedges);
+    return text;
+  }
+  const int usable = UsableWedges(result);
+  if (result.num_edge_points < options.min_found_fraction * usable) {
+    return "not found near the expected position (clean edges on " +
+           std::to_string(result.num_edge_points) + " of " + std::to_string(usable) + " wedges)";
+  }
+  return {};
+}
+
+// The edge points of the wedges `which` about `circle`: on the top rim (the
+// steps' x0) or on the bottom rim (x1).
+Eigen::Matrix2Xd RimPoints(const EdgePass& pass, const Circle& circle,
+                           const std::vector<int>& which, bool bottom_rim) {
+  Eigen::Matrix2Xd points(2, static_cast<Eigen::Index>(which.size()));
+  for (size_t i = 0; i < which.size(); ++i) {
+    const WedgeEdge& w = pass.wedges[static_cast<size_t>(which[i])];
+    const double offset = bottom_rim ? w.step.x1 : w.step.x0;
+    points.col(static_cast<Eigen::Index>(i)) =
+        circle.centre +
+        (circle.radius + offset) * Eigen::Vector2d(std::cos(w.angle), std::sin(w.angle));
+  }
+  return points;
+}
+
+// What pass (b), which looked for the bottom rim on each ray, tells: the
+// bottom rim where enough wedges resolved it, the wall's level, and whether
+// the BorePrior is to be used instead.
+void LearnBottomRim(const EdgePass& pass, const WedgeSelection& wedges, const Circle& circle,
+                    double sigma, const std::optional<Eigen::Vector2d>& nadir_px,
+                    const std::optional<BorePrior>& prior, const CircleMeasureOptions& options,
+                    BottomRim* bottom, CircleMeasurement* result) {
+  const int num = static_cast<int>(pass.wedges.size());
+  if (static_cast<int>(wedges.bottom_rim.size()) >= std::max(12, num / 10)) {
+    const Eigen::Matrix2Xd points = RimPoints(pass, circle, wedges.bottom_rim, true);
+    std::vector<double> offsets;
+    offsets.reserve(wedges.bottom_rim.size());
+    for (int k : wedges.bottom_rim) offsets.push_back(pass.wedges[static_cast<size_t>(k)].step.x1);
+    if (nadir_px) {
+      bottom->points = points;
+      bottom->scale = FitBottomScale(points, circle, *nadir_px,
+                                     1.0 + Median(offsets) / circle.radius, options.tukey_sigmas);
+    }
+    if (!bottom->scale) {
+      const CircleFit fit = FitCircleRobust(
+          points, Circle{circle.centre, circle.radius + Median(offsets)}, options.tukey_sigmas);
+      // The bottom rim looks smaller than the top one and lies inside it.
+      if (fit.circle.radius > 0.0 && fit.circle.radius < circle.radius &&
+          (fit.circle.centre - circle.centre).norm() < circle.radius) {
+        bottom->free = fit.circle;
+      }
+    }
+  }
+  // The wall's level where a wall 2 blurs to 2 profile half widths wide was
+  // fitted with the rim (a BorePrior for other views): the model the tied
+  // wall uses. (Wider walls, fitted apart or with the rim's window short of
+  // the hole's level, read it 10 % off on synthetic holes.)
+  std::vector<double> walls;
+  for (int k : wedges.bottom_rim) {
+    const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
+    if (w.wall_fitted) walls.push_back(w.step.wall_contrast);
+  }
+  if (walls.size() >= 12) result->wall_contrast = Median(walls);
+  result->num_bottom_rim_points = static_cast<int>(wedges.bottom_rim.size());
+  result->bottom_rim_modelled = bottom->Known();
+  if (nadir_px && prior && !result->bottom_rim_modelled) {
+    // The prior's wall, narrower than min_wall_blurs blurs on more than
+    // half the rim: those wedges cannot be left out (the Limits).
+    const Circle prior_bottom{*nadir_px + prior->bottom_rim_scale * (circle.centre - *nadir_px),
+                              prior->bottom_rim_scale * circle.radius};
+    int narrow = 0;
+    for (const WedgeEdge& w : pass.wedges) {
+      const double x1 = BottomRimOffset(circle, prior_bottom,
+                                        Eigen::Vector2d(std::cos(w.angle), std::sin(w.angle)));
+      narrow += x1 < 0.0 && x1 > -options.min_wall_blurs * sigma ? 1 : 0;
+    }
+    if (2 * narrow > num) {
+      bottom->scale = prior->bottom_rim_scale;
+      result->bore_prior_used = true;
+    }
+  }
+}
+
+// The final fit's inliers: their count, RMS residual and median contrast.
+void SummariseInliers(const CircleFit& fit, const EdgePass& pass, CircleMeasurement* result) {
+  result->num_inliers = 0;
+  double sum2 = 0.0;
+  std::vector<double> contrasts;
+  for (Eigen::Index i = 0; i < fit.weight.size(); ++i) {
+    if (fit.weight(i) <= 0.0) continue;
+    ++result->num_inliers;
+    sum2 += fit.residual(i) * fit.residual(i);
+    contrasts.push_back(
+        pass.wedges[static_cast<size_t>(fit.index[static_cast<size_t>(i)])].step.contrast);
+  }
+  result->rms_px = std::sqrt(sum2 / std::max(1, result->num_inliers));
+  result->contrast = Median(contrasts);
+}
+
+// Why the final fit is not the hole ("" when it is): too few of the wedges
+// that could give an edge on one circle, another radius, or texture.
+std::string FitError(const CircleMeasurement& result, double nominal_radius_px,
+                     const CircleMeasureOptions& options) {
+  const int usable = UsableWedges(result);
+  const auto num = static_cast<double>(usable);
+  char text[160];
+  if (result.num_inliers < options.min_found_fraction * num) {
+    return "not found near the expected position (" + std::to_string(result.num_inliers) + " of " +
+           std::to_string(usable) + " wedges fit one circle)";
+  }
+  if (std::abs(result.radius_px / nominal_radius_px - 1.0) > options.max_radius_deviation) {
+    std::snprintf(text, sizeof(text),
+                  "not found near the expected position (the circle found has radius %.1f px, "
+                  "nominal %.1f px)",
+                  result.radius_px, nominal_radius_px);
+    return text;
+  }
+  if (result.rms_px > options.max_rms_px) {
+    // Edges scattered by px about the best circle: texture, not a rim.
+    std::snprintf(text, sizeof(text),
+                  "not found near the expected position (no rim of the nominal radius: edges "
+                  "%.2f px RMS off the best circle)",
+                  result.rms_px);
+    return text;
+  }
+  if (result.num_inliers < options.min_inlier_fraction * num) {
+    std::snprintf(text, sizeof(text), "poor fit: %d of %d wedges fit the circle, rms %.3f px",
+                  result.num_inliers, usable, result.rms_px);
+    return text;
+  }
+  return {};
+}
+
+// What the borrowed wall level's own error moves the tied rim (~2 px per
+// unit of level): the covariance term of (cx, cy, r) by central
+// differences, refitting at the level +- its sigma; zero where a refit
+// fails or uses no prior.
+Eigen::Matrix3d WallLevelCovariance(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
+                                    double nominal_radius_px, const CircleMeasureOptions& options,
+                                    const Eigen::Vector2d& nadir_px, const BorePrior& prior) {
+  const auto refit = [&](double sign) {
+    BorePrior shifted = prior;
+    shifted.wall_contrast += sign * prior.wall_contrast_sigma;
+    shifted.wall_contrast_sigma = 0.0;
+    return MeasureCircle(image, expected_centre_px, nominal_radius_px, options, nadir_px, shifted);
+  };
+  const CircleMeasurement plus = refit(1.0), minus = refit(-1.0);
+  if (!(plus.ok && minus.ok && plus.bore_prior_used && minus.bore_prior_used)) {
+    return Eigen::Matrix3d::Zero();
+  }
+  const Eigen::Vector3d g(0.5 * (plus.centre_px.x() - minus.centre_px.x()),
+                          0.5 * (plus.centre_px.y() - minus.centre_px.y()),
+                          0.5 * (plus.radius_px - minus.radius_px));
+  return g * g.transpose();
+}
+
 }  // namespace
 
 std::string CircleMeasureOptions::Check() const {
@@ -782,188 +994,50 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
   Circle circle{result.coarse_centre_px, nominal_radius_px};
   double band = options.rim_band_px;
   double sigma = 1.0;
-  std::optional<Circle> bottom;        // without a nadir: a free circle
-  std::optional<double> bottom_scale;  // with one: k, the bottom rim about the nadir
-  Eigen::Matrix2Xd bottom_points;      // ... fitted to these, resolved in pass (b)
-  auto bottom_of = [&](const Circle& top) -> std::optional<Circle> {
-    if (!bottom_scale) return bottom;
-    return Circle{*nadir_px + *bottom_scale * (top.centre - *nadir_px), *bottom_scale * top.radius};
-  };
+  BottomRim bottom;
   CircleFit fit;
   EdgePass pass;
   for (int p = 0; p < options.max_passes; ++p) {
     result.passes = p + 1;
     // Passes: rims alone (the blur), then with the bottom rim looked for on
     // each ray (its circle), then with the bottom rim from that circle.
-    const Inner inner = p == 0                   ? Inner::kRamp
-                        : p == 1                 ? Inner::kFree
-                        : bottom || bottom_scale ? Inner::kFixed
-                                                 : Inner::kRamp;
-    pass = FindEdges(image, circle, band, sigma, inner, bottom_of(circle),
-                     bottom_scale ? options.min_wall_blurs * sigma : 0.0,
+    const Inner inner = p == 0           ? Inner::kRamp
+                        : p == 1         ? Inner::kFree
+                        : bottom.Known() ? Inner::kFixed
+                                         : Inner::kRamp;
+    pass = FindEdges(image, circle, band, sigma, inner, bottom.Below(circle, nadir_px),
+                     bottom.scale ? options.min_wall_blurs * sigma : 0.0,
                      result.bore_prior_used ? std::optional(prior->wall_contrast) : std::nullopt,
                      options);
     if (std::isfinite(pass.sigma)) sigma = pass.sigma;
-    const int num = static_cast<int>(pass.wedges.size());
-    result.num_wedges = num;
-    result.num_uncovered = 0;
-    result.num_narrow_wall = 0;
-    for (const WedgeEdge& w : pass.wedges) result.num_narrow_wall += w.narrow ? 1 : 0;
-    // Left out while the rest spans half the rim or more; else the fit
-    // keeps them (the header's limit).
-    result.narrow_wall_skipped =
-        result.num_narrow_wall > 0 && 2 * result.num_narrow_wall <= num && !result.bore_prior_used;
-    const int usable = num - (result.narrow_wall_skipped ? result.num_narrow_wall : 0);
-    std::vector<int> index, inner_index;
-    for (int k = 0; k < num; ++k) {
-      const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
-      if (w.uncovered) ++result.num_uncovered;
-      if (w.ok && !(w.narrow && result.narrow_wall_skipped)) index.push_back(k);
-      if (w.inner_ok) inner_index.push_back(k);
-    }
-    result.num_edge_points = static_cast<int>(index.size());
-    if (result.num_uncovered > options.max_uncovered_fraction * num) {
-      char text[128];
-      std::snprintf(text, sizeof(text), "cut by the mosaic border (%.0f%% of the rim not covered)",
-                    100.0 * result.num_uncovered / num);
-      result.error = text;
-      return result;
-    }
-    if (result.num_edge_points < options.min_found_fraction * usable) {
-      result.error = "not found near the expected position (clean edges on " +
-                     std::to_string(result.num_edge_points) + " of " + std::to_string(usable) +
-                     " wedges)";
-      return result;
-    }
-    auto points_at = [&](const std::vector<int>& which, bool inner_rim) {
-      Eigen::Matrix2Xd points(2, static_cast<Eigen::Index>(which.size()));
-      for (size_t i = 0; i < which.size(); ++i) {
-        const WedgeEdge& w = pass.wedges[static_cast<size_t>(which[i])];
-        const double offset = inner_rim ? w.step.x1 : w.step.x0;
-        points.col(static_cast<Eigen::Index>(i)) =
-            circle.centre +
-            (circle.radius + offset) * Eigen::Vector2d(std::cos(w.angle), std::sin(w.angle));
-      }
-      return points;
-    };
-    if (inner == Inner::kFree && static_cast<int>(inner_index.size()) >= std::max(12, num / 10)) {
-      const Eigen::Matrix2Xd inner_points = points_at(inner_index, true);
-      std::vector<double> offsets;
-      offsets.reserve(inner_index.size());
-      for (int k : inner_index) offsets.push_back(pass.wedges[static_cast<size_t>(k)].step.x1);
-      if (nadir_px) {
-        bottom_points = inner_points;
-        bottom_scale = FitBottomScale(inner_points, circle, *nadir_px,
-                                      1.0 + Median(offsets) / circle.radius, options.tukey_sigmas);
-      }
-      if (!bottom_scale) {
-        const CircleFit bottom_fit =
-            FitCircleRobust(inner_points, Circle{circle.centre, circle.radius + Median(offsets)},
-                            options.tukey_sigmas);
-        // The bottom rim looks smaller than the top one and lies inside it.
-        if (bottom_fit.circle.radius > 0.0 && bottom_fit.circle.radius < circle.radius &&
-            (bottom_fit.circle.centre - circle.centre).norm() < circle.radius) {
-          bottom = bottom_fit.circle;
-        }
-      }
-    }
+    const WedgeSelection wedges = SelectWedges(pass, &result);
+    result.error = PassError(result, options);
+    if (!result.error.empty()) return result;
     if (inner == Inner::kFree) {
-      // The wall's level where a wall 2 blurs to 2 profile half widths wide
-      // was fitted with the rim (a BorePrior for other views): the model
-      // the tied wall uses. (Wider walls, fitted apart or with the rim's
-      // window short of the hole's level, read it 10 % off on synthetic
-      // holes.)
-      std::vector<double> walls;
-      for (int k : inner_index) {
-        const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
-        if (w.wall_fitted) walls.push_back(w.step.wall_contrast);
-      }
-      if (walls.size() >= 12) result.wall_contrast = Median(walls);
-      result.num_bottom_rim_points = static_cast<int>(inner_index.size());
-      result.bottom_rim_modelled = bottom.has_value() || bottom_scale.has_value();
-      if (nadir_px && prior && !result.bottom_rim_modelled) {
-        // The prior's wall, narrower than min_wall_blurs blurs on more than
-        // half the rim: those wedges cannot be left out (the Limits).
-        const Circle prior_bottom{*nadir_px + prior->bottom_rim_scale * (circle.centre - *nadir_px),
-                                  prior->bottom_rim_scale * circle.radius};
-        int narrow = 0;
-        for (const WedgeEdge& w : pass.wedges) {
-          const double x1 = BottomRimOffset(circle, prior_bottom,
-                                            Eigen::Vector2d(std::cos(w.angle), std::sin(w.angle)));
-          narrow += x1 < 0.0 && x1 > -options.min_wall_blurs * sigma ? 1 : 0;
-        }
-        if (2 * narrow > num) {
-          bottom_scale = prior->bottom_rim_scale;
-          result.bore_prior_used = true;
-        }
-      }
+      LearnBottomRim(pass, wedges, circle, sigma, nadir_px, prior, options, &bottom, &result);
     }
-    fit = FitCircleRobust(points_at(index, false), circle, options.tukey_sigmas);
-    fit.index = index;
+    fit = FitCircleRobust(RimPoints(pass, circle, wedges.rim, false), circle, options.tukey_sigmas);
+    fit.index = wedges.rim;
     const double moved = std::max((fit.circle.centre - circle.centre).norm(),
                                   std::abs(fit.circle.radius - circle.radius));
     circle = fit.circle;
     // k relates the bottom rim to the top rim as now placed (an early pass's
     // rim can be off by a tenth of a px where a narrow wall merges with it).
-    if (bottom_scale && !result.bore_prior_used) {
-      bottom_scale =
-          FitBottomScale(bottom_points, circle, *nadir_px, *bottom_scale, options.tukey_sigmas)
-              .value_or(*bottom_scale);
+    if (bottom.scale && !result.bore_prior_used) {
+      bottom.scale =
+          FitBottomScale(bottom.points, circle, *nadir_px, *bottom.scale, options.tukey_sigmas)
+              .value_or(*bottom.scale);
     }
-    result.bottom_rim_scale = bottom_scale.value_or(0.0);
+    result.bottom_rim_scale = bottom.scale.value_or(0.0);
     band = std::clamp(4.0 * fit.scale, 1.0, options.rim_band_px);
     if (p >= 2 && moved < options.converged_px) break;
   }
-  // Inliers and their statistics.
-  result.num_inliers = 0;
-  double sum2 = 0.0;
-  std::vector<double> contrasts;
-  for (Eigen::Index i = 0; i < fit.weight.size(); ++i) {
-    if (fit.weight(i) <= 0.0) continue;
-    ++result.num_inliers;
-    sum2 += fit.residual(i) * fit.residual(i);
-    contrasts.push_back(
-        pass.wedges[static_cast<size_t>(fit.index[static_cast<size_t>(i)])].step.contrast);
-  }
-  result.rms_px = std::sqrt(sum2 / std::max(1, result.num_inliers));
-  result.contrast = Median(contrasts);
+  SummariseInliers(fit, pass, &result);
   result.edge_sigma_px = sigma;
   result.centre_px = circle.centre;
   result.radius_px = circle.radius + sigma * sigma / (2.0 * circle.radius);
-  // Fractions of the wedges that could give an edge.
-  const int usable = result.num_wedges - (result.narrow_wall_skipped ? result.num_narrow_wall : 0);
-  const auto num = static_cast<double>(usable);
-  if (result.num_inliers < options.min_found_fraction * num) {
-    result.error = "not found near the expected position (" + std::to_string(result.num_inliers) +
-                   " of " + std::to_string(usable) + " wedges fit one circle)";
-    return result;
-  }
-  if (std::abs(result.radius_px / nominal_radius_px - 1.0) > options.max_radius_deviation) {
-    char text[160];
-    std::snprintf(text, sizeof(text),
-                  "not found near the expected position (the circle found has radius %.1f px, "
-                  "nominal %.1f px)",
-                  result.radius_px, nominal_radius_px);
-    result.error = text;
-    return result;
-  }
-  if (result.rms_px > options.max_rms_px) {
-    // Edges scattered by px about the best circle: texture, not a rim.
-    char text[160];
-    std::snprintf(text, sizeof(text),
-                  "not found near the expected position (no rim of the nominal radius: edges "
-                  "%.2f px RMS off the best circle)",
-                  result.rms_px);
-    result.error = text;
-    return result;
-  }
-  if (result.num_inliers < options.min_inlier_fraction * num) {
-    char text[160];
-    std::snprintf(text, sizeof(text), "poor fit: %d of %d wedges fit the circle, rms %.3f px",
-                  result.num_inliers, usable, result.rms_px);
-    result.error = text;
-    return result;
-  }
+  result.error = FitError(result, nominal_radius_px, options);
+  if (!result.error.empty()) return result;
 
   // Covariance (header; EdgeErrorSpectrum).
   const EdgeErrorSpectrum spectrum = EstimateEdgeErrorSpectrum(
@@ -973,23 +1047,8 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
       spectrum.samples_per_independent * 2 * kPi * circle.radius / result.num_wedges;
   result.ok = true;
   if (result.bore_prior_used && prior->wall_contrast_sigma > 0.0) {
-    // The borrowed wall level's own error moves the tied rim (~2 px per
-    // unit of level): its term by central differences, refitting at the
-    // level +- its sigma.
-    const auto refit = [&](double sign) {
-      BorePrior shifted = *prior;
-      shifted.wall_contrast += sign * prior->wall_contrast_sigma;
-      shifted.wall_contrast_sigma = 0.0;
-      return MeasureCircle(image, expected_centre_px, nominal_radius_px, options, nadir_px,
-                           shifted);
-    };
-    const CircleMeasurement plus = refit(1.0), minus = refit(-1.0);
-    if (plus.ok && minus.ok && plus.bore_prior_used && minus.bore_prior_used) {
-      const Eigen::Vector3d g(0.5 * (plus.centre_px.x() - minus.centre_px.x()),
-                              0.5 * (plus.centre_px.y() - minus.centre_px.y()),
-                              0.5 * (plus.radius_px - minus.radius_px));
-      result.covariance_px2 += g * g.transpose();
-    }
+    result.covariance_px2 += WallLevelCovariance(image, expected_centre_px, nominal_radius_px,
+                                                 options, *nadir_px, *prior);
   }
   return result;
 }
