@@ -241,6 +241,183 @@ Eigen::Matrix2d FitSimilarity(const std::vector<Eigen::Vector2d>& dt_mm,
 // a dark region does not outweigh the other pairs.
 double Evidence(double ncc) { return std::atanh(std::clamp(ncc, 0.0, 0.99)); }
 
+// How far from its predicted shift a pair still agrees with a motion, px.
+double Tolerance(const ImageMotionOptions& options, const Eigen::Vector2d& predicted_px) {
+  return options.tolerance_fraction * predicted_px.norm() + options.tolerance_px;
+}
+
+// Step 1 for a pair: the NCC of its coarsest levels at every shift (-2
+// where they overlap too little), and the strongest local maxima.
+struct CoarseSurface {
+  int rows = 0, cols = 0;   // the coarsest level's size: shifts within +-(rows - 1, cols - 1)
+  std::vector<double> ncc;  // at (dx, dy): [(dy + rows - 1) (2 cols - 1) + dx + cols - 1]
+  std::vector<std::pair<double, Eigen::Vector2i>> peaks;  // (ncc, shift), best first
+
+  double At(int dx, int dy) const { return ncc[(dy + rows - 1) * (2 * cols - 1) + dx + cols - 1]; }
+};
+
+// `sa`, `sb`: the levels' spectra, zero-padded to fft_rows x fft_cols.
+CoarseSurface CoarseNccSurface(const Level& a, const Level& b, const Spectrum& sa,
+                               const Spectrum& sb, int fft_rows, int fft_cols,
+                               const ImageMotionOptions& options) {
+  CoarseSurface surface;
+  const int rows = surface.rows = static_cast<int>(a.image.rows());
+  const int cols = surface.cols = static_cast<int>(a.image.cols());
+  const int grid_w = 2 * cols - 1, grid_h = 2 * rows - 1;
+  const auto min_pixels = static_cast<Eigen::Index>(options.min_overlap_fraction * a.image.size());
+  const std::vector<double> cross = CrossSums(sa, sb, fft_rows, fft_cols);
+  surface.ncc.assign(static_cast<size_t>(grid_w) * grid_h, -2.0);
+  for (int dy = -rows + 1; dy < rows; ++dy) {
+    for (int dx = -cols + 1; dx < cols; ++dx) {
+      const double sab = cross[static_cast<size_t>((dy + fft_rows) % fft_rows) * fft_cols +
+                               (dx + fft_cols) % fft_cols];
+      surface.ncc[(dy + rows - 1) * grid_w + dx + cols - 1] =
+          OverlapNcc(a.image, b.image, a.moments, b.moments, dx, dy, min_pixels, nullptr, &sab);
+    }
+  }
+  std::vector<std::pair<double, Eigen::Vector2i>>& maxima = surface.peaks;
+  for (int y = 0; y < grid_h; ++y) {
+    for (int x = 0; x < grid_w; ++x) {
+      const double v = surface.ncc[y * grid_w + x];
+      if (v <= -1.0) continue;
+      bool is_max = true;
+      for (int ny = std::max(0, y - 1); ny <= std::min(grid_h - 1, y + 1) && is_max; ++ny)
+        for (int nx = std::max(0, x - 1); nx <= std::min(grid_w - 1, x + 1); ++nx)
+          if (surface.ncc[ny * grid_w + nx] > v) is_max = false;
+      if (is_max) maxima.emplace_back(v, Eigen::Vector2i(x - cols + 1, y - rows + 1));
+    }
+  }
+  const size_t keep = std::min<size_t>(options.peaks_per_pair, maxima.size());
+  std::partial_sort(maxima.begin(), maxima.begin() + keep, maxima.end(),
+                    [](const auto& x, const auto& y) { return x.first > y.first; });
+  maxima.resize(keep);
+  return surface;
+}
+
+// Step 2's candidate motion and, per pair, the best coarse shift near what
+// it predicts.
+struct Candidate {
+  Eigen::Matrix2d a;
+  int mirror;
+  double score = 0.0;
+  std::vector<LocalBest> at;
+};
+
+// Every pair's peaks, with either handedness, as candidates.
+std::vector<Candidate> CandidateMotions(const std::vector<Eigen::Vector2d>& dt_mm,
+                                        const std::vector<CoarseSurface>& surfaces,
+                                        int coarse_factor) {
+  std::vector<Candidate> candidates;
+  for (size_t k = 0; k < surfaces.size(); ++k) {
+    if (!(dt_mm[k].norm() > 0)) continue;
+    for (const auto& peak : surfaces[k].peaks) {
+      for (const int m : {1, -1}) {
+        Candidate c;
+        c.a = SimilarityThrough(dt_mm[k], coarse_factor * peak.second.cast<double>(), m);
+        c.mirror = m;
+        candidates.push_back(c);
+      }
+    }
+  }
+  return candidates;
+}
+
+// A candidate scored over all pairs: the best of each pair's surface within
+// the tolerance of its prediction.
+void ScoreCandidate(const std::vector<CoarseSurface>& surfaces,
+                    const std::vector<Eigen::Vector2d>& dt_mm, int coarse_factor,
+                    const ImageMotionOptions& options, Candidate* c) {
+  c->at.resize(surfaces.size());
+  for (size_t k = 0; k < surfaces.size(); ++k) {
+    const CoarseSurface& s = surfaces[k];
+    const Eigen::Vector2d predicted = c->a * dt_mm[k];
+    const int cx = static_cast<int>(std::lround(predicted.x() / coarse_factor));
+    const int cy = static_cast<int>(std::lround(predicted.y() / coarse_factor));
+    const int radius = static_cast<int>(std::ceil(Tolerance(options, predicted) / coarse_factor));
+    LocalBest& best = c->at[k];
+    for (int dy = std::max(cy - radius, -s.rows + 1); dy <= std::min(cy + radius, s.rows - 1);
+         ++dy) {
+      for (int dx = std::max(cx - radius, -s.cols + 1); dx <= std::min(cx + radius, s.cols - 1);
+           ++dx) {
+        const double v = s.At(dx, dy);
+        if (v > best.ncc) best.ncc = v, best.shift << dx, dy;
+      }
+    }
+    c->score += Evidence(best.ncc);
+  }
+}
+
+// Step 3: the best candidate's (the first's) evidence over each clearly
+// different candidate's, on the pairs where they differ; the least ratio
+// (infinity if none differs).
+double MarginOverOthers(const std::vector<Candidate>& candidates,
+                        const std::vector<Eigen::Vector2d>& dt_mm, int coarse_factor,
+                        const ImageMotionOptions& options) {
+  const Candidate& best = candidates.front();
+  const int num_pairs = static_cast<int>(dt_mm.size());
+  double margin = std::numeric_limits<double>::infinity();
+  for (size_t i = 1; i < candidates.size(); ++i) {
+    double best_sum = 0, other_sum = 0;
+    int num_different = 0;
+    for (int k = 0; k < num_pairs; ++k) {
+      const LocalBest& x = best.at[k];
+      const LocalBest& y = candidates[i].at[k];
+      const bool x_valid = x.ncc > -1.0, y_valid = y.ncc > -1.0;
+      const bool same = x_valid == y_valid &&
+                        (!x_valid || coarse_factor * (x.shift - y.shift).cast<double>().norm() <=
+                                         Tolerance(options, best.a * dt_mm[k]));
+      if (same) continue;
+      ++num_different;
+      best_sum += Evidence(x.ncc);
+      other_sum += Evidence(y.ncc);
+    }
+    // Differing on fewer than half the pairs, it is the same motion with a
+    // spurious peak or two, not a competing one.
+    if (2 * num_different >= num_pairs && other_sum > 0)
+      margin = std::min(margin, best_sum / other_sum);
+  }
+  return margin;
+}
+
+// Step 4 for a pair: its coarse shift followed down the pyramids to the
+// finest level (not ok where a level finds no overlap).
+TranslationEstimate RefineShift(const std::vector<Level>& pa, const std::vector<Level>& pb,
+                                const LocalBest& coarse, double min_overlap_fraction) {
+  TranslationEstimate t;
+  LocalBest level_best = coarse;
+  for (size_t l = 1; l < pa.size() && level_best.ncc > -1.0; ++l) {
+    const int ratio = pa[l - 1].factor / pa[l].factor;
+    level_best = SearchShift(pa[l], pb[l], level_best.shift * pa[l - 1].factor / pa[l].factor,
+                             ratio + 1, min_overlap_fraction);
+  }
+  if (level_best.ncc <= -1.0) return t;
+  const Level& la = pa.back();
+  const Level& lb = pb.back();
+  t.ok = true;
+  t.shift_px = level_best.shift.cast<double>() * la.factor;
+  t.ncc = OverlapNcc(la.image, lb.image, la.moments, lb.moments, level_best.shift.x(),
+                     level_best.shift.y(), 1, &t.overlap_fraction);
+  return t;
+}
+
+// The motion per table mm by least squares over the agreeing pairs: affine
+// where their displacements span the plane, else a similarity of handedness
+// `mirror`.
+Eigen::Matrix2d FitMotion(const std::vector<Eigen::Vector2d>& dt_mm,
+                          const std::vector<TranslationEstimate>& shifts,
+                          const std::vector<int>& agreeing, int mirror) {
+  Eigen::Matrix2d tt = Eigen::Matrix2d::Zero(), st = Eigen::Matrix2d::Zero();
+  for (int k : agreeing) {
+    tt += dt_mm[k] * dt_mm[k].transpose();
+    st += shifts[k].shift_px * dt_mm[k].transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> spread(tt);
+  if (spread.eigenvalues()(0) > 0.05 * spread.eigenvalues()(1)) return st * tt.inverse();
+  std::vector<Eigen::Vector2d> refined_px(dt_mm.size());
+  for (int k : agreeing) refined_px[k] = shifts[k].shift_px;
+  return FitSimilarity(dt_mm, refined_px, agreeing, mirror);
+}
+
 }  // namespace
 
 ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
@@ -275,120 +452,28 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
     dt_mm[k] = table_mm[pairs[k].second] - table_mm[pairs[k].first];
 
   // 1. Every pair's coarse NCC surface and its strongest local maxima.
-  struct Candidate {
-    Eigen::Matrix2d a;
-    int mirror;
-    double score = 0.0;
-    std::vector<LocalBest> at;  // per pair: the best coarse shift near the prediction
-  };
-  // Surface of pair k: NCC at shift (dx, dy) at [(dy + rows - 1) grid_w + dx + cols - 1].
-  const int rows = static_cast<int>(pyramids[0][0].image.rows());
-  const int cols = static_cast<int>(pyramids[0][0].image.cols());
-  const int grid_w = 2 * cols - 1, grid_h = 2 * rows - 1;
-  std::vector<std::vector<double>> surfaces(num_pairs);
-  std::vector<std::vector<std::pair<double, Eigen::Vector2i>>> peaks(num_pairs);
+  std::vector<CoarseSurface> surfaces(num_pairs);
   ParallelFor(num_pairs, options.num_threads, [&](int k) {
-    const Level& a = pyramids[pairs[k].first][0];
-    const Level& b = pyramids[pairs[k].second][0];
-    const auto min_pixels =
-        static_cast<Eigen::Index>(options.min_overlap_fraction * a.image.size());
-    const std::vector<double> cross =
-        CrossSums(spectra[pairs[k].first], spectra[pairs[k].second], fft_rows, fft_cols);
-    std::vector<double>& surface = surfaces[k];
-    surface.assign(static_cast<size_t>(grid_w) * grid_h, -2.0);
-    for (int dy = -rows + 1; dy < rows; ++dy) {
-      for (int dx = -cols + 1; dx < cols; ++dx) {
-        const double sab = cross[static_cast<size_t>((dy + fft_rows) % fft_rows) * fft_cols +
-                                 (dx + fft_cols) % fft_cols];
-        surface[(dy + rows - 1) * grid_w + dx + cols - 1] =
-            OverlapNcc(a.image, b.image, a.moments, b.moments, dx, dy, min_pixels, nullptr, &sab);
-      }
-    }
-    std::vector<std::pair<double, Eigen::Vector2i>>& maxima = peaks[k];
-    for (int y = 0; y < grid_h; ++y) {
-      for (int x = 0; x < grid_w; ++x) {
-        const double v = surface[y * grid_w + x];
-        if (v <= -1.0) continue;
-        bool is_max = true;
-        for (int ny = std::max(0, y - 1); ny <= std::min(grid_h - 1, y + 1) && is_max; ++ny)
-          for (int nx = std::max(0, x - 1); nx <= std::min(grid_w - 1, x + 1); ++nx)
-            if (surface[ny * grid_w + nx] > v) is_max = false;
-        if (is_max) maxima.emplace_back(v, Eigen::Vector2i(x - cols + 1, y - rows + 1));
-      }
-    }
-    const size_t keep = std::min<size_t>(options.peaks_per_pair, maxima.size());
-    std::partial_sort(maxima.begin(), maxima.begin() + keep, maxima.end(),
-                      [](const auto& x, const auto& y) { return x.first > y.first; });
-    maxima.resize(keep);
+    const auto [i, j] = pairs[k];
+    surfaces[k] = CoarseNccSurface(pyramids[i][0], pyramids[j][0], spectra[i], spectra[j], fft_rows,
+                                   fft_cols, options);
   });
-  std::vector<Candidate> candidates;
-  for (int k = 0; k < num_pairs; ++k) {
-    if (!(dt_mm[k].norm() > 0)) continue;
-    for (const auto& peak : peaks[k]) {
-      for (const int m : {1, -1}) {
-        Candidate c;
-        c.a = SimilarityThrough(dt_mm[k], coarse_factor * peak.second.cast<double>(), m);
-        c.mirror = m;
-        candidates.push_back(c);
-      }
-    }
-  }
+  std::vector<Candidate> candidates = CandidateMotions(dt_mm, surfaces, coarse_factor);
   if (candidates.empty()) {
     estimate.brief = "no pair of neighbouring tiles overlaps by more than " +
                      std::to_string(options.min_overlap_fraction) + " of the image";
     return estimate;
   }
 
-  // 2. Each candidate scored over all pairs: the best of the pair's surface
-  // within the tolerance of its prediction.
-  const auto radius_of = [&](const Eigen::Vector2d& predicted_px) {
-    return options.tolerance_fraction * predicted_px.norm() + options.tolerance_px;
-  };
-  for (Candidate& c : candidates) {
-    c.at.resize(num_pairs);
-    for (int k = 0; k < num_pairs; ++k) {
-      const Eigen::Vector2d predicted = c.a * dt_mm[k];
-      const int cx = static_cast<int>(std::lround(predicted.x() / coarse_factor));
-      const int cy = static_cast<int>(std::lround(predicted.y() / coarse_factor));
-      const int radius = static_cast<int>(std::ceil(radius_of(predicted) / coarse_factor));
-      LocalBest& best = c.at[k];
-      for (int dy = std::max(cy - radius, -rows + 1); dy <= std::min(cy + radius, rows - 1); ++dy) {
-        for (int dx = std::max(cx - radius, -cols + 1); dx <= std::min(cx + radius, cols - 1);
-             ++dx) {
-          const double v = surfaces[k][(dy + rows - 1) * grid_w + dx + cols - 1];
-          if (v > best.ncc) best.ncc = v, best.shift << dx, dy;
-        }
-      }
-      c.score += Evidence(best.ncc);
-    }
-  }
+  // 2. Each candidate scored over all pairs.
+  for (Candidate& c : candidates) ScoreCandidate(surfaces, dt_mm, coarse_factor, options, &c);
   std::sort(candidates.begin(), candidates.end(),
             [](const Candidate& x, const Candidate& y) { return x.score > y.score; });
   const Candidate& best = candidates.front();
   // 3. The margin over every clearly different candidate.
   estimate.score = best.score;
   estimate.mirrored = best.mirror < 0;
-  estimate.margin = std::numeric_limits<double>::infinity();
-  for (size_t i = 1; i < candidates.size(); ++i) {
-    double best_sum = 0, other_sum = 0;
-    int num_different = 0;
-    for (int k = 0; k < num_pairs; ++k) {
-      const LocalBest& x = best.at[k];
-      const LocalBest& y = candidates[i].at[k];
-      const bool x_valid = x.ncc > -1.0, y_valid = y.ncc > -1.0;
-      const bool same = x_valid == y_valid &&
-                        (!x_valid || coarse_factor * (x.shift - y.shift).cast<double>().norm() <=
-                                         radius_of(best.a * dt_mm[k]));
-      if (same) continue;
-      ++num_different;
-      best_sum += Evidence(x.ncc);
-      other_sum += Evidence(y.ncc);
-    }
-    // Differing on fewer than half the pairs, it is the same motion with a
-    // spurious peak or two, not a competing one.
-    if (2 * num_different >= num_pairs && other_sum > 0)
-      estimate.margin = std::min(estimate.margin, best_sum / other_sum);
-  }
+  estimate.margin = MarginOverOthers(candidates, dt_mm, coarse_factor, options);
   if (!(best.score > 0) || estimate.margin < options.min_margin) {
     std::ostringstream brief;
     brief << "the image motion per table mm is ambiguous: the best consensus of the " << num_pairs
@@ -414,26 +499,13 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
   }
   const Eigen::Matrix2d coarse_a = FitSimilarity(dt_mm, coarse_px, found, best.mirror);
   std::vector<int> agreeing;
-  for (int k = 0; k < num_pairs; ++k) {
+  for (int k : found) {
     TranslationEstimate& t = estimate.pair_shifts[k];
-    if (best.at[k].ncc <= -1.0) continue;
-    const std::vector<Level>& pa = pyramids[pairs[k].first];
-    const std::vector<Level>& pb = pyramids[pairs[k].second];
-    LocalBest level_best = best.at[k];
-    for (size_t l = 1; l < pa.size() && level_best.ncc > -1.0; ++l) {
-      const int ratio = pa[l - 1].factor / pa[l].factor;
-      level_best = SearchShift(pa[l], pb[l], level_best.shift * pa[l - 1].factor / pa[l].factor,
-                               ratio + 1, options.min_overlap_fraction);
-    }
-    if (level_best.ncc <= -1.0) continue;
-    const Level& la = pa.back();
-    const Level& lb = pb.back();
-    t.ok = true;
-    t.shift_px = level_best.shift.cast<double>() * la.factor;
-    t.ncc = OverlapNcc(la.image, lb.image, la.moments, lb.moments, level_best.shift.x(),
-                       level_best.shift.y(), 1, &t.overlap_fraction);
+    t = RefineShift(pyramids[pairs[k].first], pyramids[pairs[k].second], best.at[k],
+                    options.min_overlap_fraction);
+    if (!t.ok) continue;
     const Eigen::Vector2d predicted = coarse_a * dt_mm[k];
-    if ((t.shift_px - predicted).norm() <= radius_of(predicted)) {
+    if ((t.shift_px - predicted).norm() <= Tolerance(options, predicted)) {
       estimate.pair_agrees[k] = true;
       agreeing.push_back(k);
     }
@@ -443,20 +515,7 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
     estimate.brief = "no neighbour pair's refined shift agrees with the consensus motion";
     return estimate;
   }
-  // Least squares: affine when the agreeing displacements span the plane.
-  Eigen::Matrix2d tt = Eigen::Matrix2d::Zero(), st = Eigen::Matrix2d::Zero();
-  for (int k : agreeing) {
-    tt += dt_mm[k] * dt_mm[k].transpose();
-    st += estimate.pair_shifts[k].shift_px * dt_mm[k].transpose();
-  }
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> spread(tt);
-  if (spread.eigenvalues()(0) > 0.05 * spread.eigenvalues()(1)) {
-    estimate.px_per_table_mm = st * tt.inverse();
-  } else {
-    std::vector<Eigen::Vector2d> refined_px(num_pairs);
-    for (int k : agreeing) refined_px[k] = estimate.pair_shifts[k].shift_px;
-    estimate.px_per_table_mm = FitSimilarity(dt_mm, refined_px, agreeing, best.mirror);
-  }
+  estimate.px_per_table_mm = FitMotion(dt_mm, estimate.pair_shifts, agreeing, best.mirror);
   estimate.ok = true;
   std::ostringstream brief;
   brief << estimate.num_agreeing << " of " << num_pairs
