@@ -105,6 +105,178 @@ Eigen::Matrix2d CorrelatedProducts(const std::array<ImageF, 2>& e, double blur_s
   return products;
 }
 
+// The gain field's terms at a pixel: x^(d - j) y^j for degree d = 0..kGainDegree
+// (x, y) the pixel's place scaled to [-1, 1] over the patch.
+class GainBasis {
+ public:
+  GainBasis(int rows, int cols)
+      : centre_(0.5 * (cols - 1), 0.5 * (rows - 1)), half_size_(centre_.cwiseMax(1.0)) {}
+
+  std::array<double, kNumGainTerms> Terms(const Eigen::Vector2i& p) const {
+    const Eigen::Vector2d u = (p.cast<double>() - centre_).cwiseQuotient(half_size_);
+    const double x = u.x(), y = u.y();
+    // Each degree's terms from the last's.
+    std::array<double, kNumGainTerms> t;
+    t[0] = 1.0;
+    int first = 0, k = 1;
+    for (int d = 1; d <= kGainDegree; ++d) {
+      for (int j = 0; j < d; ++j) t[k++] = t[first + j] * x;
+      t[k++] = t[first + d - 1] * y;
+      first += d;
+    }
+    return t;
+  }
+
+ private:
+  Eigen::Vector2d centre_, half_size_;
+};
+
+double GainAt(const Parameters& theta, const std::array<double, kNumGainTerms>& terms) {
+  double gain = 0.0;
+  for (int k = 0; k < kNumGainTerms; ++k) gain += theta(2 + k) * terms[k];
+  return gain;
+}
+
+// b(x + s), its gradient and g(u) at a pixel the fit uses: J's row is
+// rebuilt from them (storing 24 doubles a pixel would take ~100 MB an
+// overlap).
+struct Sample {
+  float value, gx, gy, gain;
+};
+
+// r = a - (g b(x + s) + o); J = dr/dtheta.
+Row JacobianRow(const std::array<double, kNumGainTerms>& terms, const Sample& sample) {
+  Row row;
+  row(0) = -sample.gain * sample.gx;
+  row(1) = -sample.gain * sample.gy;
+  for (int k = 0; k < kNumGainTerms; ++k) row(2 + k) = -terms[k] * sample.value;
+  row(kNumParameters - 1) = -1.0;
+  return row;
+}
+
+// The patches smoothed, where they may be sampled, and a's pixels the fit
+// may use.
+struct SmoothedOverlap {
+  ImageF smooth_a, smooth_b;
+  ImageF support_b;  // b's smoothing kernel's share of valid pixels
+  ImageF valid_b;    // 1 where raw b is valid (sampled for the noise estimate)
+  std::vector<Eigen::Vector2i> pixels;
+};
+
+SmoothedOverlap SmoothOverlap(const ImageF& a, const ImageF& b, const ImageF& mask,
+                              const OverlapAlignmentOptions& options) {
+  const double sigma = options.smoothing_sigma_px;
+  SmoothedOverlap overlap;
+  // Masked pixels count as unseen in both patches: nothing within the
+  // smoothing's reach of them counts.
+  ImageF valid_a = ValidPixels(a, options.max_value);
+  overlap.valid_b = ValidPixels(b, options.max_value);
+  if (mask.size() != 0) {
+    const ImageF keep = mask.unaryExpr([](float m) { return m > 0.0f ? 1.0f : 0.0f; });
+    valid_a = valid_a.cwiseProduct(keep);
+    overlap.valid_b = overlap.valid_b.cwiseProduct(keep);
+  }
+  const ImageF support_a = GaussianBlur(valid_a, sigma);
+  overlap.support_b = GaussianBlur(overlap.valid_b, sigma);
+  overlap.smooth_a = GaussianBlur(a, sigma);
+  overlap.smooth_b = GaussianBlur(b, sigma);
+  // The blur clamps at the window's border: pixels within its reach are left out.
+  const int margin = static_cast<int>(std::ceil(3.0 * sigma)) + 2;
+  for (int r = margin; r < a.rows() - margin; ++r) {
+    for (int c = margin; c < a.cols() - margin; ++c) {
+      if (!(support_a(r, c) >= kFullSupport)) continue;
+      overlap.pixels.emplace_back(c, r);
+    }
+  }
+  return overlap;
+}
+
+// The fit linearised at theta: the pixels where smoothed b(x + s) can be
+// sampled, their residuals and samples.
+struct Linearisation {
+  std::vector<Eigen::Vector2i> used;
+  std::vector<double> residuals;
+  std::vector<Sample> samples;
+};
+
+Linearisation Linearise(const SmoothedOverlap& overlap, const GainBasis& basis,
+                        const Parameters& theta) {
+  Linearisation lin;
+  const Eigen::Vector2d shift = theta.head<2>();
+  for (const Eigen::Vector2i& p : overlap.pixels) {
+    double value;
+    Eigen::Vector2d grad;
+    if (!SampleWithGradient(overlap.smooth_b, overlap.support_b, p.x() + shift.x(),
+                            p.y() + shift.y(), &value, &grad)) {
+      continue;
+    }
+    const double gain = GainAt(theta, basis.Terms(p));
+    lin.used.push_back(p);
+    lin.residuals.push_back(overlap.smooth_a(p.y(), p.x()) -
+                            (gain * value + theta(kNumParameters - 1)));
+    lin.samples.push_back({static_cast<float>(value), static_cast<float>(grad.x()),
+                           static_cast<float>(grad.y()), static_cast<float>(gain)});
+  }
+  return lin;
+}
+
+// J' W J and J' W r, W the Huber weights at `threshold`, by blocks of rows
+// (a matrix product each: the 24 x 24 outer products one row at a time took
+// most of the fit's time).
+void NormalEquations(const Linearisation& lin, const GainBasis& basis, double threshold,
+                     Square* normal, Parameters* gradient) {
+  normal->setZero();
+  gradient->setZero();
+  constexpr int kBlock = 512;
+  Eigen::Matrix<double, kNumParameters, kBlock> block;
+  Eigen::Matrix<double, kBlock, 1> block_residuals;
+  const std::vector<double>& residuals = lin.residuals;
+  for (size_t first = 0; first < residuals.size(); first += kBlock) {
+    const int n = static_cast<int>(std::min<size_t>(kBlock, residuals.size() - first));
+    for (int k = 0; k < n; ++k) {
+      const size_t i = first + k;
+      const double root_w = std::sqrt(HuberWeight(residuals[i], threshold));
+      block.col(k) = root_w * JacobianRow(basis.Terms(lin.used[i]), lin.samples[i]).transpose();
+      block_residuals(k) = root_w * residuals[i];
+    }
+    normal->selfadjointView<Eigen::Lower>().rankUpdate(block.leftCols(n));
+    gradient->noalias() += block.leftCols(n) * block_residuals.head(n);
+  }
+  *normal = normal->selfadjointView<Eigen::Lower>();
+}
+
+// The noise of a - (g b + o), unsmoothed: the residuals at the used pixels
+// where raw b's samples are all valid.
+std::vector<double> RawResiduals(const ImageF& a, const ImageF& b, const SmoothedOverlap& overlap,
+                                 const Linearisation& lin, const GainBasis& basis,
+                                 const Parameters& theta) {
+  std::vector<double> raw;
+  for (const Eigen::Vector2i& p : lin.used) {
+    double value;
+    Eigen::Vector2d grad;
+    if (!SampleWithGradient(b, overlap.valid_b, p.x() + theta(0), p.y() + theta(1), &value, &grad))
+      continue;
+    raw.push_back(a(p.y(), p.x()) -
+                  (GainAt(theta, basis.Terms(p)) * value + theta(kNumParameters - 1)));
+  }
+  return raw;
+}
+
+// e_i = W J H^-1's column i as an image, for the shift's two parameters:
+// Cov(shift) = (e_i, K e_j), K the residuals' correlation (header).
+std::array<ImageF, 2> ShiftInfluence(const Linearisation& lin, const GainBasis& basis,
+                                     double threshold, const Square& normal, int rows, int cols) {
+  const Square inverse = normal.ldlt().solve(Square::Identity());
+  std::array<ImageF, 2> e = {ImageF::Zero(rows, cols), ImageF::Zero(rows, cols)};
+  for (size_t i = 0; i < lin.used.size(); ++i) {
+    const double w = HuberWeight(lin.residuals[i], threshold);
+    const Row row = JacobianRow(basis.Terms(lin.used[i]), lin.samples[i]);
+    for (int k = 0; k < 2; ++k)
+      e[k](lin.used[i].y(), lin.used[i].x()) = static_cast<float>(w * row.dot(inverse.row(k)));
+  }
+  return e;
+}
+
 }  // namespace
 
 std::string OverlapAlignmentOptions::Check() const {
@@ -135,71 +307,14 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   OverlapAlignment result;
   const int rows = static_cast<int>(a.rows()), cols = static_cast<int>(a.cols());
   const double sigma = options.smoothing_sigma_px;
-  // Masked pixels count as unseen in both patches: nothing within the
-  // smoothing's reach of them counts.
-  ImageF valid_a = ValidPixels(a, options.max_value), valid_b = ValidPixels(b, options.max_value);
-  if (mask.size() != 0) {
-    const ImageF keep = mask.unaryExpr([](float m) { return m > 0.0f ? 1.0f : 0.0f; });
-    valid_a = valid_a.cwiseProduct(keep);
-    valid_b = valid_b.cwiseProduct(keep);
-  }
-  const ImageF support_a = GaussianBlur(valid_a, sigma);
-  const ImageF support_b = GaussianBlur(valid_b, sigma);
-  const ImageF smooth_a = GaussianBlur(a, sigma), smooth_b = GaussianBlur(b, sigma);
-  // Raw b is sampled for the noise estimate only where all its samples are valid.
-  const ImageF& raw_support_b = valid_b;
-  // The blur clamps at the window's border: pixels within its reach are left out.
-  const int margin = static_cast<int>(std::ceil(3.0 * sigma)) + 2;
-  std::vector<Eigen::Vector2i> pixels;
-  for (int r = margin; r < rows - margin; ++r) {
-    for (int c = margin; c < cols - margin; ++c) {
-      if (!(support_a(r, c) >= kFullSupport)) continue;
-      pixels.emplace_back(c, r);
-    }
-  }
-  const Eigen::Vector2d centre(0.5 * (cols - 1), 0.5 * (rows - 1));
-  const Eigen::Vector2d half_size = centre.cwiseMax(1.0);
-  const auto gain_terms = [&](const Eigen::Vector2i& p) {
-    const Eigen::Vector2d u = (p.cast<double>() - centre).cwiseQuotient(half_size);
-    const double x = u.x(), y = u.y();
-    // x^(d - j) y^j, degree d = 0..kGainDegree: each degree's from the last's.
-    std::array<double, kNumGainTerms> t;
-    t[0] = 1.0;
-    int first = 0, k = 1;
-    for (int d = 1; d <= kGainDegree; ++d) {
-      for (int j = 0; j < d; ++j) t[k++] = t[first + j] * x;
-      t[k++] = t[first + d - 1] * y;
-      first += d;
-    }
-    return t;
-  };
-  const auto gain_at = [&](const Parameters& theta, const std::array<double, kNumGainTerms>& t) {
-    double gain = 0.0;
-    for (int k = 0; k < kNumGainTerms; ++k) gain += theta(2 + k) * t[k];
-    return gain;
-  };
+  const SmoothedOverlap overlap = SmoothOverlap(a, b, mask, options);
+  const GainBasis basis(rows, cols);
 
+  // Gauss-Newton with Huber weights on the smoothed patches.
   Parameters theta = Parameters::Zero();
   theta(2) = 1.0;  // g0
   Square normal;
-  std::vector<Eigen::Vector2i> used;
-  std::vector<double> residuals;
-  // b(x + s), its gradient and g(u) at each used pixel: J's row is rebuilt
-  // from them (storing 24 doubles a pixel would take ~100 MB an overlap).
-  struct Sample {
-    float value, gx, gy, gain;
-  };
-  std::vector<Sample> samples;
-  const auto jacobian_row = [&](const Eigen::Vector2i& p, const Sample& sample) {
-    // r = a - (g b(x + s) + o); J = dr/dtheta.
-    const std::array<double, kNumGainTerms> terms = gain_terms(p);
-    Row row;
-    row(0) = -sample.gain * sample.gx;
-    row(1) = -sample.gain * sample.gy;
-    for (int k = 0; k < kNumGainTerms; ++k) row(2 + k) = -terms[k] * sample.value;
-    row(kNumParameters - 1) = -1.0;
-    return row;
-  };
+  Linearisation lin;
   double huber_threshold = 0.0;
   const auto no_gradient = [&result] {
     result.why = "the overlap holds no gradient to align on";
@@ -207,48 +322,15 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   };
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     result.num_iterations = iteration + 1;
-    used.clear();
-    residuals.clear();
-    samples.clear();
-    const Eigen::Vector2d shift = theta.head<2>();
-    for (const Eigen::Vector2i& p : pixels) {
-      double value;
-      Eigen::Vector2d grad;
-      if (!SampleWithGradient(smooth_b, support_b, p.x() + shift.x(), p.y() + shift.y(), &value,
-                              &grad)) {
-        continue;
-      }
-      const double gain = gain_at(theta, gain_terms(p));
-      used.push_back(p);
-      residuals.push_back(smooth_a(p.y(), p.x()) - (gain * value + theta(kNumParameters - 1)));
-      samples.push_back({static_cast<float>(value), static_cast<float>(grad.x()),
-                         static_cast<float>(grad.y()), static_cast<float>(gain)});
-    }
-    result.num_pixels = static_cast<int>(residuals.size());
+    lin = Linearise(overlap, basis, theta);
+    result.num_pixels = static_cast<int>(lin.residuals.size());
     if (result.num_pixels < options.min_pixels) {
       result.why = "too few pixels seen by both";
       return result;
     }
-    huber_threshold = options.huber_sigmas * std::max(RobustSigma(residuals), 1e-9);
-    // J' W J and J' W r by blocks of rows (a matrix product each: the
-    // 24 x 24 outer products one row at a time took most of the fit's time).
-    normal.setZero();
-    Parameters gradient = Parameters::Zero();
-    constexpr int kBlock = 512;
-    Eigen::Matrix<double, kNumParameters, kBlock> block;
-    Eigen::Matrix<double, kBlock, 1> block_residuals;
-    for (size_t first = 0; first < residuals.size(); first += kBlock) {
-      const int n = static_cast<int>(std::min<size_t>(kBlock, residuals.size() - first));
-      for (int k = 0; k < n; ++k) {
-        const size_t i = first + k;
-        const double root_w = std::sqrt(HuberWeight(residuals[i], huber_threshold));
-        block.col(k) = root_w * jacobian_row(used[i], samples[i]).transpose();
-        block_residuals(k) = root_w * residuals[i];
-      }
-      normal.selfadjointView<Eigen::Lower>().rankUpdate(block.leftCols(n));
-      gradient.noalias() += block.leftCols(n) * block_residuals.head(n);
-    }
-    normal = normal.selfadjointView<Eigen::Lower>();
+    huber_threshold = options.huber_sigmas * std::max(RobustSigma(lin.residuals), 1e-9);
+    Parameters gradient;
+    NormalEquations(lin, basis, huber_threshold, &normal, &gradient);
     const Eigen::LDLT<Square> ldlt(normal);
     if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return no_gradient();
     const Parameters step = -ldlt.solve(gradient);
@@ -261,39 +343,22 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
     if (step.head<2>().norm() < options.shift_tolerance_px) break;
   }
 
-  // The raw residuals' robust sigma: the noise of a - g b, unsmoothed.
-  std::vector<double> raw_residuals;
-  for (const Eigen::Vector2i& p : used) {
-    double value;
-    Eigen::Vector2d grad;
-    if (!SampleWithGradient(b, raw_support_b, p.x() + theta(0), p.y() + theta(1), &value, &grad))
-      continue;
-    raw_residuals.push_back(a(p.y(), p.x()) -
-                            (gain_at(theta, gain_terms(p)) * value + theta(kNumParameters - 1)));
-  }
+  const std::vector<double> raw_residuals = RawResiduals(a, b, overlap, lin, basis, theta);
   if (raw_residuals.size() < static_cast<size_t>(options.min_pixels)) {
     result.why = "too few pixels seen by both";
     return result;
   }
   result.residual_sigma = RobustSigma(raw_residuals);
   // Cov(theta) = H^-1 J' W K W J H^-1 (header): its shift block is (e_i, K
-  // e_j) with e_i = W J H^-1's column i as an image, two images whatever
-  // the number of gain terms.
-  const Square inverse = normal.ldlt().solve(Square::Identity());
-  std::array<ImageF, 2> e = {ImageF::Zero(rows, cols), ImageF::Zero(rows, cols)};
-  for (size_t i = 0; i < used.size(); ++i) {
-    const double w = HuberWeight(residuals[i], huber_threshold);
-    const Row row = jacobian_row(used[i], samples[i]);
-    for (int k = 0; k < 2; ++k)
-      e[k](used[i].y(), used[i].x()) = static_cast<float>(w * row.dot(inverse.row(k)));
-  }
+  // e_j), two images whatever the number of gain terms.
+  const std::array<ImageF, 2> e = ShiftInfluence(lin, basis, huber_threshold, normal, rows, cols);
   // The noise: its smoothed residuals correlate as K = G * G.
   Eigen::Matrix2d covariance = result.residual_sigma * result.residual_sigma *
                                CorrelatedProducts(e, std::sqrt(2.0) * sigma, 1);
   // The misfit: a smooth field of misfit_relative of the level.
   double level = 0.0;
-  for (const Eigen::Vector2i& p : used) level += smooth_a(p.y(), p.x());
-  level /= static_cast<double>(used.size());
+  for (const Eigen::Vector2i& p : lin.used) level += overlap.smooth_a(p.y(), p.x());
+  level /= static_cast<double>(lin.used.size());
   const double scale = options.misfit_scale_px;
   const int factor = std::max(1, static_cast<int>(scale / 8.0));
   result.misfit_sigma = options.misfit_relative * level;
