@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -149,98 +150,122 @@ ceres::LossFunction* MakeLoss(const PlaneBundleOptions& options, double sigma_px
   return nullptr;
 }
 
-// The covariance of the scene blocks (ambient, in their order and sizes;
-// zero rows and columns for constant ones) and of the chosen tracks' points,
-// as ceres::Covariance gives them, from the Schur complement: the Jacobian
-// of the problem (loss applied, manifolds' tangent spaces) gives J^T J =
-// [V W; W^T U] with V the tracks' 2 x 2 blocks; the scene's tangent
-// covariance is S^-1, S = U - W^T V^-1 W (the solver's reduced system), a
-// track's is V_k^-1 + V_k^-1 W_k S^-1 W_k^T V_k^-1. A QR of the whole
-// Jacobian (ceres::Covariance, SPARSE_QR) took ~4x as long on the demo. False
-// when S is rank-deficient (its Jacobi-scaled condition beyond 1e14).
-bool SchurCovariance(ceres::Problem* problem,
-                     const std::vector<std::pair<double*, int>>& scene_blocks, const Blocks& b,
-                     PlaneScene* scene, const std::vector<int>& tracks, int num_threads,
-                     Eigen::MatrixXd* scene_covariance,
-                     std::vector<Eigen::Matrix2d>* track_covariance) {
+// The problem's Jacobian over its variable blocks (loss applied, manifolds'
+// tangent spaces): the tracks' points first, 2 columns each, then the
+// scene's tangent columns.
+struct SchurJacobian {
+  ceres::CRSMatrix jacobian;
+  std::vector<int> point_of_track;  // its point's index, -1 if not variable
+  int num_points = 0;
+  std::vector<int> tangent_offset;  // per scene block, in the scene columns; -1 if constant
+  int num_scene_columns = 0;
+  int point_columns() const { return 2 * num_points; }
+};
+
+std::optional<SchurJacobian> EvaluateSchurJacobian(
+    ceres::Problem* problem, const std::vector<std::pair<double*, int>>& scene_blocks,
+    const Blocks& b, PlaneScene* scene, int num_threads) {
+  SchurJacobian j;
   ceres::Problem::EvaluateOptions evaluate;
   // The Jacobian alone: each block has its own place in it, so its bits do
   // not depend on the threads (a cost or gradient, summed per thread, would).
   evaluate.num_threads = num_threads;
-  // Variable blocks only (the others are constant in the evaluation): the
-  // tracks' points first, 2 columns each, then the scene's tangent columns.
-  std::vector<int> point_of_track(scene->track_xy_mm.cols(), -1);
+  j.point_of_track.assign(scene->track_xy_mm.cols(), -1);
   for (Eigen::Index k = 0; k < scene->track_xy_mm.cols(); ++k) {
     double* point = b.point(scene, static_cast<int>(k));
     if (!problem->HasParameterBlock(point) || problem->IsParameterBlockConstant(point)) continue;
-    point_of_track[k] = static_cast<int>(evaluate.parameter_blocks.size());
+    j.point_of_track[k] = static_cast<int>(evaluate.parameter_blocks.size());
     evaluate.parameter_blocks.push_back(point);
   }
-  const int num_points = static_cast<int>(evaluate.parameter_blocks.size());
-  const int point_columns = 2 * num_points;
-  std::vector<int> tangent_offset;  // per scene block, -1 if constant
-  int m = 0;
+  j.num_points = static_cast<int>(evaluate.parameter_blocks.size());
   for (const auto& [block, offset] : scene_blocks) {
     if (problem->IsParameterBlockConstant(block)) {
-      tangent_offset.push_back(-1);
+      j.tangent_offset.push_back(-1);
       continue;
     }
-    tangent_offset.push_back(m);
-    m += problem->ParameterBlockTangentSize(block);
+    j.tangent_offset.push_back(j.num_scene_columns);
+    j.num_scene_columns += problem->ParameterBlockTangentSize(block);
     evaluate.parameter_blocks.push_back(block);
   }
-  ceres::CRSMatrix jacobian;
-  if (!problem->Evaluate(evaluate, nullptr, nullptr, nullptr, &jacobian)) return false;
+  if (!problem->Evaluate(evaluate, nullptr, nullptr, nullptr, &j.jacobian)) return std::nullopt;
+  return j;
+}
 
-  // Per point, its rows and the scene columns they touch (ascending): a point
-  // is seen by a few tiles and, through a splined lens, depends on the knots
-  // near its pixels. Its share of the reduced system, J_k' J_k - W_k' V_k^-1
-  // W_k (J_k its rows' scene columns, W_k = P_k' J_k, V_k = P_k' P_k, P_k
-  // their point columns), is formed densely over those columns, as a
-  // product of rank num_rows - 2, and added to S once.
-  std::vector<std::vector<int>> rows(num_points), columns(num_points);
-  std::vector<int> other_rows;  // rows of priors, which no point enters
+// The Jacobian's rows by point: a point is seen by a few tiles and, through
+// a splined lens, depends on the knots near its pixels.
+struct RowsByPoint {
+  std::vector<std::vector<int>> rows;     // per point
+  std::vector<std::vector<int>> columns;  // per point: the scene columns its rows touch, ascending
+  std::vector<int> other_rows;            // rows of priors, which no point enters
+};
+
+RowsByPoint SortRowsByPoint(const SchurJacobian& j) {
+  const ceres::CRSMatrix& jacobian = j.jacobian;
+  const int point_columns = j.point_columns();
+  RowsByPoint by;
+  by.rows.resize(j.num_points);
+  by.columns.resize(j.num_points);
   for (int row = 0; row < jacobian.num_rows; ++row) {
     int point = -1;
     for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1] && point < 0; ++e)
       if (jacobian.cols[e] < point_columns) point = jacobian.cols[e] / 2;
     if (point < 0) {
-      other_rows.push_back(row);
+      by.other_rows.push_back(row);
       continue;
     }
-    rows[point].push_back(row);
+    by.rows[point].push_back(row);
     for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
       if (jacobian.cols[e] >= point_columns)
-        columns[point].push_back(jacobian.cols[e] - point_columns);
+        by.columns[point].push_back(jacobian.cols[e] - point_columns);
     }
   }
-  for (std::vector<int>& c : columns) {
+  for (std::vector<int>& c : by.columns) {
     std::sort(c.begin(), c.end());
     c.erase(std::unique(c.begin(), c.end()), c.end());
   }
+  return by;
+}
 
+// J^T J = [V W; W^T U] reduced to the scene columns: S = U - W^T V^-1 W,
+// with each point's V_k^-1 and W_k (2 x its columns) kept for its own
+// covariance.
+struct ReducedSystem {
+  Eigen::MatrixXd s;
+  std::vector<Eigen::Matrix2d> v_inverse;
+  std::vector<Eigen::MatrixXd> w;
+};
+
+// Each point's share of S, J_k' J_k - W_k' V_k^-1 W_k (J_k its rows' scene
+// columns, W_k = P_k' J_k, V_k = P_k' P_k, P_k their point columns), is
+// formed densely over its columns, as a product of rank num_rows - 2, and
+// added to S once. nullopt where a point's V_k is singular.
+std::optional<ReducedSystem> ReduceToScene(const SchurJacobian& j, const RowsByPoint& by,
+                                           int num_threads) {
+  const ceres::CRSMatrix& jacobian = j.jacobian;
+  const int point_columns = j.point_columns(), m = j.num_scene_columns;
+  ReducedSystem reduced;
+  reduced.v_inverse.resize(j.num_points);
+  reduced.w.resize(j.num_points);
   // S's upper triangle, summed per chunk of points and the chunks then in
   // order: a fixed number of chunks, so that the bits do not depend on the
   // threads.
   constexpr int kNumChunks = 8;
-  std::vector<Eigen::Matrix2d> v_inverse(num_points);
-  std::vector<Eigen::MatrixXd> w(num_points);  // 2 x columns[point].size()
   std::vector<Eigen::MatrixXd> chunk_s(kNumChunks);
   std::atomic<bool> singular{false};
   ParallelFor(kNumChunks, num_threads, [&](int chunk) {
     Eigen::MatrixXd& sum = chunk_s[chunk];
     sum = Eigen::MatrixXd::Zero(m, m);
-    const int end = static_cast<int>(static_cast<long>(num_points) * (chunk + 1) / kNumChunks);
-    for (int k = static_cast<int>(static_cast<long>(num_points) * chunk / kNumChunks); k < end;
+    const int end = static_cast<int>(static_cast<long>(j.num_points) * (chunk + 1) / kNumChunks);
+    for (int k = static_cast<int>(static_cast<long>(j.num_points) * chunk / kNumChunks); k < end;
          ++k) {
-      const std::vector<int>& cols = columns[k];
-      const int num_rows = static_cast<int>(rows[k].size());
+      const std::vector<int>& cols = by.columns[k];
+      const int num_rows = static_cast<int>(by.rows[k].size());
       Eigen::MatrixXd j_scene =
           Eigen::MatrixXd::Zero(num_rows, static_cast<Eigen::Index>(cols.size()));
       Eigen::Matrix<double, Eigen::Dynamic, 2> j_point =
           Eigen::Matrix<double, Eigen::Dynamic, 2>::Zero(num_rows, 2);
       for (int i = 0; i < num_rows; ++i) {
-        const int row = rows[k][i];
+        const int row = by.rows[k][i];
         for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e) {
           const int col = jacobian.cols[e];
           if (col < point_columns) {
@@ -256,8 +281,8 @@ bool SchurCovariance(ceres::Problem* problem,
         singular = true;
         return;
       }
-      v_inverse[k] = v.inverse();
-      w[k] = j_point.transpose() * j_scene;
+      reduced.v_inverse[k] = v.inverse();
+      reduced.w[k] = j_point.transpose() * j_scene;
       if (num_rows <= 2) continue;  // one view: its point absorbs it, no share of S
       // J_k' J_k - W_k' V_k^-1 W_k = (Z' J_k)' (Z' J_k), Z an orthonormal
       // basis of the rows' space orthogonal to P_k: the last num_rows - 2
@@ -272,68 +297,104 @@ bool SchurCovariance(ceres::Problem* problem,
       }
     }
   });
-  if (singular) return false;
-  Eigen::MatrixXd s = Eigen::MatrixXd::Zero(m, m);
+  if (singular) return std::nullopt;
+  Eigen::MatrixXd& s = reduced.s;
+  s = Eigen::MatrixXd::Zero(m, m);
   std::vector<std::pair<int, double>> entries;  // of a row: (scene column, value)
-  for (const int row : other_rows) {
+  for (const int row : by.other_rows) {
     entries.clear();
     for (int e = jacobian.rows[row]; e < jacobian.rows[row + 1]; ++e)
       entries.emplace_back(jacobian.cols[e] - point_columns, jacobian.values[e]);
     for (size_t e1 = 0; e1 < entries.size(); ++e1) {
       const auto [i, x] = entries[e1];
       for (size_t e2 = e1; e2 < entries.size(); ++e2) {
-        const auto [j, y] = entries[e2];
-        s(std::min(i, j), std::max(i, j)) += x * y;
+        const auto [jj, y] = entries[e2];
+        s(std::min(i, jj), std::max(i, jj)) += x * y;
       }
     }
   }
   for (const Eigen::MatrixXd& sum : chunk_s) s += sum;
   s.triangularView<Eigen::StrictlyLower>() = s.transpose();
-  // Rank: the Jacobi-scaled reduced system's eigenvalues.
+  return reduced;
+}
+
+// S^-1, nullopt when S is rank-deficient: its Jacobi-scaled eigenvalues
+// spread beyond 1e14.
+std::optional<Eigen::MatrixXd> InverseOfFullRank(const Eigen::MatrixXd& s) {
   const Eigen::VectorXd d = s.diagonal();
-  if (!(d.minCoeff() > 0)) return false;
+  if (!(d.minCoeff() > 0)) return std::nullopt;
   const Eigen::VectorXd inv_sqrt_d = d.cwiseSqrt().cwiseInverse();
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(
       inv_sqrt_d.asDiagonal() * s * inv_sqrt_d.asDiagonal());
   const Eigen::VectorXd lambda = eigen.eigenvalues();
-  if (!(lambda(0) > 1e-14 * lambda(m - 1))) return false;
-  const Eigen::MatrixXd tangent = inv_sqrt_d.asDiagonal() * eigen.eigenvectors() *
-                                  lambda.cwiseInverse().asDiagonal() *
-                                  eigen.eigenvectors().transpose() * inv_sqrt_d.asDiagonal();
+  if (!(lambda(0) > 1e-14 * lambda(lambda.size() - 1))) return std::nullopt;
+  return inv_sqrt_d.asDiagonal() * eigen.eigenvectors() * lambda.cwiseInverse().asDiagonal() *
+         eigen.eigenvectors().transpose() * inv_sqrt_d.asDiagonal();
+}
 
-  // Lift to the ambient sizes: C = P C_tangent P^T, P the plus Jacobian.
+// P, the plus Jacobian from the scene's tangent columns to its blocks'
+// ambient values (zero rows for constant blocks): C = P C_tangent P^T.
+Eigen::MatrixXd AmbientFromTangent(const ceres::Problem& problem,
+                                   const std::vector<std::pair<double*, int>>& scene_blocks,
+                                   const SchurJacobian& j) {
   int ambient_size = 0;
   for (const auto& [block, offset] : scene_blocks)
-    ambient_size += problem->ParameterBlockSize(block);
-  Eigen::MatrixXd lift = Eigen::MatrixXd::Zero(ambient_size, m);
+    ambient_size += problem.ParameterBlockSize(block);
+  Eigen::MatrixXd lift = Eigen::MatrixXd::Zero(ambient_size, j.num_scene_columns);
   for (size_t n = 0, row = 0; n < scene_blocks.size(); ++n) {
     double* block = scene_blocks[n].first;
-    const int ambient = problem->ParameterBlockSize(block);
-    if (tangent_offset[n] >= 0) {
-      const int tangent_size = problem->ParameterBlockTangentSize(block);
-      if (const ceres::Manifold* manifold = problem->GetManifold(block)) {
+    const int ambient = problem.ParameterBlockSize(block);
+    if (j.tangent_offset[n] >= 0) {
+      const int tangent_size = problem.ParameterBlockTangentSize(block);
+      if (const ceres::Manifold* manifold = problem.GetManifold(block)) {
         Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> plus(ambient,
                                                                                    tangent_size);
         manifold->PlusJacobian(block, plus.data());
-        lift.block(row, tangent_offset[n], ambient, tangent_size) = plus;
+        lift.block(row, j.tangent_offset[n], ambient, tangent_size) = plus;
       } else {
-        lift.block(row, tangent_offset[n], ambient, tangent_size).setIdentity();
+        lift.block(row, j.tangent_offset[n], ambient, tangent_size).setIdentity();
       }
     }
     row += ambient;
   }
-  *scene_covariance = lift * tangent * lift.transpose();
+  return lift;
+}
+
+// The covariance of the scene blocks (ambient, in their order and sizes;
+// zero rows and columns for constant ones) and of the chosen tracks' points,
+// as ceres::Covariance gives them, from the Schur complement: the Jacobian
+// of the problem (loss applied, manifolds' tangent spaces) gives J^T J =
+// [V W; W^T U] with V the tracks' 2 x 2 blocks; the scene's tangent
+// covariance is S^-1, S = U - W^T V^-1 W (the solver's reduced system), a
+// track's is V_k^-1 + V_k^-1 W_k S^-1 W_k^T V_k^-1. A QR of the whole
+// Jacobian (ceres::Covariance, SPARSE_QR) took ~4x as long on the demo. False
+// when S is rank-deficient (its Jacobi-scaled condition beyond 1e14).
+bool SchurCovariance(ceres::Problem* problem,
+                     const std::vector<std::pair<double*, int>>& scene_blocks, const Blocks& b,
+                     PlaneScene* scene, const std::vector<int>& tracks, int num_threads,
+                     Eigen::MatrixXd* scene_covariance,
+                     std::vector<Eigen::Matrix2d>* track_covariance) {
+  const std::optional<SchurJacobian> j =
+      EvaluateSchurJacobian(problem, scene_blocks, b, scene, num_threads);
+  if (!j) return false;
+  const RowsByPoint by = SortRowsByPoint(*j);
+  const std::optional<ReducedSystem> reduced = ReduceToScene(*j, by, num_threads);
+  if (!reduced) return false;
+  const std::optional<Eigen::MatrixXd> tangent = InverseOfFullRank(reduced->s);
+  if (!tangent) return false;
+  const Eigen::MatrixXd lift = AmbientFromTangent(*problem, scene_blocks, *j);
+  *scene_covariance = lift * *tangent * lift.transpose();
   track_covariance->clear();
   for (int k : tracks) {
-    const int point = point_of_track[k];
+    const int point = j->point_of_track[k];
     if (point < 0) {
       track_covariance->push_back(Eigen::Matrix2d::Zero());
       continue;
     }
-    Eigen::Matrix2d c = v_inverse[point];
-    if (w[point].size() > 0) {
-      const Eigen::MatrixXd g = v_inverse[point] * w[point];
-      c += g * tangent(columns[point], columns[point]) * g.transpose();
+    Eigen::Matrix2d c = reduced->v_inverse[point];
+    if (reduced->w[point].size() > 0) {
+      const Eigen::MatrixXd g = reduced->v_inverse[point] * reduced->w[point];
+      c += g * (*tangent)(by.columns[point], by.columns[point]) * g.transpose();
     }
     track_covariance->push_back(c);
   }
