@@ -614,6 +614,130 @@ bool CovarianceIntoScene(const BuiltProblem& built, Blocks* blocks, const std::v
   return true;
 }
 
+// Why the solve cannot run on these inputs ("" when it can).
+std::string WhyNotRun(const LensProjection& lens, const PlaneBundleInput& input,
+                      const PlaneBundleConfig& config, const PlaneBundleOptions& options,
+                      const PlaneScene& scene) {
+  std::string error = config.Check();
+  if (error.empty()) error = options.Check();
+  if (error.empty()) error = CheckPlaneBundleInput(input, config, lens.NumIntrinsics());
+  if (error.empty() &&
+      (scene.table_pos_mm.size() != input.commanded_table_pos_mm.size() ||
+       scene.track_xy_mm.cols() != input.num_tracks || scene.plates.size() != input.plates.size() ||
+       scene.intrinsics.size() != lens.NumIntrinsics())) {
+    error = "the initial scene's sizes do not match the input";
+  }
+  return error;
+}
+
+// The observations of weight > 0, per tile into summary's counts; "" or why
+// the solve cannot run (a tile with neither a prior nor an observation).
+std::string CountObservations(const PlaneBundleInput& input, PlaneBundleSummary* summary) {
+  const int num_tiles = static_cast<int>(input.commanded_table_pos_mm.size());
+  std::vector<int> tile_observations(num_tiles, 0);
+  for (const TrackObservation& obs : input.observations) {
+    if (obs.weight <= 0.0) continue;
+    ++tile_observations[obs.tile];
+    ++summary->num_observations;
+  }
+  for (const PlateMarkObservation& obs : input.plate_observations) {
+    if (obs.weight <= 0.0) continue;
+    ++tile_observations[obs.tile];
+    ++summary->num_observations;
+  }
+  for (int i = 0; i < num_tiles; ++i)
+    if (tile_observations[i] == 0) summary->tiles_without_observations.push_back(i);
+  for (const int i : input.tiles_without_table_prior) {
+    if (tile_observations[i] > 0) continue;
+    return "tile " + std::to_string(i) + " has neither a table prior nor an observation";
+  }
+  return {};
+}
+
+ceres::Solver::Options SolverOptions(const PlaneBundleOptions& options, bool has_observations) {
+  ceres::Solver::Options solver_options;
+  solver_options.linear_solver_type = options.linear_solver == LinearSolver::kSparseSchur
+                                          ? ceres::SPARSE_SCHUR
+                                          : ceres::DENSE_SCHUR;
+  solver_options.max_num_iterations = options.max_iterations;
+  solver_options.initial_trust_region_radius = options.initial_trust_region_radius;
+  solver_options.function_tolerance = options.function_tolerance;
+  solver_options.gradient_tolerance = options.gradient_tolerance;
+  solver_options.parameter_tolerance = options.parameter_tolerance;
+  // One thread: Ceres sums the cost and gradient per thread and adds into
+  // the reduced system under locks, in the threads' order, so the last bits
+  // of every solve differed between runs. Two threads were slower in every
+  // solve of the demo and lens-mismatch here (2 shared cores).
+  solver_options.num_threads = 1;
+  solver_options.logging_type = ceres::SILENT;
+  if (!has_observations) solver_options.linear_solver_type = ceres::DENSE_QR;  // priors alone
+  return solver_options;
+}
+
+// The elimination ordering. Ceres orders a group's blocks by address (a
+// std::set<double*>), and that order lays out the reduced system and orders
+// its sums: with the heap's layout, which differs between runs, the
+// solution's last bits did. So every scene block has a group of its own, in
+// the scene vector's order. The points share group 0: columns of one
+// matrix, they are in track order.
+std::shared_ptr<ceres::ParameterBlockOrdering> DeterministicOrdering(const BuiltProblem& built,
+                                                                     int num_tracks, Blocks* b,
+                                                                     PlaneScene* scene) {
+  const ceres::Problem& problem = *built.problem;
+  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+  for (int k = 0; k < num_tracks; ++k) ordering->AddElementToGroup(b->point(scene, k), 0);
+  int group = 1;
+  const auto add_group = [&](double* block) {
+    if (problem.HasParameterBlock(block)) ordering->AddElementToGroup(block, group++);
+  };
+  add_group(b->r.data());
+  add_group(b->t.data());
+  for (std::array<double, 2>& pos : b->table_pos) add_group(pos.data());
+  for (size_t g = 0; g < b->plate_pose.size(); ++g) {
+    add_group(b->plate_pose[g].data());
+    add_group(&b->plate_height[g]);
+    add_group(&b->plate_scale[g]);
+  }
+  for (size_t k = 0; k + 1 < built.block_starts.size(); ++k)
+    add_group(b->intrinsics.data() + built.block_starts[k]);
+  return ordering;
+}
+
+// Why the solution cannot be used ("" when it can).
+std::string WhyUnusable(const ceres::Solver::Summary& solver_summary,
+                        const PlaneBundleSummary& summary, int num_tiles,
+                        const PlaneBundleConfig& config, const PlaneBundleOptions& options) {
+  const int observed_tiles =
+      num_tiles - static_cast<int>(summary.tiles_without_observations.size());
+  if (!solver_summary.IsSolutionUsable()) return "the solver failed: " + solver_summary.message;
+  if (solver_summary.termination_type == ceres::NO_CONVERGENCE)
+    return "no convergence in " + std::to_string(options.max_iterations) + " iterations";
+  if (observed_tiles < 2) return "fewer than 2 tiles observed";
+  if (!(summary.inlier_rms_px <= options.max_usable_rms_px))
+    return "inlier RMS above max_usable_rms_px";
+  if (config.compute_covariance && !summary.covariance_ok)
+    return "covariance not computable (rank-deficient: too few observations?)";
+  return {};
+}
+
+std::string Brief(const PlaneBundleSummary& summary, const std::string& why_unusable, int num_tiles,
+                  int num_tracks) {
+  double max_adjustment_mm = 0.0;
+  for (const Eigen::Vector2d& a : summary.table_adjustment_mm) {
+    max_adjustment_mm = std::max(max_adjustment_mm, a.norm());
+  }
+  std::ostringstream brief;
+  brief.precision(3);
+  brief << "plane BA " << (summary.usable ? "ok" : "UNUSABLE (" + why_unusable + ")") << ": "
+        << num_tiles << " tiles (" << summary.tiles_without_observations.size()
+        << " by prior only), " << num_tracks << " tracks, " << summary.num_observations
+        << " obs, rms " << summary.initial_rms_px << " -> " << summary.final_rms_px
+        << " px (inliers " << summary.inlier_rms_px << ", " << summary.num_outliers
+        << " outliers) in " << summary.iterations << " it, tilt " << summary.plane_tilt_deg
+        << " deg, max |T adj| " << max_adjustment_mm << " mm";
+  return brief.str();
+}
+
 }  // namespace
 
 PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundleInput& input,
@@ -621,18 +745,7 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
                                     const PlaneBundleOptions& options, PlaneScene* scene) {
   PlaneBundleSummary summary;
   const int num_tiles = static_cast<int>(input.commanded_table_pos_mm.size());
-  const int num_plates = static_cast<int>(input.plates.size());
-  const int num_intrinsics = lens.NumIntrinsics();
-  std::string error = config.Check();
-  if (error.empty()) error = options.Check();
-  if (error.empty()) error = CheckPlaneBundleInput(input, config, num_intrinsics);
-  if (error.empty() && (static_cast<int>(scene->table_pos_mm.size()) != num_tiles ||
-                        scene->track_xy_mm.cols() != input.num_tracks ||
-                        static_cast<int>(scene->plates.size()) != num_plates ||
-                        scene->intrinsics.size() != num_intrinsics)) {
-    error = "the initial scene's sizes do not match the input";
-  }
-  if (!error.empty()) {
+  if (const std::string error = WhyNotRun(lens, input, config, options, *scene); !error.empty()) {
     summary.brief = "plane bundle adjustment not run: " + error;
     return summary;
   }
@@ -644,24 +757,8 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
   ComputeResiduals(lens, input, &b, scene);
   const double outlier_px = 3.0 * options.loss_scale_px;
   summary.initial_rms_px = Stats(input, *scene, outlier_px).rms_px;
-
-  std::vector<int> tile_observations(num_tiles, 0);
-  for (const TrackObservation& obs : input.observations) {
-    if (obs.weight <= 0.0) continue;
-    ++tile_observations[obs.tile];
-    ++summary.num_observations;
-  }
-  for (const PlateMarkObservation& obs : input.plate_observations) {
-    if (obs.weight <= 0.0) continue;
-    ++tile_observations[obs.tile];
-    ++summary.num_observations;
-  }
-  for (int i = 0; i < num_tiles; ++i)
-    if (tile_observations[i] == 0) summary.tiles_without_observations.push_back(i);
-  for (const int i : input.tiles_without_table_prior) {
-    if (tile_observations[i] > 0) continue;
-    summary.brief = "plane bundle adjustment not run: tile " + std::to_string(i) +
-                    " has neither a table prior nor an observation";
+  if (const std::string error = CountObservations(input, &summary); !error.empty()) {
+    summary.brief = "plane bundle adjustment not run: " + error;
     return summary;
   }
   const bool has_observations = summary.num_observations > 0;
@@ -686,59 +783,22 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
                                      initial_intrinsics,
                                      has_observations,
                                      &num_outside};
-
-  ceres::Solver::Options solver_options;
-  solver_options.linear_solver_type = options.linear_solver == LinearSolver::kSparseSchur
-                                          ? ceres::SPARSE_SCHUR
-                                          : ceres::DENSE_SCHUR;
-  solver_options.max_num_iterations = options.max_iterations;
-  solver_options.initial_trust_region_radius = options.initial_trust_region_radius;
-  solver_options.function_tolerance = options.function_tolerance;
-  solver_options.gradient_tolerance = options.gradient_tolerance;
-  solver_options.parameter_tolerance = options.parameter_tolerance;
-  // One thread: Ceres sums the cost and gradient per thread and adds into
-  // the reduced system under locks, in the threads' order, so the last bits
-  // of every solve differed between runs. Two threads were slower in every
-  // solve of the demo and lens-mismatch here (2 shared cores).
-  solver_options.num_threads = 1;
-  solver_options.logging_type = ceres::SILENT;
-  if (!has_observations) solver_options.linear_solver_type = ceres::DENSE_QR;  // priors alone
-  // Ceres orders a group's blocks by address (a std::set<double*>), and that
-  // order lays out the reduced system and orders its sums: with the heap's
-  // layout, which differs between runs, the solution's last bits did. So
-  // every scene block has a group of its own, in the scene vector's order.
-  // The points share group 0: columns of one matrix, they are in track order.
-  const auto ordering_of = [&](const BuiltProblem& built) {
-    const ceres::Problem& problem = *built.problem;
-    auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-    for (int k = 0; k < input.num_tracks; ++k) ordering->AddElementToGroup(b.point(scene, k), 0);
-    int group = 1;
-    const auto add_group = [&](double* block) {
-      if (problem.HasParameterBlock(block)) ordering->AddElementToGroup(block, group++);
-    };
-    add_group(b.r.data());
-    add_group(b.t.data());
-    for (std::array<double, 2>& pos : b.table_pos) add_group(pos.data());
-    for (int g = 0; g < num_plates; ++g) {
-      add_group(b.plate_pose[g].data());
-      add_group(&b.plate_height[g]);
-      add_group(&b.plate_scale[g]);
-    }
-    for (size_t k = 0; k + 1 < built.block_starts.size(); ++k)
-      add_group(b.intrinsics.data() + built.block_starts[k]);
-    return ordering;
-  };
+  ceres::Solver::Options solver_options = SolverOptions(options, has_observations);
   const bool split =
       has_observations && config.refine_intrinsics && lens.IntrinsicsBlockStarts().size() > 2;
   BuiltProblem built = BuildProblem(problem_inputs, split, &b, scene);
-  if (has_observations) solver_options.linear_solver_ordering = ordering_of(built);
+  if (has_observations) {
+    solver_options.linear_solver_ordering =
+        DeterministicOrdering(built, input.num_tracks, &b, scene);
+  }
   ceres::Solver::Summary solver_summary;
   ceres::Solve(solver_options, built.problem.get(), &solver_summary);
   int iterations = static_cast<int>(solver_summary.iterations.size()) - 1;
   summary.intrinsics_block_exits = num_outside;
   if (num_outside > 0) {  // from where it stopped, with the intrinsics in one block
     built = BuildProblem(problem_inputs, false, &b, scene);
-    solver_options.linear_solver_ordering = ordering_of(built);
+    solver_options.linear_solver_ordering =
+        DeterministicOrdering(built, input.num_tracks, &b, scene);
     ceres::Solve(solver_options, built.problem.get(), &solver_summary);
     iterations += static_cast<int>(solver_summary.iterations.size()) - 1;
   }
@@ -773,35 +833,9 @@ PlaneBundleSummary SolvePlaneBundle(const LensProjection& lens, const PlaneBundl
         CovarianceIntoScene(built, &b, config.covariance_tracks, options.num_threads, scene);
     summary.covariance_seconds = SecondsSince(covariance_start);
   }
-
-  const int observed_tiles = num_tiles - static_cast<int>(summary.tiles_without_observations.size());
-  std::string why_unusable;
-  if (!solver_summary.IsSolutionUsable()) {
-    why_unusable = "the solver failed: " + solver_summary.message;
-  } else if (solver_summary.termination_type == ceres::NO_CONVERGENCE) {
-    why_unusable = "no convergence in " + std::to_string(options.max_iterations) + " iterations";
-  } else if (observed_tiles < 2) {
-    why_unusable = "fewer than 2 tiles observed";
-  } else if (!(summary.inlier_rms_px <= options.max_usable_rms_px)) {
-    why_unusable = "inlier RMS above max_usable_rms_px";
-  } else if (config.compute_covariance && !summary.covariance_ok) {
-    why_unusable = "covariance not computable (rank-deficient: too few observations?)";
-  }
+  const std::string why_unusable = WhyUnusable(solver_summary, summary, num_tiles, config, options);
   summary.usable = why_unusable.empty();
-  double max_adjustment_mm = 0.0;
-  for (const Eigen::Vector2d& a : summary.table_adjustment_mm) {
-    max_adjustment_mm = std::max(max_adjustment_mm, a.norm());
-  }
-  std::ostringstream brief;
-  brief.precision(3);
-  brief << "plane BA " << (summary.usable ? "ok" : "UNUSABLE (" + why_unusable + ")") << ": "
-        << num_tiles << " tiles (" << summary.tiles_without_observations.size()
-        << " by prior only), " << input.num_tracks << " tracks, " << summary.num_observations
-        << " obs, rms " << summary.initial_rms_px << " -> " << summary.final_rms_px
-        << " px (inliers " << summary.inlier_rms_px << ", " << summary.num_outliers
-        << " outliers) in " << summary.iterations << " it, tilt " << summary.plane_tilt_deg
-        << " deg, max |T adj| " << max_adjustment_mm << " mm";
-  summary.brief = brief.str();
+  summary.brief = Brief(summary, why_unusable, num_tiles, input.num_tracks);
   return summary;
 }
 
