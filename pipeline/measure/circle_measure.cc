@@ -368,6 +368,181 @@ double BottomRimOffset(const Circle& circle, const Circle& bottom, const Eigen::
   return b + std::sqrt(disc) - circle.radius;
 }
 
+// A wedge's pixels in the annulus: radial distance d from the circle, px,
+// and value.
+struct WedgePixels {
+  std::vector<double> d, v;
+};
+
+// A step fit's samples: a wedge's pixels with d in [lo, hi].
+struct StepSamples {
+  std::vector<double> d, v;
+  void Take(const WedgePixels& pixels, double lo, double hi) {
+    d.clear();
+    v.clear();
+    for (size_t i = 0; i < pixels.d.size(); ++i) {
+      if (pixels.d[i] >= lo && pixels.d[i] <= hi) {
+        d.push_back(pixels.d[i]);
+        v.push_back(pixels.v[i]);
+      }
+    }
+  }
+};
+
+// The annulus d_lo <= d <= d_hi about `circle`, pixel by pixel into its
+// wedges. A wedge with an uncovered pixel outside radius `rcover` is marked
+// uncovered.
+std::vector<WedgePixels> GatherWedgePixels(const ImageF& image, const Circle& circle, double d_lo,
+                                           double d_hi, double rcover,
+                                           std::vector<WedgeEdge>* wedges) {
+  const int num = static_cast<int>(wedges->size());
+  std::vector<WedgePixels> pixels(static_cast<size_t>(num));
+  const double rmax = circle.radius + d_hi, rmin = std::max(0.0, circle.radius + d_lo);
+  // A wedge's share of the annulus, and some: one allocation each.
+  const auto per_wedge = static_cast<size_t>(kPi * (rmax * rmax - rmin * rmin) / num) + 8;
+  for (WedgePixels& p : pixels) p.d.reserve(per_wedge), p.v.reserve(per_wedge);
+  const auto col_lo = static_cast<Eigen::Index>(std::floor(circle.centre.x() - rmax));
+  const auto col_hi = static_cast<Eigen::Index>(std::ceil(circle.centre.x() + rmax));
+  const auto row_lo = static_cast<Eigen::Index>(std::floor(circle.centre.y() - rmax));
+  const auto row_hi = static_cast<Eigen::Index>(std::ceil(circle.centre.y() + rmax));
+  for (Eigen::Index row = row_lo; row <= row_hi; ++row) {
+    for (Eigen::Index col = col_lo; col <= col_hi; ++col) {
+      const double dx = col - circle.centre.x(), dy = row - circle.centre.y();
+      const double rho = std::sqrt(dx * dx + dy * dy);
+      if (rho < rmin || rho > rmax) continue;
+      double t = std::atan2(dy, dx);
+      if (t < 0) t += 2 * kPi;
+      const auto k = static_cast<size_t>(std::min(num - 1, static_cast<int>(t / (2 * kPi) * num)));
+      if (!Covered(image, row, col)) {
+        if (rho >= rcover) (*wedges)[k].uncovered = true;
+        continue;
+      }
+      pixels[k].d.push_back(rho - circle.radius);
+      pixels[k].v.push_back(image(row, col));
+    }
+  }
+  return pixels;
+}
+
+// A wedge's centre ray from the circle's d_lo to d_hi, sampled every kStep
+// px (bilinear), and its rises over 1 px, deriv(i) = value(i + h) -
+// value(i - h) (zero where they reach beyond the covered samples).
+class RayProfile {
+ public:
+  static constexpr double kStep = 0.25;
+  static constexpr int h = 2;  // 0.5 px
+
+  RayProfile(double d_lo, double d_hi)
+      : d_lo_(d_lo),
+        value_(static_cast<int>(std::lround((d_hi - d_lo) / kStep)) + 1),
+        deriv_(Eigen::VectorXd::Zero(value_.size())) {}
+
+  // The ray along n; false where it is covered too little inside `d_fit`
+  // for a step fit there.
+  bool Sample(const ImageF& image, const Circle& circle, const Eigen::Vector2d& n, double d_fit) {
+    const int samples = static_cast<int>(value_.size());
+    first_ = samples;
+    for (int i = samples - 1; i >= 0; --i) {
+      const Eigen::Vector2d p = circle.centre + (circle.radius + Offset(i)) * n;
+      value_(i) = Bilinear(image, p.x(), p.y());
+      if (std::isnan(value_(i))) break;
+      first_ = i;
+    }
+    if (first_ > Index(d_fit) - h) return false;
+    deriv_.head(first_ + h).setZero();
+    for (int i = first_ + h; i + h < samples; ++i) deriv_(i) = value_(i + h) - value_(i - h);
+    return true;
+  }
+
+  int Index(double d) const { return static_cast<int>(std::lround((d - d_lo_) / kStep)); }
+  double Offset(int i) const { return d_lo_ + i * kStep; }
+  int first_rise() const { return first_ + h; }  // the innermost rise of covered samples
+  double Rise(int i) const { return deriv_(i); }
+  bool IsPeak(int i) const { return deriv_(i) >= deriv_(i - 1) && deriv_(i) >= deriv_(i + 1); }
+
+ private:
+  double d_lo_;
+  Eigen::VectorXd value_, deriv_;
+  int first_ = 0;  // samples [first_, size) are covered
+};
+
+// The rim on a profile: the outermost strong dark-to-bright step within
+// [d_lo, d_hi], a local maximum of at least half the largest rise there; its
+// index, -1 if none.
+int RimPeak(const RayProfile& profile, double d_lo, double d_hi) {
+  const int i_lo = profile.Index(d_lo), i_hi = profile.Index(d_hi);
+  double largest = 0.0;
+  for (int i = i_lo; i <= i_hi; ++i) largest = std::max(largest, profile.Rise(i));
+  if (!(largest > 0.0)) return -1;
+  for (int i = i_hi; i >= i_lo; --i)
+    if (profile.Rise(i) >= 0.5 * largest && profile.IsPeak(i)) return i;
+  return -1;
+}
+
+// A clean rim step: its rim within 1 px of the profile's, contrast and blur
+// in range.
+bool IsRimStep(const StepFit& step, double x_rim, const CircleMeasureOptions& options) {
+  return step.ok && std::abs(step.x0 - x_rim) <= 1.0 && step.contrast >= options.min_contrast &&
+         step.sigma < options.profile_half_width_px;
+}
+
+// Pass (b)'s fit of a wedge (Inner::kFree): its rim at x_rim, and the bottom
+// rim looked for down to `reach` inside it, as a step of its own when far
+// inside, else as a two-step fit.
+void FitRimAndBottomRim(const WedgePixels& pixels, const RayProfile& profile, int peak, double band,
+                        double reach, double sigma, const CircleMeasureOptions& options,
+                        StepSamples* samples, WedgeEdge* wedge) {
+  const double hw = options.profile_half_width_px;
+  const double x_rim = profile.Offset(peak);
+  samples->Take(pixels, x_rim - hw, x_rim + hw);
+  wedge->step = FitStep(samples->d, samples->v, x_rim, x_rim - hw, sigma, Inner::kRamp);
+  wedge->ok = IsRimStep(wedge->step, x_rim, options);
+  // The bottom rim: the strongest rise inside the rim's flank ...
+  const int stop = std::max(profile.first_rise(), profile.Index(x_rim - reach + band));
+  double best = 0.2 * options.min_contrast;
+  int inner_peak = -1;
+  for (int i = peak - static_cast<int>(std::lround(2.0 * sigma / RayProfile::kStep)); i >= stop;
+       --i) {
+    if (profile.Rise(i) > best && profile.IsPeak(i)) {
+      best = profile.Rise(i);
+      inner_peak = i;
+    }
+  }
+  const double x_peak = profile.Offset(inner_peak);
+  if (wedge->ok && inner_peak >= 0 && x_peak < x_rim - 2.0 * hw) {
+    // ... far inside: a step of its own.
+    samples->Take(pixels, x_peak - hw, x_peak + hw);
+    const StepFit step = FitStep(samples->d, samples->v, x_peak, x_peak - hw, sigma, Inner::kRamp);
+    if (step.ok && std::abs(step.x0 - x_peak) <= 1.0 &&
+        step.contrast >= 0.5 * options.min_contrast) {
+      wedge->step.x1 = step.x0;
+      wedge->step.wall_contrast = step.contrast;
+      wedge->inner_ok = true;
+    }
+    return;
+  }
+  // ... or near: both steps in one fit, started there or on two shoulders
+  // of the rim's flank (a narrow wall shows as a shoulder, not a peak); it
+  // must explain the same samples clearly better than the rim alone.
+  std::vector<double> starts = {x_rim - 2.0 * sigma, x_rim - 3.5 * sigma};
+  if (inner_peak >= 0) starts.push_back(x_peak);
+  const double lo = std::min(x_rim - hw, *std::min_element(starts.begin(), starts.end()) - hw);
+  samples->Take(pixels, lo, x_rim + hw);
+  std::optional<StepFit> alone;  // fitted when a two-step fit needs the comparison
+  for (const double x1 : starts) {
+    const StepFit step = FitStep(samples->d, samples->v, x_rim, x1, sigma, Inner::kFree);
+    if (!(IsRimStep(step, x_rim, options) && step.x1 < step.x0 - 2.0 * step.sigma &&
+          step.x1 > lo + step.sigma && step.wall_contrast >= 0.5 * options.min_contrast)) {
+      continue;
+    }
+    if (!alone) alone = FitStep(samples->d, samples->v, x_rim, x_rim, sigma, Inner::kRamp);
+    if (step.rms < 0.7 * alone->rms && (!wedge->inner_ok || step.rms < wedge->step.rms)) {
+      wedge->step = step;
+      wedge->ok = wedge->inner_ok = wedge->wall_fitted = true;
+    }
+  }
+}
+
 // One pass of step 2 about `circle` (the header's passes a-c): `inner` is
 // kRamp for the rims alone, kFree to look for the bottom rim on each ray as
 // well, kFixed to take it from `bottom`. The blur is fitted per wedge,
@@ -389,143 +564,29 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
   const double reach =
       std::clamp(0.5 * circle.radius, band + 2.0 * hw, std::max(band + 2.0 * hw, 30.0));
   const double d_lo = -band - (inner == Inner::kFree ? reach : hw + 1.0), d_hi = band + hw + 1.0;
-  // Each wedge's pixels (radial distance d, value).
-  std::vector<std::vector<double>> wd(static_cast<size_t>(num)), wv(static_cast<size_t>(num));
-  const double rmax = circle.radius + d_hi, rmin = std::max(0.0, circle.radius + d_lo);
-  // A wedge's share of the annulus, and some: one allocation each.
-  const auto per_wedge = static_cast<size_t>(kPi * (rmax * rmax - rmin * rmin) / num) + 8;
-  for (size_t k = 0; k < wd.size(); ++k) wd[k].reserve(per_wedge), wv[k].reserve(per_wedge);
-  const auto col_lo = static_cast<Eigen::Index>(std::floor(circle.centre.x() - rmax));
-  const auto col_hi = static_cast<Eigen::Index>(std::ceil(circle.centre.x() + rmax));
-  const auto row_lo = static_cast<Eigen::Index>(std::floor(circle.centre.y() - rmax));
-  const auto row_hi = static_cast<Eigen::Index>(std::ceil(circle.centre.y() + rmax));
   const double rcover = circle.radius - band - hw - 1.0;  // uncovered pixels matter outside this
-  for (Eigen::Index row = row_lo; row <= row_hi; ++row) {
-    for (Eigen::Index col = col_lo; col <= col_hi; ++col) {
-      const double dx = col - circle.centre.x(), dy = row - circle.centre.y();
-      const double rho = std::sqrt(dx * dx + dy * dy);
-      if (rho < rmin || rho > rmax) continue;
-      double t = std::atan2(dy, dx);
-      if (t < 0) t += 2 * kPi;
-      const auto k = static_cast<size_t>(std::min(num - 1, static_cast<int>(t / (2 * kPi) * num)));
-      if (!Covered(image, row, col)) {
-        if (rho >= rcover) pass.wedges[k].uncovered = true;
-        continue;
-      }
-      wd[k].push_back(rho - circle.radius);
-      wv[k].push_back(image(row, col));
-    }
-  }
-  constexpr double kStep = 0.25;
-  const int samples = static_cast<int>(std::lround((d_hi - d_lo) / kStep)) + 1;
-  Eigen::VectorXd profile(samples), deriv = Eigen::VectorXd::Zero(samples);
-  const int h = static_cast<int>(std::lround(0.5 / kStep));
-  std::vector<double> d, v;  // a step fit's samples
+  const std::vector<WedgePixels> pixels =
+      GatherWedgePixels(image, circle, d_lo, d_hi, rcover, &pass.wedges);
+  RayProfile profile(d_lo, d_hi);
+  StepSamples samples;
   for (int k = 0; k < num; ++k) {
     WedgeEdge& wedge = pass.wedges[static_cast<size_t>(k)];
     wedge.angle = 2 * kPi * (k + 0.5) / num;
     if (wedge.uncovered) continue;
     const Eigen::Vector2d n(std::cos(wedge.angle), std::sin(wedge.angle));
-    int first = samples;  // profile samples [first, samples) are valid
-    for (int i = samples - 1; i >= 0; --i) {
-      const Eigen::Vector2d p = circle.centre + (circle.radius + d_lo + i * kStep) * n;
-      profile(i) = Bilinear(image, p.x(), p.y());
-      if (std::isnan(profile(i))) break;
-      first = i;
-    }
-    const int i_lo = static_cast<int>(std::lround((-band - d_lo) / kStep));
-    const int i_hi = static_cast<int>(std::lround((band - d_lo) / kStep));
-    const int i_fit = static_cast<int>(std::lround((-band - hw - d_lo) / kStep));
-    if (first > i_fit - h) {
+    if (!profile.Sample(image, circle, n, -band - hw)) {
       wedge.uncovered = true;
       continue;
     }
-    for (int i = first + h; i + h < samples; ++i) {
-      deriv(i) = profile(i + h) - profile(i - h);
-    }
-    // The outermost strong dark-to-bright step within the band is the rim.
-    double largest = 0.0;
-    for (int i = i_lo; i <= i_hi; ++i) largest = std::max(largest, deriv(i));
-    if (!(largest > 0.0)) continue;
-    int peak = -1;
-    for (int i = i_hi; i >= i_lo; --i) {
-      const double g = deriv(i);
-      if (g >= 0.5 * largest && g >= deriv(i - 1) && g >= deriv(i + 1)) {
-        peak = i;
-        break;
-      }
-    }
+    const int peak = RimPeak(profile, -band, band);
     if (peak < 0) continue;
-    const double x_rim = d_lo + peak * kStep;
-    const auto& all_d = wd[static_cast<size_t>(k)];
-    const auto& all_v = wv[static_cast<size_t>(k)];
-    // The wedge's pixels with d in [lo, hi], into d and v.
-    auto samples_in = [&](double lo, double hi) {
-      d.clear();
-      v.clear();
-      for (size_t i = 0; i < all_d.size(); ++i) {
-        if (all_d[i] >= lo && all_d[i] <= hi) {
-          d.push_back(all_d[i]);
-          v.push_back(all_v[i]);
-        }
-      }
-    };
-    auto accept = [&](const StepFit& step) {
-      return step.ok && std::abs(step.x0 - x_rim) <= 1.0 && step.contrast >= options.min_contrast &&
-             step.sigma < hw;
-    };
+    const WedgePixels& wedge_pixels = pixels[static_cast<size_t>(k)];
     if (inner == Inner::kFree) {
-      samples_in(x_rim - hw, x_rim + hw);
-      wedge.step = FitStep(d, v, x_rim, x_rim - hw, sigma, Inner::kRamp);
-      wedge.ok = accept(wedge.step);
-      // The bottom rim: the strongest rise inside the rim's flank ...
-      const int stop =
-          std::max(first + h, static_cast<int>(std::lround((x_rim - reach + band - d_lo) / kStep)));
-      double best = 0.2 * options.min_contrast;
-      int inner_peak = -1;
-      for (int i = peak - static_cast<int>(std::lround(2.0 * sigma / kStep)); i >= stop; --i) {
-        const double g = deriv(i);
-        if (g > best && g >= deriv(i - 1) && g >= deriv(i + 1)) {
-          best = g;
-          inner_peak = i;
-        }
-      }
-      const double x_peak = d_lo + inner_peak * kStep;
-      if (wedge.ok && inner_peak >= 0 && x_peak < x_rim - 2.0 * hw) {
-        // ... far inside: a step of its own.
-        samples_in(x_peak - hw, x_peak + hw);
-        const StepFit step = FitStep(d, v, x_peak, x_peak - hw, sigma, Inner::kRamp);
-        if (step.ok && std::abs(step.x0 - x_peak) <= 1.0 &&
-            step.contrast >= 0.5 * options.min_contrast) {
-          wedge.step.x1 = step.x0;
-          wedge.step.wall_contrast = step.contrast;
-          wedge.inner_ok = true;
-        }
-        continue;
-      }
-      // ... or near: both steps in one fit, started there or on two
-      // shoulders of the rim's flank (a narrow wall shows as a shoulder, not
-      // a peak); it must explain the same samples clearly better than the
-      // rim alone.
-      std::vector<double> starts = {x_rim - 2.0 * sigma, x_rim - 3.5 * sigma};
-      if (inner_peak >= 0) starts.push_back(x_peak);
-      const double lo = std::min(x_rim - hw, *std::min_element(starts.begin(), starts.end()) - hw);
-      samples_in(lo, x_rim + hw);
-      std::optional<StepFit> alone;  // fitted when a two-step fit needs the comparison
-      for (const double x1 : starts) {
-        const StepFit step = FitStep(d, v, x_rim, x1, sigma, Inner::kFree);
-        if (!(accept(step) && step.x1 < step.x0 - 2.0 * step.sigma && step.x1 > lo + step.sigma &&
-              step.wall_contrast >= 0.5 * options.min_contrast)) {
-          continue;
-        }
-        if (!alone) alone = FitStep(d, v, x_rim, x_rim, sigma, Inner::kRamp);
-        if (step.rms < 0.7 * alone->rms && (!wedge.inner_ok || step.rms < wedge.step.rms)) {
-          wedge.step = step;
-          wedge.ok = wedge.inner_ok = wedge.wall_fitted = true;
-        }
-      }
+      FitRimAndBottomRim(wedge_pixels, profile, peak, band, reach, sigma, options, &samples,
+                         &wedge);
       continue;
     }
+    const double x_rim = profile.Offset(peak);
     double x1 = kNaN;
     Inner mode = inner;
     if (inner == Inner::kFixed) {
@@ -538,10 +599,13 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
         x1 = -x1;  // the band's width
       }
     }
-    samples_in(x_rim - hw, x_rim + hw);
-    wedge.step = FitStep(d, v, x_rim, x1, sigma, mode, narrow_wall_level.value_or(0.0));
-    wedge.ok = accept(wedge.step);
+    samples.Take(wedge_pixels, x_rim - hw, x_rim + hw);
+    wedge.step =
+        FitStep(samples.d, samples.v, x_rim, x1, sigma, mode, narrow_wall_level.value_or(0.0));
+    wedge.ok = IsRimStep(wedge.step, x_rim, options);
   }
+  // A wedge whose step fits its pixels far worse than the median wedge's is
+  // no clean edge (a burr, a scratch).
   std::vector<double> rms, sigmas;
   for (const WedgeEdge& w : pass.wedges) {
     if (!w.ok) continue;
