@@ -424,35 +424,146 @@ ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapT
   return ReportObject{{"brief", *brief}, {"ties", std::move(rows)}};
 }
 
-// The final adjustment (the plate on the part, the intrinsics prior) with
-// the holes of project.yaml's features that several tiles see whole as tie
-// points (pipeline/measure/hole_ties.h), fitted on the registered scene
-// (`geometry`: the mosaic's grid on it, ComputeOrthoGeometry): a
-// view's centre is an image position, which the final adjustment's small
-// changes of the scene leave as it is. A tie the solve finds inconsistent is
-// dropped and the solve run again; the kept ties' tracks join
-// registration->input, and its tiles held by the prior are the final
-// solve's.
-struct FinalOutcome {
-  FinalAdjustment adjusted;
-  std::string ties_brief;
-  ReportValue ties_report;  // report.mosaic's hole_ties
-  std::string overlap_brief;
-  ReportValue overlap_report;  // report.mosaic's overlap_ties
-  // Table priors left out (registration->input.tiles_without_table_prior),
-  // each as it was found, and the bound it exceeded.
-  std::vector<std::pair<TablePriorTest, double>> table_priors_left_out;
-  // The features' holes for the mosaic to keep whole (orthorectify.h): where
-  // their views put them, else where near_px does, within a quarter of the
-  // diameter (project-format.md).
-  std::vector<OrthoDisc> holes_to_keep_whole;
-  // What the mosaic's interpolator samples of the tiles (InterpolatorSamples),
-  // computed during the solves, whose single thread leaves a core free.
-  std::vector<ImageF> samples;
-  double fit_seconds = 0.0;      // the ties' hole fits
-  double overlap_seconds = 0.0;  // the held tiles' overlap alignments
-  double solve_seconds = 0.0;    // the final adjustment's solves
+// The holes of project.yaml's features where their near_px puts them on
+// `scene`, and the features' names.
+struct HolesToTie {
+  std::vector<TieHole> holes;
+  std::vector<std::string> names;
 };
+
+HolesToTie LocateHolesToTie(const Project& project, const LensProjection& lens,
+                            const PlaneScene& scene) {
+  HolesToTie located;
+  for (const FeatureSpec& feature : project.features) {
+    const auto it = std::find_if(project.tiles.begin(), project.tiles.end(),
+                                 [&](const TilePosition& t) { return t.image == feature.image; });
+    if (it == project.tiles.end()) continue;
+    const auto near_mm = PartPointOfTilePixel(
+        lens, scene, static_cast<int>(it - project.tiles.begin()), feature.near_px);
+    if (!near_mm) continue;
+    located.holes.push_back({*near_mm, 0.5 * feature.diameter_mm});
+    located.names.push_back(feature.name);
+  }
+  return located;
+}
+
+// The pairs of tiles (lower index first) that usable matches or hole ties
+// link.
+std::vector<std::pair<int, int>> LinkedTiles(const TileRegistration& registration,
+                                             const std::vector<HoleTie>& ties) {
+  std::vector<std::pair<int, int>> links;
+  for (const PairRegistration& pair : registration.pairs) {
+    if (pair.usable) links.emplace_back(pair.tile_a, pair.tile_b);
+  }
+  for (const HoleTie& tie : ties) {
+    for (size_t u = 0; u < tie.tiles.size(); ++u) {
+      for (size_t v = u + 1; v < tie.tiles.size(); ++v) {
+        links.emplace_back(std::min(tie.tiles[u], tie.tiles[v]),
+                           std::max(tie.tiles[u], tie.tiles[v]));
+      }
+    }
+  }
+  return links;
+}
+
+// The final adjustment with the hole ties (AdjustWithHoleTies), of the
+// registered scene and any variant of its input.
+struct TiedSolver {
+  const CameraModel& camera;
+  const PlaneScene& registered;
+  const PlateOnPart& plate;
+  const IntrinsicsPrior& prior;
+  const FinalAdjustmentOptions& options;
+  const std::vector<HoleTie>& ties;
+  const HoleTieOptions& tie_options;
+
+  TiedAdjustment operator()(const PlaneBundleInput& input) const {
+    return AdjustWithHoleTies(camera, input, registered, plate, prior, options, ties, tie_options);
+  }
+};
+
+// Table positions the features contradict (table_prior_check.h): left out
+// of *input, *tied the solve without them; each as found, with the bound it
+// exceeded.
+std::vector<std::pair<TablePriorTest, double>> LeaveOutWrongTablePriors(const TiedSolver& solve,
+                                                                        PlaneBundleInput* input,
+                                                                        TiedAdjustment* tied) {
+  // Every solve without some priors is kept for the one the search settles on.
+  std::vector<TiedAdjustment> solves;
+  const auto as_solve = [](const TiedAdjustment& t) {
+    return TablePriorSolve{t.adjusted.summary.usable, t.adjusted.scene.table_pos_mm,
+                           t.adjusted.scene.covariance};
+  };
+  const WrongTablePriors wrong = FindWrongTablePriors(
+      input->commanded_table_pos_mm, input->table_sigma_mm, as_solve(*tied),
+      [&](const std::vector<int>& without) {
+        PlaneBundleInput trial = *input;
+        trial.tiles_without_table_prior = without;
+        solves.push_back(solve(trial));
+        return as_solve(solves.back());
+      },
+      TablePriorCheckOptions());
+  if (wrong.solve > 0) {
+    input->tiles_without_table_prior = wrong.tiles;
+    *tied = std::move(solves[wrong.solve - 1]);
+  }
+  return wrong.found;
+}
+
+// A table that scatters more than table.sigma_mm says, and no wrong
+// position explains it: its priors are weighed by the scatter estimated
+// (their variance component) into input->table_sigma_mm, *tied solved so,
+// so that the covariance, and so every sigma's table part, rests on what
+// the data show. Never narrower than stated: the test is one-sided.
+void WeighTablePriorsByScatter(const TiedSolver& solve, PlaneBundleInput* input,
+                               TiedAdjustment* tied) {
+  const auto solve_weighed_by = [&](double sigma_mm) {
+    PlaneBundleInput weighed = *input;
+    weighed.table_sigma_mm = sigma_mm;
+    return solve(weighed);
+  };
+  const auto scatter_of = [&](const TiedAdjustment& t, double sigma_mm) {
+    return EstimateTableSigma(input->commanded_table_pos_mm, t.adjusted.scene.table_pos_mm,
+                              t.adjusted.scene.covariance, sigma_mm,
+                              input->tiles_without_table_prior);
+  };
+  const double stated_mm = input->table_sigma_mm;
+  TableSigmaEstimate scatter = scatter_of(*tied, stated_mm);
+  // Looser priors can check positions only beyond the gauge's 4 dof (shift,
+  // turn, scale): 3 tiles with priors or more.
+  const size_t num_with_prior =
+      input->commanded_table_pos_mm.size() - input->tiles_without_table_prior.size();
+  if (!scatter.ok && num_with_prior >= 3) {
+    // Priors so stiff that the features check no position (redundancy < 1):
+    // a table stated to 0.1 um that scatters 20 um was held to its
+    // positions, and on markers seed 101 the measurements were off by up to
+    // 25 of their sigmas.
+    // Seen with priors 100x looser, the scatter has its full redundancy.
+    const TiedAdjustment loose = solve_weighed_by(kLooseTableSigmaFactor * stated_mm);
+    if (loose.adjusted.summary.usable)
+      scatter = scatter_of(loose, kLooseTableSigmaFactor * stated_mm);
+  }
+  if (!scatter.ok || TableSigmaConsistent(scatter, stated_mm)) return;
+  // Each estimate rests on the weights it was solved with: too stiff ones
+  // squeeze the positions' scatter, so the estimate is repeated until it
+  // stands (stated 0.0005 mm on markers seed 283, which scatters 0.017,
+  // the first pass weighed it 0.009, the second 0.0168, and the third
+  // estimate moved by less than 2 %).
+  double used_mm = stated_mm;
+  for (int pass = 0; pass < kMaxTableSigmaPasses && scatter.ok &&
+                     scatter.sigma_mm > (1.0 + kTableSigmaSettled) * used_mm;
+       ++pass) {
+    TiedAdjustment retried = solve_weighed_by(scatter.sigma_mm);
+    if (!retried.adjusted.summary.usable) break;
+    used_mm = scatter.sigma_mm;
+    *tied = std::move(retried);
+    scatter = scatter_of(*tied, used_mm);
+    spdlog::info("mosaic: table priors weighed by {:.4f} mm (pass {}): they scatter {:.4f} mm",
+                 used_mm, pass + 1, scatter.sigma_mm);
+  }
+  input->table_sigma_mm = used_mm;
+}
+
 // The report of the hole ties (`names`: the holes' features) in the final
 // adjustment `tied` (its residuals: residual_px): each kept tie's tiles and
 // residual, the dropped ones, and *brief.
@@ -493,26 +604,47 @@ ReportValue HoleTiesReport(const Project& project, const TiedAdjustment& tied,
       {"brief", *brief}, {"ties", std::move(rows)}, {"dropped", std::move(dropped)}};
 }
 
+// The final adjustment (the plate on the part, the intrinsics prior) with
+// the holes of project.yaml's features that several tiles see whole as tie
+// points (pipeline/measure/hole_ties.h), fitted on the registered scene
+// (`geometry`: the mosaic's grid on it, ComputeOrthoGeometry): a
+// view's centre is an image position, which the final adjustment's small
+// changes of the scene leave as it is. A tie the solve finds inconsistent is
+// dropped and the solve run again; the kept ties' tracks join
+// registration->input, and its tiles held by the prior are the final
+// solve's.
+struct FinalOutcome {
+  FinalAdjustment adjusted;
+  std::string ties_brief;
+  ReportValue ties_report;  // report.mosaic's hole_ties
+  std::string overlap_brief;
+  ReportValue overlap_report;  // report.mosaic's overlap_ties
+  // Table priors left out (registration->input.tiles_without_table_prior),
+  // each as it was found, and the bound it exceeded.
+  std::vector<std::pair<TablePriorTest, double>> table_priors_left_out;
+  // The features' holes for the mosaic to keep whole (orthorectify.h): where
+  // their views put them, else where near_px does, within a quarter of the
+  // diameter (project-format.md).
+  std::vector<OrthoDisc> holes_to_keep_whole;
+  // What the mosaic's interpolator samples of the tiles (InterpolatorSamples),
+  // computed during the solves, whose single thread leaves a core free.
+  std::vector<ImageF> samples;
+  double fit_seconds = 0.0;      // the ties' hole fits
+  double overlap_seconds = 0.0;  // the held tiles' overlap alignments
+  double solve_seconds = 0.0;    // the final adjustment's solves
+};
+
 FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<ImageF>& tiles,
                                       const CameraModel& camera, const OrthoGeometry& geometry,
                                       const PlateOnPart& plate, const IntrinsicsPrior& prior,
                                       const FinalAdjustmentOptions& options, int num_threads,
                                       TileRegistration* registration) {
   const auto start = std::chrono::steady_clock::now();
+  // The registered scene; the overlap ties add their tracks to it.
   const PlaneScene& registered = registration->scene;
   const MrcalLensProjection lens(camera);
-  std::vector<TieHole> holes;
-  std::vector<std::string> names;
-  for (const FeatureSpec& feature : project.features) {
-    const auto it = std::find_if(project.tiles.begin(), project.tiles.end(),
-                                 [&](const TilePosition& t) { return t.image == feature.image; });
-    if (it == project.tiles.end()) continue;
-    const auto near_mm = PartPointOfTilePixel(
-        lens, registered, static_cast<int>(it - project.tiles.begin()), feature.near_px);
-    if (!near_mm) continue;
-    holes.push_back({*near_mm, 0.5 * feature.diameter_mm});
-    names.push_back(feature.name);
-  }
+  const HolesToTie to_tie = LocateHolesToTie(project, lens, registered);
+  const std::vector<TieHole>& holes = to_tie.holes;
   const std::optional<OrthoGeometry> fine = MeasurementGeometry(camera, registered, geometry);
   const OrthoGeometry& views_geometry = fine ? *fine : geometry;
   const double tile_px_per_mosaic_px = TilePxPerMosaicPx(views_geometry);
@@ -536,23 +668,12 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   // Tiles that no match placed, or that matches and holes tie to one
   // neighbour only: their other overlaps, aligned directly, as tracks.
   const auto overlap_start = std::chrono::steady_clock::now();
-  std::vector<std::pair<int, int>> links;
-  for (const PairRegistration& pair : registration->pairs) {
-    if (pair.usable) links.emplace_back(pair.tile_a, pair.tile_b);
-  }
-  for (const HoleTie& tie : ties) {
-    for (size_t u = 0; u < tie.tiles.size(); ++u) {
-      for (size_t v = u + 1; v < tie.tiles.size(); ++v) {
-        links.emplace_back(std::min(tie.tiles[u], tie.tiles[v]),
-                           std::max(tie.tiles[u], tie.tiles[v]));
-      }
-    }
-  }
   OverlapTieOptions overlap_options;
   overlap_options.num_threads = num_threads;
   const std::vector<OverlapTie> overlap_ties =
       FindOverlapTies(views_geometry, tiles,
-                      OverlapsToAlign(views_geometry, registration->tiles_held_by_prior, links),
+                      OverlapsToAlign(views_geometry, registration->tiles_held_by_prior,
+                                      LinkedTiles(*registration, ties)),
                       holes, registration->input.table_sigma_mm, overlap_options);
   const int first_overlap_observation = static_cast<int>(registration->input.observations.size());
   AddOverlapTieTracks(overlap_ties, &registration->input, &registration->scene);
@@ -564,83 +685,11 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   std::future<std::vector<ImageF>> samples_beside =
       std::async(std::launch::async,
                  [&tiles, samples_options] { return InterpolatorSamples(tiles, samples_options); });
-  TiedAdjustment tied = AdjustWithHoleTies(camera, registration->input, registered, plate, prior,
-                                           options, ties, tie_options);
-  // Table positions the features contradict (table_prior_check.h): every
-  // solve without some priors is kept for the one the search settles on.
+  const TiedSolver solve{camera, registered, plate, prior, options, ties, tie_options};
   PlaneBundleInput& input = registration->input;
-  std::vector<TiedAdjustment> solves;
-  const auto as_solve = [](const TiedAdjustment& t) {
-    return TablePriorSolve{t.adjusted.summary.usable, t.adjusted.scene.table_pos_mm,
-                           t.adjusted.scene.covariance};
-  };
-  const WrongTablePriors wrong = FindWrongTablePriors(
-      input.commanded_table_pos_mm, input.table_sigma_mm, as_solve(tied),
-      [&](const std::vector<int>& without) {
-        PlaneBundleInput trial = input;
-        trial.tiles_without_table_prior = without;
-        solves.push_back(AdjustWithHoleTies(camera, trial, registered, plate, prior, options, ties,
-                                            tie_options));
-        return as_solve(solves.back());
-      },
-      TablePriorCheckOptions());
-  if (wrong.solve > 0) {
-    input.tiles_without_table_prior = wrong.tiles;
-    tied = std::move(solves[wrong.solve - 1]);
-  }
-  result.table_priors_left_out = wrong.found;
-  // A table that scatters more than table.sigma_mm says, and no wrong
-  // position explains it: its priors are weighed by the scatter estimated
-  // (their variance component), so that the covariance, and so every sigma's
-  // table part, rests on what the data show. Never narrower than stated: the
-  // test is one-sided.
-  const auto solve_weighed_by = [&](double sigma_mm) {
-    PlaneBundleInput weighed = input;
-    weighed.table_sigma_mm = sigma_mm;
-    return AdjustWithHoleTies(camera, weighed, registered, plate, prior, options, ties,
-                              tie_options);
-  };
-  const auto scatter_of = [&](const TiedAdjustment& t, double sigma_mm) {
-    return EstimateTableSigma(input.commanded_table_pos_mm, t.adjusted.scene.table_pos_mm,
-                              t.adjusted.scene.covariance, sigma_mm,
-                              input.tiles_without_table_prior);
-  };
-  const double stated_mm = input.table_sigma_mm;
-  TableSigmaEstimate scatter = scatter_of(tied, stated_mm);
-  // Looser priors can check positions only beyond the gauge's 4 dof (shift,
-  // turn, scale): 3 tiles with priors or more.
-  const size_t num_with_prior =
-      input.commanded_table_pos_mm.size() - input.tiles_without_table_prior.size();
-  if (!scatter.ok && num_with_prior >= 3) {
-    // Priors so stiff that the features check no position (redundancy < 1):
-    // a table stated to 0.1 um that scatters 20 um was held to its
-    // positions, and on markers seed 101 the measurements were off by up to
-    // 25 of their sigmas.
-    // Seen with priors 100x looser, the scatter has its full redundancy.
-    const TiedAdjustment loose = solve_weighed_by(kLooseTableSigmaFactor * stated_mm);
-    if (loose.adjusted.summary.usable)
-      scatter = scatter_of(loose, kLooseTableSigmaFactor * stated_mm);
-  }
-  if (scatter.ok && !TableSigmaConsistent(scatter, stated_mm)) {
-    // Each estimate rests on the weights it was solved with: too stiff ones
-    // squeeze the positions' scatter, so the estimate is repeated until it
-    // stands (stated 0.0005 mm on markers seed 283, which scatters 0.017,
-    // the first pass weighed it 0.009, the second 0.0168, and the third
-    // estimate moved by less than 2 %).
-    double used_mm = stated_mm;
-    for (int pass = 0; pass < kMaxTableSigmaPasses && scatter.ok &&
-                       scatter.sigma_mm > (1.0 + kTableSigmaSettled) * used_mm;
-         ++pass) {
-      TiedAdjustment retried = solve_weighed_by(scatter.sigma_mm);
-      if (!retried.adjusted.summary.usable) break;
-      used_mm = scatter.sigma_mm;
-      tied = std::move(retried);
-      scatter = scatter_of(tied, used_mm);
-      spdlog::info("mosaic: table priors weighed by {:.4f} mm (pass {}): they scatter {:.4f} mm",
-                   used_mm, pass + 1, scatter.sigma_mm);
-    }
-    input.table_sigma_mm = used_mm;
-  }
+  TiedAdjustment tied = solve(input);
+  result.table_priors_left_out = LeaveOutWrongTablePriors(solve, &input, &tied);
+  WeighTablePriorsByScatter(solve, &input, &tied);
   result.adjusted = std::move(tied.adjusted);
   result.samples = samples_beside.get();
   result.solve_seconds = SecondsSince(start) - result.fit_seconds - result.overlap_seconds;
@@ -648,8 +697,8 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
       OverlapTiesReport(project, overlap_ties, first_overlap_observation,
                         result.adjusted.scene.residual_px, &result.overlap_brief);
 
-  result.ties_report = HoleTiesReport(project, tied, result.adjusted.scene.residual_px, ties, names,
-                                      holes.empty(), &result.ties_brief);
+  result.ties_report = HoleTiesReport(project, tied, result.adjusted.scene.residual_px, ties,
+                                      to_tie.names, holes.empty(), &result.ties_brief);
   // The tracks (the plate's observations stay the final adjustment's).
   registration->input.observations = result.adjusted.input.observations;
   registration->input.num_tracks = result.adjusted.input.num_tracks;
