@@ -873,6 +873,69 @@ MosaicTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOption
   return tiles;
 }
 
+// The final adjustment's outcome in the log: its ties, and warnings of
+// what it found.
+void LogFinalAdjustment(const FinalOutcome& outcome) {
+  const FinalAdjustment& adjusted = outcome.adjusted;
+  spdlog::info("mosaic: holes: {}", outcome.ties_brief);
+  spdlog::info("mosaic: overlaps: {}", outcome.overlap_brief);
+  spdlog::info("mosaic: final {}", adjusted.summary.brief);
+  if (adjusted.observation_sigma_scale > 1.0) {
+    spdlog::info(
+        "mosaic: the matches scatter {:.2f}x their declared sigma: the covariance is widened "
+        "accordingly",
+        adjusted.observation_sigma_scale);
+  }
+  if (adjusted.summary.usable && adjusted.scale_check.ok &&
+      std::abs(adjusted.scale_check.scale_minus_1_ppm) > kPlateScaleUnitsPpm) {
+    spdlog::warn(
+        "mosaic: the calibration plate on the part measures {:.4f} times its size at the scale "
+        "of table.csv's positions: are they in mm, and is project.yaml's board the plate used?",
+        1.0 + 1e-6 * adjusted.scale_check.scale_minus_1_ppm);
+  }
+}
+
+// What the stage writes into the staging directory: the mosaic (on a thread
+// of its own, which RunProject waits for before it commits out/), the
+// scene, the COLMAP model.
+struct MosaicFiles {
+  MosaicReport report;  // its file, grid and RMS; `extra` empty
+  ColmapExportSummary colmap;
+  double seconds = 0.0;  // scene.json, colmap/ (mosaic.png: in the background)
+};
+
+MosaicFiles WriteMosaicFiles(StageContext& context, const OrthoMosaic& mosaic,
+                             const CameraModel& camera, const CameraModel& scene_camera,
+                             const TileRegistration& registration,
+                             const FinalAdjustment& adjusted) {
+  const auto start = std::chrono::steady_clock::now();
+  // The samples the file will hold, for the measure stage and report.html,
+  // while the file is written on another thread (0.05 s of CPU on the demo,
+  // WriteOrthoMosaic).
+  context.mosaic =
+      std::make_shared<const StoredImage>(QuantizeImage(mosaic.pixels, kMosaicBitDepth));
+  const fs::path mosaic_path = context.staging_dir / kMosaicName;
+  const OrthoGrid grid = mosaic.grid;
+  context.pending_writes.push_back(
+      std::async(std::launch::async, [mosaic_path, grid, samples = context.mosaic] {
+        const auto write_start = std::chrono::steady_clock::now();
+        WriteOrthoMosaic(mosaic_path, grid, *samples);
+        spdlog::debug("mosaic: {} written in {:.2f} s (in the background)", mosaic_path.string(),
+                      SecondsSince(write_start));
+      }));
+  MosaicFiles files;
+  files.report = OrthoMosaicReport(mosaic_path, grid);
+  files.report.rms_px = registration.rms_px;
+  fs::create_directories(context.staging_dir / "mosaic");
+  const SavedScene saved = SceneToSave(context.project, camera, registration, adjusted);
+  WriteSceneJson(saved, context.staging_dir / kSceneName);
+  files.colmap =
+      WriteColmapModel(context.staging_dir / kColmapDirName, scene_camera, registration.scene,
+                       registration.input.observations, saved.tile_images);
+  files.seconds = SecondsSince(start);
+  return files;
+}
+
 void RunMosaicStage(StageContext& context) {
   const Project& project = context.project;
   const auto stage_start = std::chrono::steady_clock::now();
@@ -944,15 +1007,7 @@ void RunMosaicStage(StageContext& context) {
       FinalAdjustmentWithHoles(project, tiles, camera, registered_geometry, plate, prior,
                                final_options, context.num_threads, &registration);
   FinalAdjustment& adjusted = final_outcome.adjusted;
-  spdlog::info("mosaic: holes: {}", final_outcome.ties_brief);
-  spdlog::info("mosaic: overlaps: {}", final_outcome.overlap_brief);
-  spdlog::info("mosaic: final {}", adjusted.summary.brief);
-  if (adjusted.observation_sigma_scale > 1.0) {
-    spdlog::info(
-        "mosaic: the matches scatter {:.2f}x their declared sigma: the covariance is widened "
-        "accordingly",
-        adjusted.observation_sigma_scale);
-  }
+  LogFinalAdjustment(final_outcome);
   if (!adjusted.summary.usable) throw StageFailedError(Stage::kMosaic, adjusted.summary.brief);
   registration.scene = adjusted.scene;
   registration.bundle = adjusted.summary;
@@ -964,13 +1019,6 @@ void RunMosaicStage(StageContext& context) {
   registration.plane_tilt_deg = adjusted.summary.plane_tilt_deg;
   const ReportValue working_distance =
       WorkingDistanceReport(adjusted.scene, rt_cam_from_plates, project);
-  if (adjusted.scale_check.ok &&
-      std::abs(adjusted.scale_check.scale_minus_1_ppm) > kPlateScaleUnitsPpm) {
-    spdlog::warn(
-        "mosaic: the calibration plate on the part measures {:.4f} times its size at the scale "
-        "of table.csv's positions: are they in mm, and is project.yaml's board the plate used?",
-        1.0 + 1e-6 * adjusted.scale_check.scale_minus_1_ppm);
-  }
   // The camera of the adjusted scene: its (refined or held) intrinsics.
   CameraModel scene_camera = camera;
   scene_camera.intrinsics = adjusted.scene.intrinsics;
@@ -990,33 +1038,10 @@ void RunMosaicStage(StageContext& context) {
     throw StageFailedError(Stage::kMosaic, WhyOrthoFailed(project, tiles, ortho.summary));
 
   if (context.progress) context.progress(num_tiles + 3, num_tiles + 4, "write mosaic");
-  const auto write_start = std::chrono::steady_clock::now();
-  // The samples the file will hold, for the measure stage and report.html,
-  // while the file is written on another thread (0.05 s of CPU on the demo,
-  // WriteOrthoMosaic). RunProject waits for it before it commits out/.
-  context.mosaic =
-      std::make_shared<const StoredImage>(QuantizeImage(ortho.mosaic.pixels, kMosaicBitDepth));
   context.tiles = tile_images;
-  const fs::path mosaic_path = context.staging_dir / kMosaicName;
-  const OrthoGrid grid = ortho.mosaic.grid;
-  context.pending_writes.push_back(
-      std::async(std::launch::async, [mosaic_path, grid, samples = context.mosaic] {
-        const auto start = std::chrono::steady_clock::now();
-        WriteOrthoMosaic(mosaic_path, grid, *samples);
-        spdlog::debug("mosaic: {} written in {:.2f} s (in the background)", mosaic_path.string(),
-                      SecondsSince(start));
-      }));
-  MosaicReport report = OrthoMosaicReport(mosaic_path, grid);
-  report.rms_px = registration.rms_px;
-
-  fs::create_directories(context.staging_dir / "mosaic");
-  const SavedScene saved = SceneToSave(project, camera, registration, adjusted);
-  WriteSceneJson(saved, context.staging_dir / kSceneName);
-
-  const ColmapExportSummary colmap =
-      WriteColmapModel(context.staging_dir / kColmapDirName, scene_camera, registration.scene,
-                       registration.input.observations, saved.tile_images);
-  const double write_seconds = SecondsSince(write_start);
+  MosaicFiles files =
+      WriteMosaicFiles(context, ortho.mosaic, camera, scene_camera, registration, adjusted);
+  MosaicReport& report = files.report;
 
   const Eigen::Matrix2d& a = registration.image_px_per_table_mm;
   report.extra = ReportObject{
@@ -1050,7 +1075,7 @@ void RunMosaicStage(StageContext& context) {
       {"ortho", OrthoReport(ortho.summary)},
       {"world_file", WorldFilePath(kMosaicName).string()},
       {"scene_file", kSceneName},
-      {"colmap", ColmapReport(colmap)},
+      {"colmap", ColmapReport(files.colmap)},
       {"timings_s", ReportObject{{"read", read_seconds},
                                  {"features", registration.features_seconds},
                                  {"matching", registration.matching_seconds},
@@ -1064,7 +1089,7 @@ void RunMosaicStage(StageContext& context) {
                                  {"ortho_exposure", ortho.summary.exposure_seconds},
                                  {"ortho_resample", ortho.summary.resample_seconds},
                                  // scene.json, colmap/ (mosaic.png: in the background)
-                                 {"write", write_seconds},
+                                 {"write", files.seconds},
                                  {"total", SecondsSince(stage_start)}}}};
   context.report.mosaic = std::move(report);
   if (context.progress) context.progress(num_tiles + 4, num_tiles + 4, "mosaic done");
