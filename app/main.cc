@@ -65,18 +65,130 @@ std::string PresetList() {
   return list;
 }
 
+// Freed image buffers stay with the allocator for the next image. By
+// default glibc gives blocks of 128 kB .. 32 MB back to the kernel as soon
+// as they are freed (munmap, or trimming the heap's top), and the kernel
+// zero-fills every page of the next such allocation again on first touch:
+// `omm run` on the demo took 180 k page faults (0.7 GB of zeroed pages)
+// for a peak of 0.36 GB, 105 k with these settings (the same peak). 32 MB
+// is glibc's largest mmap threshold; larger blocks are still unmapped.
+void KeepFreedBuffers() {
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max());
+}
+
+// `omm batch DIR...`.
+struct BatchArgs {
+  std::vector<fs::path> dirs;
+  bool force = false;
+  // A run keeps about 1.7 cores busy (`omm_run_benchmark`: CPU / wall time).
+  int jobs = std::max(1, omm::HardwareThreads() / 2);
+  std::optional<fs::path> csv;
+};
+
+CLI::App* AddBatchCommand(CLI::App& app, BatchArgs& args) {
+  CLI::App* batch = app.add_subcommand(
+      "batch",
+      "Run many projects, each as its own `omm run`, several at once, and print a summary table.\n"
+      "Each DIR is a project directory or a directory of project directories.\n"
+      "Projects whose out/report.json is current (same inputs, same omm) are skipped.\n"
+      "Writes each project's out/ as `omm run` does; a failing project does not stop the batch;\n"
+      "with --csv, one table of every measurement of every project.");
+  batch->add_option("DIR", args.dirs, "project directories or folders of projects")->required();
+  batch->add_flag("--force", args.force, "rerun projects whose report is current");
+  batch
+      ->add_option("-j,--jobs", args.jobs,
+                   "projects run at once (default: half the CPUs this process may use)")
+      ->check(CLI::Range(1, 256))
+      ->capture_default_str();
+  batch->add_option("--csv", args.csv,
+                    "also write every project's measurements (value, sigma, CMM deviation) to "
+                    "this CSV file");
+  return batch;
+}
+
+// `omm simulate OUT`.
+struct SimulateArgs {
+  fs::path out;
+  omm::SimulationOptions simulation;
+  std::optional<fs::path> truth;
+};
+
+CLI::App* AddSimulateCommand(CLI::App& app, SimulateArgs& args) {
+  CLI::App* simulate = app.add_subcommand(
+      "simulate",
+      "Render a synthetic project with known truth (for the demo, tests, planning a capture).\n"
+      "Writes the project directory OUT (must not exist or be empty) and its truth as JSON\n"
+      "(default OUT.truth.json beside it, outside the project).");
+  simulate->add_option("OUT", args.out, "project directory to create")->required();
+  simulate
+      ->add_option("--seed", args.simulation.seed,
+                   "random seed; the same seed gives the same project")
+      ->capture_default_str();
+  simulate->add_option("--preset", args.simulation.preset, "scene preset: " + PresetList())
+      ->capture_default_str();
+  simulate->add_flag("--plate-on-part", args.simulation.plate_on_part,
+                     "also lay the calibration plate on the part (a scale reference; the demo "
+                     "preset always has it)");
+  simulate
+      ->add_option_function<std::string>(
+          "--board",
+          [&args](const std::string& board) {
+            const std::optional<omm::BoardType> type = omm::BoardTypeFromName(board);
+            if (!type) {
+              throw CLI::ValidationError(
+                  "--board", "expected caltab, circles or chessboard, got '" + board + "'");
+            }
+            args.simulation.board = *type;
+          },
+          "the calibration plate: caltab (default: 7 x 7 dots in a frame), circles (the same "
+          "dots alone) or chessboard (7 x 9 inner corners, 11 mm squares)")
+      ->type_name("TYPE");
+  simulate
+      ->add_option("--calib-images", args.simulation.num_calib_images,
+                   "calibration images (3..100: one partly outside the image, one without "
+                   "the plate, the rest full)")
+      ->capture_default_str();
+  simulate
+      ->add_option_function<std::string>(
+          "--grid",
+          [&args](const std::string& grid) {
+            int cols = 0, rows = 0;
+            char x = 0, rest = 0;
+            if (std::sscanf(grid.c_str(), "%d%c%d%c", &cols, &x, &rows, &rest) != 3 || x != 'x') {
+              throw CLI::ValidationError("--grid",
+                                         "expected COLSxROWS, e.g. 3x3, got '" + grid + "'");
+            }
+            args.simulation.grid_cols = cols;
+            args.simulation.grid_rows = rows;
+          },
+          "tiles per row x rows, COLSxROWS (default 3x3; 4x1 is a strip along the machine's X)")
+      ->type_name("COLSxROWS");
+  simulate
+      ->add_option("--table-sigma", args.simulation.table_sigma_mm,
+                   "1-sigma error of each table position, mm per axis (also table.sigma_mm)")
+      ->capture_default_str();
+  simulate->add_option("--truth", args.truth, "where to write the truth JSON");
+  return simulate;
+}
+
+// `omm report PROJECT`.
+CLI::App* AddReportCommand(CLI::App& app, std::string& project, bool& json) {
+  CLI::App* report = app.add_subcommand(
+      "report",
+      "Regenerate the reports from the saved results (no stage is rerun) and print a summary\n"
+      "(calibration, mosaic, measurements vs CMM).\n"
+      "Reads PROJECT/out/ (report.json, the mosaic, the plots) and project.yaml.\n"
+      "Writes PROJECT/out/report.html and out/report.json (normalised).");
+  report->add_option("PROJECT", project, "project directory")->required();
+  report->add_flag("--json", json, "print the report's JSON instead of the summary");
+  return report;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  // Freed image buffers stay with the allocator for the next image. By
-  // default glibc gives blocks of 128 kB .. 32 MB back to the kernel as soon
-  // as they are freed (munmap, or trimming the heap's top), and the kernel
-  // zero-fills every page of the next such allocation again on first touch:
-  // `omm run` on the demo took 180 k page faults (0.7 GB of zeroed pages)
-  // for a peak of 0.36 GB, 105 k with these settings (the same peak). 32 MB
-  // is glibc's largest mmap threshold; larger blocks are still unmapped.
-  mallopt(M_MMAP_THRESHOLD, 32 << 20);
-  mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max());
+  KeepFreedBuffers();
   CLI::App app{
       "omm: on-machine vision metrology. Calibrates the camera over an NC machine "
       "table, registers the tiles of a flat workpiece into an orthorectified mosaic, "
@@ -146,95 +258,12 @@ int main(int argc, char** argv) {
                   "Writes the report's measurements section (values, 1-sigma, CMM deviations).",
                   project, stage);
 
-  std::vector<fs::path> batch_dirs;
-  bool force = false;
-  CLI::App* batch = app.add_subcommand(
-      "batch",
-      "Run many projects, each as its own `omm run`, several at once, and print a summary table.\n"
-      "Each DIR is a project directory or a directory of project directories.\n"
-      "Projects whose out/report.json is current (same inputs, same omm) are skipped.\n"
-      "Writes each project's out/ as `omm run` does; a failing project does not stop the batch;\n"
-      "with --csv, one table of every measurement of every project.");
-  batch->add_option("DIR", batch_dirs, "project directories or folders of projects")->required();
-  batch->add_flag("--force", force, "rerun projects whose report is current");
-  // A run keeps about 1.7 cores busy (`omm_run_benchmark`: CPU / wall time).
-  int jobs = std::max(1, omm::HardwareThreads() / 2);
-  batch
-      ->add_option("-j,--jobs", jobs,
-                   "projects run at once (default: half the CPUs this process may use)")
-      ->check(CLI::Range(1, 256))
-      ->capture_default_str();
-  std::optional<fs::path> batch_csv;
-  batch->add_option("--csv", batch_csv,
-                    "also write every project's measurements (value, sigma, CMM deviation) to "
-                    "this CSV file");
-
-  fs::path simulate_out;
-  omm::SimulationOptions simulation;
-  std::optional<fs::path> truth;
-  CLI::App* simulate = app.add_subcommand(
-      "simulate",
-      "Render a synthetic project with known truth (for the demo, tests, planning a capture).\n"
-      "Writes the project directory OUT (must not exist or be empty) and its truth as JSON\n"
-      "(default OUT.truth.json beside it, outside the project).");
-  simulate->add_option("OUT", simulate_out, "project directory to create")->required();
-  simulate
-      ->add_option("--seed", simulation.seed, "random seed; the same seed gives the same project")
-      ->capture_default_str();
-  simulate->add_option("--preset", simulation.preset, "scene preset: " + PresetList())
-      ->capture_default_str();
-  simulate->add_flag("--plate-on-part", simulation.plate_on_part,
-                     "also lay the calibration plate on the part (a scale reference; the demo "
-                     "preset always has it)");
-  simulate
-      ->add_option_function<std::string>(
-          "--board",
-          [&simulation](const std::string& board) {
-            const std::optional<omm::BoardType> type = omm::BoardTypeFromName(board);
-            if (!type) {
-              throw CLI::ValidationError(
-                  "--board", "expected caltab, circles or chessboard, got '" + board + "'");
-            }
-            simulation.board = *type;
-          },
-          "the calibration plate: caltab (default: 7 x 7 dots in a frame), circles (the same "
-          "dots alone) or chessboard (7 x 9 inner corners, 11 mm squares)")
-      ->type_name("TYPE");
-  simulate
-      ->add_option("--calib-images", simulation.num_calib_images,
-                   "calibration images (3..100: one partly outside the image, one without "
-                   "the plate, the rest full)")
-      ->capture_default_str();
-  simulate
-      ->add_option_function<std::string>(
-          "--grid",
-          [&simulation](const std::string& grid) {
-            int cols = 0, rows = 0;
-            char x = 0, rest = 0;
-            if (std::sscanf(grid.c_str(), "%d%c%d%c", &cols, &x, &rows, &rest) != 3 || x != 'x') {
-              throw CLI::ValidationError("--grid",
-                                         "expected COLSxROWS, e.g. 3x3, got '" + grid + "'");
-            }
-            simulation.grid_cols = cols;
-            simulation.grid_rows = rows;
-          },
-          "tiles per row x rows, COLSxROWS (default 3x3; 4x1 is a strip along the machine's X)")
-      ->type_name("COLSxROWS");
-  simulate
-      ->add_option("--table-sigma", simulation.table_sigma_mm,
-                   "1-sigma error of each table position, mm per axis (also table.sigma_mm)")
-      ->capture_default_str();
-  simulate->add_option("--truth", truth, "where to write the truth JSON");
-
+  BatchArgs batch_args;
+  CLI::App* batch = AddBatchCommand(app, batch_args);
+  SimulateArgs simulate_args;
+  CLI::App* simulate = AddSimulateCommand(app, simulate_args);
   bool json = false;
-  CLI::App* report = app.add_subcommand(
-      "report",
-      "Regenerate the reports from the saved results (no stage is rerun) and print a summary\n"
-      "(calibration, mosaic, measurements vs CMM).\n"
-      "Reads PROJECT/out/ (report.json, the mosaic, the plots) and project.yaml.\n"
-      "Writes PROJECT/out/report.html and out/report.json (normalised).");
-  report->add_option("PROJECT", project, "project directory")->required();
-  report->add_flag("--json", json, "print the report's JSON instead of the summary");
+  CLI::App* report = AddReportCommand(app, project, json);
 
   try {
     app.parse(argc, argv);
@@ -248,10 +277,13 @@ int main(int argc, char** argv) {
   if (run->parsed())
     return omm::RunCommand(project, omm::AllStages(), false, mosaic_features, threads);
   if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features, threads);
-  if (batch->parsed()) return omm::BatchCommand(batch_dirs, force, batch_csv, jobs, threads);
+  if (batch->parsed()) {
+    return omm::BatchCommand(batch_args.dirs, batch_args.force, batch_args.csv, batch_args.jobs,
+                             threads);
+  }
   if (simulate->parsed()) {
-    simulation.num_threads = threads;
-    return omm::SimulateCommand(simulate_out, simulation, truth);
+    simulate_args.simulation.num_threads = threads;
+    return omm::SimulateCommand(simulate_args.out, simulate_args.simulation, simulate_args.truth);
   }
   if (report->parsed()) return omm::ReportCommand(project, json);
   return omm::kExitBadInput;
