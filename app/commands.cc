@@ -185,6 +185,175 @@ Outcome ChildOutcome(const ProcessEnd& end, const std::string& log, const std::s
   return {verdict.exit_code, verdict.message};
 }
 
+// One `omm batch`: a row and the measurements per project, filled in as
+// each one ends or is skipped.
+class Batch {
+ public:
+  explicit Batch(std::vector<fs::path> projects)
+      : projects_(std::move(projects)), rows_(projects_.size()), measurements_(projects_.size()) {
+    for (size_t i = 0; i < projects_.size(); ++i) {
+      rows_[i].project = projects_[i].string();
+      measurements_[i].project = projects_[i].string();
+    }
+  }
+
+  // Those to run: the others are skipped (report current) or refused
+  // (project files unreadable) here, without a child.
+  std::vector<size_t> ProjectsToRun(bool force, int num_threads) {
+    std::vector<size_t> to_run;
+    for (size_t i = 0; i < projects_.size(); ++i) {
+      bool current = false;
+      const Outcome loaded = Guarded([&] {
+        const Project project = LoadProject(projects_[i], num_threads);
+        current = !force && ReportIsCurrent(project);
+      });
+      if (loaded.exit_code != kExitOk || current) {
+        rows_[i].result = current ? "current (skipped)" : "";
+        Conclude(i, loaded);
+      } else {
+        to_run.push_back(i);
+      }
+    }
+    return to_run;
+  }
+
+  // Each project of `to_run` as its own `omm run -q` on `child_threads`, up
+  // to `jobs` at a time; their logs go to a scratch folder, and their
+  // warnings and errors are relayed. SIGINT or SIGTERM stops the batch: the
+  // children running are killed, the others not started, and the rows say
+  // which. True if stopped.
+  bool Run(const std::vector<size_t>& to_run, int jobs, int child_threads) {
+    if (to_run.empty()) return false;
+    const fs::path program = OwnExecutable();
+    ScratchDir logs("omm-batch-");
+    struct Running {
+      size_t index;
+      fs::path log;
+      std::chrono::steady_clock::time_point start;
+    };
+    std::map<pid_t, Running> running;
+    // If anything below throws, the children still running are killed and
+    // reaped before `logs` (declared earlier) is removed under them.
+    struct KillRunning {
+      const std::map<pid_t, Running>& children;
+      ~KillRunning() {
+        for (const auto& entry : children) KillProcess(entry.first);
+      }
+    } const kill_running{running};
+    const StopSignals stop_signals;
+    size_t next = 0;
+    while ((next < to_run.size() || !running.empty()) && g_stop_signal == 0) {
+      while (next < to_run.size() && running.size() < static_cast<size_t>(jobs) &&
+             g_stop_signal == 0) {
+        const size_t i = to_run[next++];
+        ProcessOptions options;
+        options.log_path = logs.path() / fmt::format("{}.log", i);
+        try {
+          const pid_t pid =
+              StartProcess({program.string(), "-q", "--threads", std::to_string(child_threads),
+                            "run", projects_[i].string()},
+                           options);
+          running.emplace(pid, Running{i, options.log_path, std::chrono::steady_clock::now()});
+          spdlog::info("started {} on {} thread{}", rows_[i].project, child_threads,
+                       child_threads == 1 ? "" : "s");
+        } catch (const ProcessStartError& e) {
+          // That project's failure; the others still run.
+          Conclude(i, {kExitFailed, "cannot start omm: " + e.code().message()});
+        }
+      }
+      if (running.empty() || g_stop_signal != 0) continue;
+      const std::optional<ProcessEnd> ended = WaitForAnyProcess();
+      if (!ended) continue;  // a signal: g_stop_signal says whether to stop
+      const ProcessEnd& end = *ended;
+      const auto it = running.find(end.pid);
+      if (it == running.end()) continue;
+      const Running child = it->second;
+      running.erase(it);
+      rows_[child.index].seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - child.start).count();
+      Conclude(child.index, ChildOutcome(end, ReadTextFile(child.log, "log not found"),
+                                         rows_[child.index].project));
+    }
+    if (g_stop_signal == 0) return false;
+    const std::string why = fmt::format("the batch got signal {} ({})",
+                                        static_cast<int>(g_stop_signal), strsignal(g_stop_signal));
+    for (const auto& [pid, child] : running) {
+      KillProcess(pid);
+      Conclude(child.index, {kExitStopped, "killed: " + why});
+    }
+    running.clear();
+    // What the stopped runs left (Ctrl-C stops the children too).
+    for (size_t i = 0; i < projects_.size(); ++i) {
+      if (IsStopped(rows_[i])) RemoveStaleStaging(projects_[i] / "out");
+    }
+    for (; next < to_run.size(); ++next) Conclude(to_run[next], {kExitStopped, "not run: " + why});
+    return true;
+  }
+
+  // After project i has ended (or was skipped), with the outcome of `omm
+  // run`: its row, its measurements and a log line.
+  void Conclude(size_t i, const Outcome& run) {
+    BatchRow& row = rows_[i];
+    ProjectMeasurements& made = measurements_[i];
+    Outcome outcome = run;
+    if (outcome.exit_code == kExitOk) {
+      outcome = Guarded([&] {
+        const Report report = ReadReportJson(projects_[i] / "out" / "report.json");
+        row.measurements = MeasurementBrief(report);
+        if (report.measurements) made.measurements = *report.measurements;
+      });
+    }
+    if (outcome.exit_code == kExitStopped) {
+      row.result = "STOPPED: " + outcome.message;
+      row.measurements = "-";
+      made = {projects_[i].string(), {}, outcome.message};
+    } else if (outcome.exit_code != kExitOk) {
+      row.result = fmt::format("FAILED ({}): {}", outcome.exit_code, outcome.message);
+      row.measurements = "-";
+      made = {projects_[i].string(), {}, outcome.message};  // out/ is an earlier run's, if any
+    }
+    ++done_;
+    const size_t total = projects_.size();
+    if (outcome.exit_code != kExitOk) {
+      spdlog::error("[{}/{}] {}: {}", done_, total, row.project, outcome.message);
+    } else if (row.seconds == 0.0) {
+      spdlog::info("[{}/{}] {}: {}", done_, total, row.project, row.result);
+    } else {
+      spdlog::info("[{}/{}] {}: {} in {:.1f} s", done_, total, row.project, row.result,
+                   row.seconds);
+    }
+  }
+
+  // The summary table and the agreement with the CMM, on stdout.
+  void PrintSummary() const {
+    size_t width = 7;
+    for (const BatchRow& row : rows_) width = std::max(width, row.project.size());
+    fmt::print("{:<{}}  {:>8}  {:<34}  {}\n", "project", width, "time_s", "measurements", "result");
+    for (const BatchRow& row : rows_) {
+      fmt::print("{:<{}}  {:>8.1f}  {:<34}  {}\n", row.project, width, row.seconds,
+                 row.measurements, row.result);
+    }
+    fmt::print("{} project{}, {} failed{}\n", rows_.size(), rows_.size() == 1 ? "" : "s",
+               NumFailed(), NumStopped() > 0 ? fmt::format(", {} stopped", NumStopped()) : "");
+    fmt::print("{}\n", CmmAgreement(measurements_));
+  }
+
+  const std::vector<ProjectMeasurements>& measurements() const { return measurements_; }
+  long NumFailed() const {
+    return std::count_if(rows_.begin(), rows_.end(),
+                         [](const BatchRow& r) { return r.result.rfind("FAILED", 0) == 0; });
+  }
+  long NumStopped() const { return std::count_if(rows_.begin(), rows_.end(), IsStopped); }
+
+ private:
+  static bool IsStopped(const BatchRow& row) { return row.result.rfind("STOPPED", 0) == 0; }
+
+  std::vector<fs::path> projects_;
+  std::vector<BatchRow> rows_;
+  std::vector<ProjectMeasurements> measurements_;
+  size_t done_ = 0;
+};
+
 }  // namespace
 
 int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
@@ -227,160 +396,23 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
       found.exit_code != kExitOk) {
     return Finish(found);
   }
-  const size_t total = projects.size();
-  std::vector<BatchRow> rows(total);
-  std::vector<ProjectMeasurements> measurements(total);
-  for (size_t i = 0; i < total; ++i) {
-    rows[i].project = projects[i].string();
-    measurements[i].project = projects[i].string();
-  }
-  size_t done = 0;
-  // After project i has ended (or was skipped), with the outcome of `omm run`.
-  const auto conclude = [&](size_t i, const Outcome& run) {
-    BatchRow& row = rows[i];
-    ProjectMeasurements& made = measurements[i];
-    Outcome outcome = run;
-    if (outcome.exit_code == kExitOk) {
-      outcome = Guarded([&] {
-        const Report report = ReadReportJson(projects[i] / "out" / "report.json");
-        row.measurements = MeasurementBrief(report);
-        if (report.measurements) made.measurements = *report.measurements;
-      });
-    }
-    if (outcome.exit_code == kExitStopped) {
-      row.result = "STOPPED: " + outcome.message;
-      row.measurements = "-";
-      made = {projects[i].string(), {}, outcome.message};
-    } else if (outcome.exit_code != kExitOk) {
-      row.result = fmt::format("FAILED ({}): {}", outcome.exit_code, outcome.message);
-      row.measurements = "-";
-      made = {projects[i].string(), {}, outcome.message};  // out/ is an earlier run's, if any
-    }
-    ++done;
-    if (outcome.exit_code != kExitOk) {
-      spdlog::error("[{}/{}] {}: {}", done, total, rows[i].project, outcome.message);
-    } else if (row.seconds == 0.0) {
-      spdlog::info("[{}/{}] {}: {}", done, total, rows[i].project, row.result);
-    } else {
-      spdlog::info("[{}/{}] {}: {} in {:.1f} s", done, total, rows[i].project, row.result,
-                   row.seconds);
-    }
-  };
-
-  // Which projects to run: the others are skipped (report current) or
-  // refused (project files unreadable) here, without a child.
-  std::vector<size_t> to_run;
-  for (size_t i = 0; i < total; ++i) {
-    bool current = false;
-    const Outcome loaded = Guarded([&] {
-      const Project project = LoadProject(projects[i], num_threads);
-      current = !force && ReportIsCurrent(project);
-    });
-    if (loaded.exit_code != kExitOk || current) {
-      rows[i].result = current ? "current (skipped)" : "";
-      conclude(i, loaded);
-    } else {
-      to_run.push_back(i);
-    }
-  }
-
-  // Each project as its own `omm run -q`, up to `jobs` at a time; their logs
-  // go to a scratch folder, and their warnings and errors are relayed.
-  // SIGINT or SIGTERM stops the batch: the children running are killed,
-  // the others not started, and the summary says which.
+  Batch batch(std::move(projects));
+  const std::vector<size_t> to_run = batch.ProjectsToRun(force, num_threads);
   bool stopped = false;
-  const Outcome ran = Guarded([&] {
-    if (to_run.empty()) return;
-    const fs::path program = OwnExecutable();
-    ScratchDir logs("omm-batch-");
-    struct Running {
-      size_t index;
-      fs::path log;
-      std::chrono::steady_clock::time_point start;
-    };
-    std::map<pid_t, Running> running;
-    // If anything below throws, the children still running are killed and
-    // reaped before `logs` (declared earlier) is removed under them.
-    struct KillRunning {
-      const std::map<pid_t, Running>& children;
-      ~KillRunning() {
-        for (const auto& entry : children) KillProcess(entry.first);
-      }
-    } const kill_running{running};
-    const StopSignals stop_signals;
-    size_t next = 0;
-    while ((next < to_run.size() || !running.empty()) && g_stop_signal == 0) {
-      while (next < to_run.size() && running.size() < static_cast<size_t>(jobs) &&
-             g_stop_signal == 0) {
-        const size_t i = to_run[next++];
-        ProcessOptions options;
-        options.log_path = logs.path() / fmt::format("{}.log", i);
-        try {
-          const pid_t pid =
-              StartProcess({program.string(), "-q", "--threads", std::to_string(child_threads),
-                            "run", projects[i].string()},
-                           options);
-          running.emplace(pid, Running{i, options.log_path, std::chrono::steady_clock::now()});
-          spdlog::info("started {} on {} thread{}", rows[i].project, child_threads,
-                       child_threads == 1 ? "" : "s");
-        } catch (const ProcessStartError& e) {
-          // That project's failure; the others still run.
-          conclude(i, {kExitFailed, "cannot start omm: " + e.code().message()});
-        }
-      }
-      if (running.empty() || g_stop_signal != 0) continue;
-      const std::optional<ProcessEnd> ended = WaitForAnyProcess();
-      if (!ended) continue;  // a signal: g_stop_signal says whether to stop
-      const ProcessEnd& end = *ended;
-      const auto it = running.find(end.pid);
-      if (it == running.end()) continue;
-      const Running child = it->second;
-      running.erase(it);
-      rows[child.index].seconds =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - child.start).count();
-      conclude(child.index, ChildOutcome(end, ReadTextFile(child.log, "log not found"),
-                                         rows[child.index].project));
-    }
-    if (g_stop_signal == 0) return;
-    stopped = true;
-    const std::string why = fmt::format("the batch got signal {} ({})",
-                                        static_cast<int>(g_stop_signal), strsignal(g_stop_signal));
-    for (const auto& [pid, child] : running) {
-      KillProcess(pid);
-      conclude(child.index, {kExitStopped, "killed: " + why});
-    }
-    running.clear();
-    // What the stopped runs left (Ctrl-C stops the children too).
-    for (size_t i = 0; i < total; ++i) {
-      if (rows[i].result.rfind("STOPPED", 0) == 0) RemoveStaleStaging(projects[i] / "out");
-    }
-    for (; next < to_run.size(); ++next) conclude(to_run[next], {kExitStopped, "not run: " + why});
-  });
-  if (ran.exit_code != kExitOk) return Finish(ran);
-
-  size_t width = 7;
-  for (const BatchRow& row : rows) width = std::max(width, row.project.size());
-  fmt::print("{:<{}}  {:>8}  {:<34}  {}\n", "project", width, "time_s", "measurements", "result");
-  for (const BatchRow& row : rows) {
-    fmt::print("{:<{}}  {:>8.1f}  {:<34}  {}\n", row.project, width, row.seconds, row.measurements,
-               row.result);
+  if (const Outcome ran = Guarded([&] { stopped = batch.Run(to_run, jobs, child_threads); });
+      ran.exit_code != kExitOk) {
+    return Finish(ran);
   }
-  const auto failed = std::count_if(
-      rows.begin(), rows.end(), [](const BatchRow& r) { return r.result.rfind("FAILED", 0) == 0; });
-  const auto num_stopped = std::count_if(rows.begin(), rows.end(), [](const BatchRow& r) {
-    return r.result.rfind("STOPPED", 0) == 0;
-  });
-  fmt::print("{} project{}, {} failed{}\n", rows.size(), rows.size() == 1 ? "" : "s", failed,
-             num_stopped > 0 ? fmt::format(", {} stopped", num_stopped) : "");
-  fmt::print("{}\n", CmmAgreement(measurements));
+  batch.PrintSummary();
   if (csv) {
     const Outcome written =
-        Guarded([&] { WriteTextFileAtomically(*csv, MeasurementsCsv(measurements)); });
+        Guarded([&] { WriteTextFileAtomically(*csv, MeasurementsCsv(batch.measurements())); });
     if (written.exit_code != kExitOk) return Finish(written);
     fmt::print("{}\n", csv->string());
   }
   if (stopped) return kExitStopped;
-  return failed > 0 || num_stopped > 0 ? kExitFailed : kExitOk;  // a child stopped from outside
+  // A child stopped from outside counts as failed.
+  return batch.NumFailed() > 0 || batch.NumStopped() > 0 ? kExitFailed : kExitOk;
 }
 
 int SimulateCommand(const fs::path& project_dir, const SimulationOptions& options,

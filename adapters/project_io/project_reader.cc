@@ -546,22 +546,11 @@ std::vector<std::string> ListImages(const fs::path& dir) {
   return names;
 }
 
-}  // namespace
-
-Project LoadProject(const fs::path& dir_in, int num_threads) {
+// tiles/ and table.csv: each tile's image and table position. Both or
+// neither (a calibration-only project); the keys they need are checked too.
+void ReadTiles(const fs::path& dir, bool has_table_keys, Project& project) {
   std::error_code ec;
-  if (!fs::is_directory(dir_in, ec)) {
-    throw InputError(dir_in.string(), "project directory not found");
-  }
-  Project project;
-  project.dir = fs::canonical(dir_in);
-  const fs::path& dir = project.dir;
-
-  bool has_table_keys = false;
-  ReadProjectYaml(dir, project, has_table_keys);
   const fs::path yaml_file = dir / "project.yaml";
-
-  // tiles/ and table.csv come together; a calibration-only project has neither.
   const fs::path tiles_dir = dir / "tiles";
   const fs::path table_file = dir / "table.csv";
   const bool has_tiles = fs::is_directory(tiles_dir, ec);
@@ -630,7 +619,11 @@ Project LoadProject(const fs::path& dir_in, int num_threads) {
       }
     }
   }
+}
 
+// cmm.csv, if there is one: a CMM value per measurement of project.yaml.
+void ReadCmm(const fs::path& dir, Project& project) {
+  std::error_code ec;
   const fs::path cmm_file = dir / "cmm.csv";
   if (fs::is_regular_file(cmm_file, ec)) {
     std::vector<std::string> names;
@@ -649,8 +642,11 @@ Project LoadProject(const fs::path& dir_in, int num_threads) {
       project.cmm.push_back({name, CsvNumber(cmm_file, row, 1, "value_mm")});
     }
   }
+}
 
-  // calib/ is used only when no earlier calibration is reused.
+// calib/'s images, used only when no earlier calibration is reused.
+void ListCalibImages(const fs::path& dir, Project& project) {
+  std::error_code ec;
   if (!project.calibration_from) {
     const fs::path calib_dir = dir / "calib";
     if (!fs::is_directory(calib_dir, ec)) {
@@ -664,9 +660,12 @@ Project LoadProject(const fs::path& dir_in, int num_threads) {
       throw InputError(calib_dir.string(), "no images (PNG, TIFF or JPEG)");
     }
   }
+}
 
-  // Read, hash and decode every image once, here: a corrupt file is found now,
-  // not halfway through, and the stages take the decoded images from memory.
+// Every image read, hashed and decoded once, here: a corrupt file is found
+// now, not halfway through, and the stages take the decoded images from
+// memory. All must have one size.
+void LoadImages(const fs::path& dir, int num_threads, Project& project) {
   std::vector<fs::path> all_images = project.calib_images;
   for (const TilePosition& tile : project.tiles) all_images.push_back(project.TilePath(tile.image));
   std::vector<LoadedImage> loaded(all_images.size());
@@ -699,6 +698,10 @@ Project LoadProject(const fs::path& dir_in, int num_threads) {
   images->calib.assign(std::make_move_iterator(loaded.begin()), std::make_move_iterator(calib_end));
   images->tiles.assign(std::make_move_iterator(calib_end), std::make_move_iterator(loaded.end()));
   project.images = std::move(images);
+}
+
+// Each feature's near_px inside its tile.
+void CheckFeaturesInTiles(const fs::path& yaml_file, const Project& project) {
   for (size_t i = 0; i < project.features.size(); ++i) {
     const FeatureSpec& feature = project.features[i];
     const Eigen::Vector2d& q = feature.near_px;
@@ -711,6 +714,26 @@ Project LoadProject(const fs::path& dir_in, int num_threads) {
                                    feature.image));
     }
   }
+}
+
+}  // namespace
+
+Project LoadProject(const fs::path& dir_in, int num_threads) {
+  std::error_code ec;
+  if (!fs::is_directory(dir_in, ec)) {
+    throw InputError(dir_in.string(), "project directory not found");
+  }
+  Project project;
+  project.dir = fs::canonical(dir_in);
+  const fs::path& dir = project.dir;
+
+  bool has_table_keys = false;
+  ReadProjectYaml(dir, project, has_table_keys);
+  ReadTiles(dir, has_table_keys, project);
+  ReadCmm(dir, project);
+  if (!project.calibration_from) ListCalibImages(dir, project);
+  LoadImages(dir, num_threads, project);
+  CheckFeaturesInTiles(dir / "project.yaml", project);
   return project;
 }
 
