@@ -152,8 +152,6 @@ class Section {
     return extra;
   }
 
-  const std::string& where() const { return where_; }
-
  private:
   const Json& json_;
   std::string path_;

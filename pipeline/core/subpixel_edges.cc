@@ -374,12 +374,6 @@ std::string EllipseEdgeOptions::Check() const {
   return {};
 }
 
-EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough, const EllipseEdgeOptions& options) {
-  EdgePass pass = CastRays(image, rough, options);
-  AddEdgeStatistics(image, &pass);
-  return pass.edges;
-}
-
 std::string MarkRefinementOptions::Check() const {
   if (std::string why = edges.Check(); !why.empty()) return "edges: " + why;
   if (std::string why = fit.Check(); !why.empty()) return "fit: " + why;

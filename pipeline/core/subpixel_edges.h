@@ -54,6 +54,9 @@ struct EllipseEdgeOptions {
   std::string Check() const;
 };
 
+// One pass's edge points of a mark (RefineEllipticalMark), on rays along the
+// normals of its rough boundary, clipped to half the minor axis inside so
+// that they never cross the centre.
 struct EllipseEdges {
   Eigen::Matrix2Xd points_px;     // one edge point per ray that crossed cleanly
   int num_rays = 0;               // rays cast
@@ -65,11 +68,6 @@ struct EllipseEdges {
   double pixel_noise_inside = 0.0;
   double pixel_noise_outside = 0.0;
 };
-
-// Edge points of the mark whose boundary is roughly `rough`. Rays are clipped
-// to half the minor axis inside so they never cross the centre.
-EllipseEdges FindEllipseEdges(const ImageF& image, const Ellipse& rough,
-                              const EllipseEdgeOptions& options = {});
 
 struct MarkRefinementOptions {
   EllipseEdgeOptions edges;
