@@ -338,7 +338,7 @@ class Batch {
     fmt::print("{}\n", CmmAgreement(measurements_));
   }
 
-  const std::vector<ProjectMeasurements>& measurements() const { return measurements_; }
+  const std::vector<ProjectMeasurements>& Measurements() const { return measurements_; }
   long NumFailed() const {
     return std::count_if(rows_.begin(), rows_.end(),
                          [](const BatchRow& r) { return r.result.rfind("FAILED", 0) == 0; });
@@ -406,7 +406,7 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
   batch.PrintSummary();
   if (csv) {
     const Outcome written =
-        Guarded([&] { WriteTextFileAtomically(*csv, MeasurementsCsv(batch.measurements())); });
+        Guarded([&] { WriteTextFileAtomically(*csv, MeasurementsCsv(batch.Measurements())); });
     if (written.exit_code != kExitOk) return Finish(written);
     fmt::print("{}\n", csv->string());
   }

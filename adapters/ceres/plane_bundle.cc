@@ -159,7 +159,7 @@ struct SchurJacobian {
   int num_points = 0;
   std::vector<int> tangent_offset;  // per scene block, in the scene columns; -1 if constant
   int num_scene_columns = 0;
-  int point_columns() const { return 2 * num_points; }
+  int PointColumns() const { return 2 * num_points; }
 };
 
 std::optional<SchurJacobian> EvaluateSchurJacobian(
@@ -201,7 +201,7 @@ struct RowsByPoint {
 
 RowsByPoint SortRowsByPoint(const SchurJacobian& j) {
   const ceres::CRSMatrix& jacobian = j.jacobian;
-  const int point_columns = j.point_columns();
+  const int point_columns = j.PointColumns();
   RowsByPoint by;
   by.rows.resize(j.num_points);
   by.columns.resize(j.num_points);
@@ -242,7 +242,7 @@ struct ReducedSystem {
 std::optional<ReducedSystem> ReduceToScene(const SchurJacobian& j, const RowsByPoint& by,
                                            int num_threads) {
   const ceres::CRSMatrix& jacobian = j.jacobian;
-  const int point_columns = j.point_columns(), m = j.num_scene_columns;
+  const int point_columns = j.PointColumns(), m = j.num_scene_columns;
   ReducedSystem reduced;
   reduced.v_inverse.resize(j.num_points);
   reduced.w.resize(j.num_points);
@@ -326,7 +326,7 @@ std::optional<Eigen::MatrixXd> InverseOfFullRank(const Eigen::MatrixXd& s) {
   const Eigen::VectorXd inv_sqrt_d = d.cwiseSqrt().cwiseInverse();
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(
       inv_sqrt_d.asDiagonal() * s * inv_sqrt_d.asDiagonal());
-  const Eigen::VectorXd lambda = eigen.eigenvalues();
+  const Eigen::VectorXd& lambda = eigen.eigenvalues();
   if (!(lambda(0) > 1e-14 * lambda(lambda.size() - 1))) return std::nullopt;
   return inv_sqrt_d.asDiagonal() * eigen.eigenvectors() * lambda.cwiseInverse().asDiagonal() *
          eigen.eigenvectors().transpose() * inv_sqrt_d.asDiagonal();

@@ -426,11 +426,12 @@ std::vector<WedgePixels> GatherWedgePixels(const ImageF& image, const Circle& ci
 
 // A wedge's centre ray from the circle's d_lo to d_hi, sampled every kStep
 // px (bilinear), and its rises over 1 px, deriv(i) = value(i + h) -
-// value(i - h) (zero where they reach beyond the covered samples).
+// value(i - h), h = kHalfRise (zero where they reach beyond the covered
+// samples).
 class RayProfile {
  public:
   static constexpr double kStep = 0.25;
-  static constexpr int h = 2;  // 0.5 px
+  static constexpr int kHalfRise = 2;  // samples: 0.5 px
 
   RayProfile(double d_lo, double d_hi)
       : d_lo_(d_lo),
@@ -448,15 +449,16 @@ class RayProfile {
       if (std::isnan(value_(i))) break;
       first_ = i;
     }
-    if (first_ > Index(d_fit) - h) return false;
-    deriv_.head(first_ + h).setZero();
-    for (int i = first_ + h; i + h < samples; ++i) deriv_(i) = value_(i + h) - value_(i - h);
+    if (first_ > Index(d_fit) - kHalfRise) return false;
+    deriv_.head(first_ + kHalfRise).setZero();
+    for (int i = first_ + kHalfRise; i + kHalfRise < samples; ++i)
+      deriv_(i) = value_(i + kHalfRise) - value_(i - kHalfRise);
     return true;
   }
 
   int Index(double d) const { return static_cast<int>(std::lround((d - d_lo_) / kStep)); }
   double Offset(int i) const { return d_lo_ + i * kStep; }
-  int first_rise() const { return first_ + h; }  // the innermost rise of covered samples
+  int FirstRise() const { return first_ + kHalfRise; }  // the innermost rise of covered samples
   double Rise(int i) const { return deriv_(i); }
   bool IsPeak(int i) const { return deriv_(i) >= deriv_(i - 1) && deriv_(i) >= deriv_(i + 1); }
 
@@ -498,7 +500,7 @@ void FitRimAndBottomRim(const WedgePixels& pixels, const RayProfile& profile, in
   wedge->step = FitStep(samples->d, samples->v, x_rim, x_rim - hw, sigma, Inner::kRamp);
   wedge->ok = IsRimStep(wedge->step, x_rim, options);
   // The bottom rim: the strongest rise inside the rim's flank ...
-  const int stop = std::max(profile.first_rise(), profile.Index(x_rim - reach + band));
+  const int stop = std::max(profile.FirstRise(), profile.Index(x_rim - reach + band));
   double best = 0.2 * options.min_contrast;
   int inner_peak = -1;
   for (int i = peak - static_cast<int>(std::lround(2.0 * sigma / RayProfile::kStep)); i >= stop;

@@ -253,7 +253,9 @@ struct CoarseSurface {
   std::vector<double> ncc;  // at (dx, dy): [(dy + rows - 1) (2 cols - 1) + dx + cols - 1]
   std::vector<std::pair<double, Eigen::Vector2i>> peaks;  // (ncc, shift), best first
 
-  double At(int dx, int dy) const { return ncc[(dy + rows - 1) * (2 * cols - 1) + dx + cols - 1]; }
+  double At(int dx, int dy) const {
+    return ncc[static_cast<size_t>((dy + rows - 1) * (2 * cols - 1) + dx + cols - 1)];
+  }
 };
 
 // `sa`, `sb`: the levels' spectra, zero-padded to fft_rows x fft_cols.
