@@ -641,6 +641,49 @@ PatchWarp PatchWarp::FromJacobians(const Eigen::Matrix2d& j, const Eigen::Matrix
   return warp;
 }
 
+namespace {
+
+// The normal equations of a patch's least-squares step in (dq_x, dq_y,
+// dgain, doffset): J' W J and -J' W r, r = gain b(q + offset_i) + offset - t
+// (residual), J its derivatives (gain times b's gradient, b, 1).
+// The upper triangle is summed with pixel pairs in the two lanes of packed
+// doubles (SSE2 does two per instruction; the scalar sums could not be
+// reordered without -ffast-math). An odd last pixel pairs with weight 0.
+void PatchNormalEquations(const Eigen::VectorXd& weight, const Eigen::VectorXd& sampled,
+                          const Eigen::VectorXd& residual, const Eigen::VectorXd& gradient_x,
+                          const Eigen::VectorXd& gradient_y, double gain, Eigen::Matrix4d* normal,
+                          Eigen::Vector4d* rhs) {
+  using Pair = Eigen::Array2d;
+  Pair n00 = Pair::Zero(), n01 = n00, n02 = n00, n03 = n00, n11 = n00, n12 = n00, n13 = n00,
+       n22 = n00, n23 = n00, n33 = n00, b0 = n00, b1 = n00, b2 = n00, b3 = n00;
+  const auto add = [&](const Pair& w, const Pair& v, const Pair& r, const Pair& gx,
+                       const Pair& gy) {
+    const Pair e = w * r, j0 = gain * gx, j1 = gain * gy;
+    const Pair wj0 = w * j0, wj1 = w * j1, wv = w * v;
+    n00 += wj0 * j0, n01 += wj0 * j1, n02 += wj0 * v, n03 += wj0;
+    n11 += wj1 * j1, n12 += wj1 * v, n13 += wj1;
+    n22 += wv * v, n23 += wv, n33 += w;
+    b0 -= j0 * e, b1 -= j1 * e, b2 -= v * e, b3 -= e;
+  };
+  const auto n = static_cast<int>(weight.size());
+  int i = 0;
+  for (; i + 1 < n; i += 2) {
+    add(weight.segment<2>(i), sampled.segment<2>(i), residual.segment<2>(i),
+        gradient_x.segment<2>(i), gradient_y.segment<2>(i));
+  }
+  if (i < n) {
+    add(Pair(weight(i), 0), Pair(sampled(i), 0), Pair(residual(i), 0), Pair(gradient_x(i), 0),
+        Pair(gradient_y(i), 0));
+  }
+  const double s01 = n01.sum(), s02 = n02.sum(), s03 = n03.sum(), s12 = n12.sum(), s13 = n13.sum(),
+               s23 = n23.sum();
+  *normal << n00.sum(), s01, s02, s03, s01, n11.sum(), s12, s13, s02, s12, n22.sum(), s23, s03, s13,
+      s23, n33.sum();
+  *rhs = Eigen::Vector4d(b0.sum(), b1.sum(), b2.sum(), b3.sum());
+}
+
+}  // namespace
+
 PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
                       const ImageF& target, const ImageF& target_spline,
                       const Eigen::Vector2d& predicted_q_px, const PatchWarp& warp,
@@ -712,36 +755,8 @@ PatchMatch MatchPatch(const ImageF& reference, const Eigen::Vector2i& anchor_px,
         }
         weight = TukeyWeights(residual, options.robust_tukey_c);
       }
-      // Upper triangle of the 4 x 4 normal matrix of (dq_x, dq_y, dgain,
-      // doffset) and the right side, pixel pairs in the two lanes of packed
-      // doubles (SSE2 does two per instruction; the scalar sums could not be
-      // reordered without -ffast-math). An odd last pixel pairs with weight 0.
-      using Pair = Eigen::Array2d;
-      Pair n00 = Pair::Zero(), n01 = n00, n02 = n00, n03 = n00, n11 = n00, n12 = n00, n13 = n00,
-           n22 = n00, n23 = n00, n33 = n00, b0 = n00, b1 = n00, b2 = n00, b3 = n00;
-      const auto add = [&](const Pair& w, const Pair& v, const Pair& r, const Pair& gx,
-                           const Pair& gy) {
-        const Pair e = w * r, j0 = gain * gx, j1 = gain * gy;
-        const Pair wj0 = w * j0, wj1 = w * j1, wv = w * v;
-        n00 += wj0 * j0, n01 += wj0 * j1, n02 += wj0 * v, n03 += wj0;
-        n11 += wj1 * j1, n12 += wj1 * v, n13 += wj1;
-        n22 += wv * v, n23 += wv, n33 += w;
-        b0 -= j0 * e, b1 -= j1 * e, b2 -= v * e, b3 -= e;
-      };
-      int i = 0;
-      for (; i + 1 < n; i += 2) {
-        add(weight.segment<2>(i), sampled.segment<2>(i), residual.segment<2>(i),
-            gradient_x.segment<2>(i), gradient_y.segment<2>(i));
-      }
-      if (i < n) {
-        add(Pair(weight(i), 0), Pair(sampled(i), 0), Pair(residual(i), 0), Pair(gradient_x(i), 0),
-            Pair(gradient_y(i), 0));
-      }
-      const double s01 = n01.sum(), s02 = n02.sum(), s03 = n03.sum(), s12 = n12.sum(),
-                   s13 = n13.sum(), s23 = n23.sum();
-      normal << n00.sum(), s01, s02, s03, s01, n11.sum(), s12, s13, s02, s12, n22.sum(), s23, s03,
-          s13, s23, n33.sum();
-      const Eigen::Vector4d rhs(b0.sum(), b1.sum(), b2.sum(), b3.sum());
+      Eigen::Vector4d rhs;
+      PatchNormalEquations(weight, sampled, residual, gradient_x, gradient_y, gain, &normal, &rhs);
       const Eigen::Vector4d step = normal.ldlt().solve(rhs);
       if (!step.allFinite()) return match;
       ++match.iterations;
