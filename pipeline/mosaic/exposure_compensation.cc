@@ -4,7 +4,9 @@
 #include <cassert>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <utility>
+#include <vector>
 
 #include <Eigen/Dense>
 
@@ -229,14 +231,10 @@ double MaxPairStep(const Samples& samples, const std::vector<double>& factor, in
   return step;
 }
 
-}  // namespace
-
-ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, int num_tiles,
-                                 const ExposureOptions& options) {
-  assert(options.Check().empty());
-  ExposureSummary summary;
-  summary.tiles.assign(num_tiles, TileExposure{});
-  Samples samples{obs, {}, 0, options.num_threads};
+// The observations' samples (runs of one `sample` index, ascending).
+Samples GroupSamples(const std::vector<ExposureObservation>& obs, [[maybe_unused]] int num_tiles,
+                     int num_threads) {
+  Samples samples{obs, {}, 0, num_threads};
   std::vector<int>& start = samples.start;
   for (size_t k = 0; k < obs.size(); ++k) {
     assert(obs[k].tile >= 0 && obs[k].tile < num_tiles);
@@ -249,6 +247,82 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
   start.push_back(static_cast<int>(obs.size()));
   for (int s = 0; s < samples.num_samples(); ++s)
     samples.max_per_sample = std::max(samples.max_per_sample, start[s + 1] - start[s]);
+  return samples;
+}
+
+// The parameters fitted, indices into (a_0, b_0, a_1, b_1, ...): a and b of
+// tiles with samples, except the gauge's a (the scale of g L is
+// undetermined) and b without vignetting.
+std::vector<int> FreeParameters(const std::vector<int>& tile_count, bool estimate_vignetting) {
+  std::vector<int> free;
+  int gauge = -1;
+  for (int i = 0; i < static_cast<int>(tile_count.size()); ++i) {
+    if (tile_count[i] == 0) continue;
+    if (gauge < 0) {
+      gauge = i;
+    } else {
+      free.push_back(2 * i);
+    }
+    if (estimate_vignetting) free.push_back(2 * i + 1);
+  }
+  return free;
+}
+
+// The exposures after `step` (over the `free` parameters), halved until the
+// weighted cost (radiances re-solved) goes down: far from the solution
+// (exposure differences of 2x) a full step can overshoot. nullopt if no
+// step down to 1/1000 of it descends.
+std::optional<std::vector<TileExposure>> DescendAlong(const Samples& samples,
+                                                      const std::vector<TileExposure>& exposure,
+                                                      const std::vector<double>& factor,
+                                                      const std::vector<double>& weight,
+                                                      const std::vector<int>& free,
+                                                      const Eigen::VectorXd& step) {
+  const double current_cost = Cost(samples, factor, weight);
+  std::vector<double> trial_factor;
+  for (double scale = 1.0; step.allFinite() && scale > 1e-3; scale *= 0.5) {
+    std::vector<TileExposure> trial = exposure;
+    bool valid = true;
+    for (size_t i = 0; i < exposure.size(); ++i) {
+      double a = exposure[i].gain, b = exposure[i].gain * exposure[i].vignetting;
+      for (size_t p = 0; p < free.size(); ++p) {
+        if (free[p] == 2 * static_cast<int>(i)) a += scale * step(p);
+        if (free[p] == 2 * static_cast<int>(i) + 1) b += scale * step(p);
+      }
+      valid &= a > 0.0;
+      trial[i].gain = a;
+      trial[i].vignetting = b / a;
+    }
+    if (!valid) continue;
+    Factors(samples, trial, &trial_factor);
+    if (Cost(samples, trial_factor, weight) < current_cost) return trial;
+  }
+  return std::nullopt;
+}
+
+// The gauge: the brightest tile that has samples keeps gain 1. Its index.
+int NormaliseGains(const std::vector<int>& tile_count, std::vector<TileExposure>* exposure) {
+  std::vector<TileExposure>& e = *exposure;
+  int reference = -1;
+  for (size_t i = 0; i < e.size(); ++i) {
+    if (tile_count[i] > 0 && (reference < 0 || e[i].gain > e[reference].gain))
+      reference = static_cast<int>(i);
+  }
+  const double scale = e[reference].gain;
+  for (size_t i = 0; i < e.size(); ++i) {
+    if (tile_count[i] > 0) e[i].gain /= scale;
+  }
+  return reference;
+}
+
+}  // namespace
+
+ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, int num_tiles,
+                                 const ExposureOptions& options) {
+  assert(options.Check().empty());
+  ExposureSummary summary;
+  summary.tiles.assign(num_tiles, TileExposure{});
+  const Samples samples = GroupSamples(obs, num_tiles, options.num_threads);
   summary.num_samples = samples.num_samples();
   summary.num_observations = static_cast<int>(obs.size());
 
@@ -263,7 +337,7 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
   }
 
   std::vector<TileExposure>& exposure = summary.tiles;
-  std::vector<double> weight(obs.size(), 1.0), factor, trial_factor, e;
+  std::vector<double> weight(obs.size(), 1.0), factor, e;
   Factors(samples, exposure, &factor);
   Residuals(samples, factor, weight, &e);
   summary.relative_sigma_before = RobustSigma(e);
@@ -271,24 +345,12 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
 
   double sigma = 0.0;  // robust sigma of the last iteration's residuals
   const int num_params = 2 * num_tiles;
+  const std::vector<int> free = FreeParameters(tile_count, options.estimate_vignetting);
+  const int nf = static_cast<int>(free.size());
   for (summary.iterations = 1; summary.iterations <= options.max_iterations; ++summary.iterations) {
     Eigen::MatrixXd h;
     Eigen::VectorXd g;
     ReducedNormalEquations(samples, factor, weight, num_params, &h, &g);
-    // Free: a and b of tiles with samples, except the gauge's a (the
-    // scale of g L is undetermined) and b without vignetting.
-    std::vector<int> free;
-    int gauge = -1;
-    for (int i = 0; i < num_tiles; ++i) {
-      if (tile_count[i] == 0) continue;
-      if (gauge < 0) {
-        gauge = i;
-      } else {
-        free.push_back(2 * i);
-      }
-      if (options.estimate_vignetting) free.push_back(2 * i + 1);
-    }
-    const int nf = static_cast<int>(free.size());
     Eigen::MatrixXd hf(nf, nf);
     Eigen::VectorXd gf(nf);
     for (int p = 0; p < nf; ++p) {
@@ -298,48 +360,14 @@ ExposureSummary EstimateExposure(const std::vector<ExposureObservation>& obs, in
       }
     }
     const Eigen::VectorXd step = hf.ldlt().solve(-gf);
-    // The step, halved until the weighted cost (radiances re-solved) goes
-    // down: far from the solution (exposure differences of 2x) a full step
-    // can overshoot.
-    std::vector<TileExposure> next = exposure;
-    const double current_cost = Cost(samples, factor, weight);
-    bool descended = false;
-    for (double scale = 1.0; step.allFinite() && scale > 1e-3; scale *= 0.5) {
-      std::vector<TileExposure> trial = exposure;
-      bool valid = true;
-      for (int i = 0; i < num_tiles; ++i) {
-        double a = exposure[i].gain, b = exposure[i].gain * exposure[i].vignetting;
-        for (int p = 0; p < nf; ++p) {
-          if (free[p] == 2 * i) a += scale * step(p);
-          if (free[p] == 2 * i + 1) b += scale * step(p);
-        }
-        valid &= a > 0.0;
-        trial[i].gain = a;
-        trial[i].vignetting = b / a;
-      }
-      if (!valid) continue;
-      Factors(samples, trial, &trial_factor);
-      if (Cost(samples, trial_factor, weight) < current_cost) {
-        next = trial;
-        descended = true;
-        break;
-      }
-    }
+    const std::optional<std::vector<TileExposure>> descended =
+        DescendAlong(samples, exposure, factor, weight, free, step);
+    std::vector<TileExposure> next = descended.value_or(exposure);
     // No descent with a step this small is the optimum (rounding); with a
     // larger one the fit is stuck away from it (a and b are g and g v, so
     // the step compares with the tolerance on g and v).
     const bool stalled = !descended && !(step.cwiseAbs().maxCoeff() < options.tolerance);
-    // Gauge: the brightest tile that has samples keeps gain 1.
-    int reference = -1;
-    for (int i = 0; i < num_tiles; ++i) {
-      if (tile_count[i] > 0 && (reference < 0 || next[i].gain > next[reference].gain))
-        reference = i;
-    }
-    const double scale = next[reference].gain;
-    for (int i = 0; i < num_tiles; ++i) {
-      if (tile_count[i] > 0) next[i].gain /= scale;
-    }
-    summary.reference_tile = reference;
+    summary.reference_tile = NormaliseGains(tile_count, &next);
 
     double change = 0.0;
     for (int i = 0; i < num_tiles; ++i) {
