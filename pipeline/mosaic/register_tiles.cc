@@ -981,6 +981,50 @@ void Summarize(const Tracks& tracks, bool use_sift, size_t num_sift_pairs_in, in
   result->brief = brief.str();
 }
 
+// Step 3's matches of every pair, in parallel: Harris candidates (unless
+// options.features is SIFT alone) and COLMAP's SIFT matches of the pair
+// (unless it is Harris alone), located and kept where the plane model holds
+// (RANSAC). The counts go into *pairs.
+struct PairMatches {
+  std::vector<std::vector<Match>> matches;          // per pair
+  std::vector<std::vector<int>> harris_candidates;  // per pair: indices into corners[a]
+};
+
+PairMatches MatchPairs(const MatchingInputs& in, const RegisterTilesOptions& options,
+                       const std::vector<ColmapPairMatches>& sift_matches,
+                       std::vector<PairRegistration>* pairs) {
+  const bool use_harris = options.features != FeatureSource::kSift;
+  const bool use_sift = options.features != FeatureSource::kHarris;
+  std::map<std::pair<int, int>, const ColmapPairMatches*> sift_of_pair;
+  if (use_sift) {
+    for (const ColmapPairMatches& m : sift_matches) sift_of_pair[{m.tile_a, m.tile_b}] = &m;
+  }
+  PairMatches matched;
+  matched.matches.resize(pairs->size());
+  matched.harris_candidates.resize(pairs->size());
+  ParallelFor(static_cast<int>(pairs->size()), options.num_threads, [&](int p) {
+    PairRegistration& pair = (*pairs)[p];
+    std::mt19937_64 rng(options.ransac_seed + p);
+    std::vector<Candidate> todo;
+    if (use_harris) {
+      matched.harris_candidates[p] = PairCandidates(in, &pair);
+      todo = HarrisCandidates(in, matched.harris_candidates[p], &pair, &rng);
+    }
+    if (const auto it = sift_of_pair.find({pair.tile_a, pair.tile_b}); it != sift_of_pair.end()) {
+      const std::vector<Candidate> from_sift = SiftCandidates(in, *it->second, &pair, &rng);
+      todo.insert(todo.end(), from_sift.begin(), from_sift.end());
+    }
+    const std::vector<Match> matches = LocateCandidates(in, pair, todo);
+    pair.num_matched = static_cast<int>(matches.size());
+    std::vector<Match> kept = PlaneInliers(in, matches, &rng);
+    pair.num_inliers = static_cast<int>(kept.size());
+    pair.num_sift = static_cast<int>(
+        std::count_if(kept.begin(), kept.end(), [](const Match& m) { return m.sift; }));
+    matched.matches[p] = std::move(kept);
+  });
+  return matched;
+}
+
 }  // namespace
 
 TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma_mm,
@@ -1013,35 +1057,10 @@ TileRegistration RegisterTiles(const PreparedTiles& prepared, double table_sigma
   // 3. (continued) The pairs matched.
   auto t0 = Clock::now();
   const MatchingInputs in = MatchingInputsOf(prepared, camera);
-  const bool use_harris = options.features != FeatureSource::kSift;
   const bool use_sift = options.features != FeatureSource::kHarris;
-  std::map<std::pair<int, int>, const ColmapPairMatches*> sift_of_pair;
-  if (use_sift) {
-    for (const ColmapPairMatches& m : sift_matches) sift_of_pair[{m.tile_a, m.tile_b}] = &m;
-  }
-  std::vector<std::vector<Match>> pair_matches(result.pairs.size());
-  // Per pair, its Harris candidates (indices into corners[a]).
-  std::vector<std::vector<int>> pair_candidates(result.pairs.size());
-  ParallelFor(static_cast<int>(result.pairs.size()), options.num_threads, [&](int p) {
-    PairRegistration& pair = result.pairs[p];
-    std::mt19937_64 rng(options.ransac_seed + p);
-    std::vector<Candidate> todo;
-    if (use_harris) {
-      pair_candidates[p] = PairCandidates(in, &pair);
-      todo = HarrisCandidates(in, pair_candidates[p], &pair, &rng);
-    }
-    if (const auto it = sift_of_pair.find({pair.tile_a, pair.tile_b}); it != sift_of_pair.end()) {
-      const std::vector<Candidate> from_sift = SiftCandidates(in, *it->second, &pair, &rng);
-      todo.insert(todo.end(), from_sift.begin(), from_sift.end());
-    }
-    const std::vector<Match> matches = LocateCandidates(in, pair, todo);
-    pair.num_matched = static_cast<int>(matches.size());
-    std::vector<Match> kept = PlaneInliers(in, matches, &rng);
-    pair.num_inliers = static_cast<int>(kept.size());
-    pair.num_sift = static_cast<int>(
-        std::count_if(kept.begin(), kept.end(), [](const Match& m) { return m.sift; }));
-    pair_matches[p] = std::move(kept);
-  });
+  PairMatches matched = MatchPairs(in, options, sift_matches, &result.pairs);
+  std::vector<std::vector<Match>>& pair_matches = matched.matches;
+  const std::vector<std::vector<int>>& pair_candidates = matched.harris_candidates;
   AddTagMatches(TagMatches(prepared), &result.pairs, &pair_matches);
   for (size_t p = 0; p < result.pairs.size(); ++p) {
     PairRegistration& pair = result.pairs[p];
