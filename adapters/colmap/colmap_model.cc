@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdio>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -24,6 +26,126 @@ std::string Format(const char* format, double value) {
 
 std::string Num(double value) { return Format("%.17g", value); }
 
+// cameras.txt: the one camera as the COLMAP model nearest to its lens model
+// (PINHOLE, with the observations undistorted, for the models COLMAP lacks);
+// the model and whether it undistorts go into *summary.
+std::string CamerasTxt(const CameraModel& camera, ColmapExportSummary* summary) {
+  const Eigen::VectorXd& k = camera.intrinsics;
+  const auto n_intrinsics = static_cast<int>(k.size());
+  std::ostringstream cam;
+  cam << "# Camera list with one line of data per camera:\n"
+      << "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n# Number of cameras: 1\n";
+  std::vector<double> params = {k[0], k[1], k[2] + kColmapPixelShift, k[3] + kColmapPixelShift};
+  if (camera.lens_model == "LENSMODEL_PINHOLE") {
+    summary->camera_model = "PINHOLE";
+  } else if (camera.lens_model == "LENSMODEL_OPENCV4") {
+    summary->camera_model = "OPENCV";
+    for (int i = 4; i < 8; ++i) params.push_back(k[i]);
+  } else if (camera.lens_model == "LENSMODEL_OPENCV5" || camera.lens_model == "LENSMODEL_OPENCV8") {
+    summary->camera_model = "FULL_OPENCV";
+    for (int i = 4; i < 12; ++i) params.push_back(i < n_intrinsics ? k[i] : 0.0);
+  } else {
+    summary->camera_model = "PINHOLE";
+    summary->undistorted = true;
+  }
+  cam << "1 " << summary->camera_model << " " << camera.width_px << " " << camera.height_px;
+  for (double p : params) cam << " " << Num(p);
+  cam << "\n";
+  return cam.str();
+}
+
+// The used observations (weight > 0) by track; a track of two or more is a
+// COLMAP point, numbered from 1 in track order.
+struct ColmapPoints {
+  std::vector<std::vector<int>> track_obs;  // per track: indices into the observations
+  std::vector<int> point_id;                // per track: -1 if not a point
+  int num_points = 0;
+};
+
+ColmapPoints PointsOf(const std::vector<TrackObservation>& observations, int num_tracks) {
+  ColmapPoints points;
+  points.track_obs.resize(num_tracks);
+  for (size_t i = 0; i < observations.size(); ++i) {
+    if (observations[i].weight > 0.0)
+      points.track_obs[observations[i].track].push_back(static_cast<int>(i));
+  }
+  points.point_id.assign(num_tracks, -1);
+  for (int tr = 0; tr < num_tracks; ++tr) {
+    if (points.track_obs[tr].size() >= 2) points.point_id[tr] = ++points.num_points;
+  }
+  return points;
+}
+
+// images.txt: each tile's pose (camera from its part position) and its
+// points2D, its used observations of points at `q_written`; *point2d_index
+// gets each observation's index among its tile's points2D.
+std::string ImagesTxt(const PlaneScene& scene, const Eigen::Matrix3d& r,
+                      const std::vector<std::string>& image_names,
+                      const std::vector<TrackObservation>& observations,
+                      const Eigen::Matrix2Xd& q_written, const ColmapPoints& points,
+                      std::vector<int>* point2d_index) {
+  const int num_tiles = static_cast<int>(image_names.size());
+  std::vector<std::vector<int>> tile_obs(num_tiles);
+  point2d_index->assign(observations.size(), -1);
+  for (size_t tr = 0; tr < points.track_obs.size(); ++tr) {
+    if (points.point_id[tr] < 0) continue;
+    for (int i : points.track_obs[tr]) {
+      (*point2d_index)[i] = static_cast<int>(tile_obs[observations[i].tile].size());
+      tile_obs[observations[i].tile].push_back(i);
+    }
+  }
+  const Eigen::Quaterniond quat(r);
+  std::ostringstream img;
+  img << "# Image list with two lines of data per image:\n"
+      << "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n"
+      << "#   POINTS2D[] as (X, Y, POINT3D_ID)\n# Number of images: " << num_tiles << "\n";
+  for (int i = 0; i < num_tiles; ++i) {
+    const Eigen::Vector3d t =
+        r * Eigen::Vector3d(scene.table_pos_mm[i].x(), scene.table_pos_mm[i].y(), 0.0) +
+        scene.cam_from_part_t_mm;
+    img << i + 1 << " " << Num(quat.w()) << " " << Num(quat.x()) << " " << Num(quat.y()) << " "
+        << Num(quat.z()) << " " << Num(t.x()) << " " << Num(t.y()) << " " << Num(t.z()) << " 1 "
+        << image_names[i] << "\n";
+    for (size_t j = 0; j < tile_obs[i].size(); ++j) {
+      const int o = tile_obs[i][j];
+      img << (j ? " " : "") << Num(q_written(0, o) + kColmapPixelShift) << " "
+          << Num(q_written(1, o) + kColmapPixelShift) << " "
+          << points.point_id[observations[o].track];
+    }
+    img << "\n";
+  }
+  return img.str();
+}
+
+// points3D.txt: each point on the part plane (z = 0) with its mean
+// reprojection error (q_model against q_obs) and its track; the counts and
+// the mean error go into *summary.
+std::string Points3DTxt(const PlaneScene& scene, const std::vector<TrackObservation>& observations,
+                        const Eigen::Matrix2Xd& q_model, const Eigen::Matrix2Xd& q_obs,
+                        const ColmapPoints& points, const std::vector<int>& point2d_index,
+                        ColmapExportSummary* summary) {
+  std::ostringstream pts;
+  double error_sum = 0.0;
+  pts << "# 3D point list with one line of data per point:\n"
+      << "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n";
+  for (size_t tr = 0; tr < points.track_obs.size(); ++tr) {
+    if (points.point_id[tr] < 0) continue;
+    const std::vector<int>& obs = points.track_obs[tr];
+    double error = 0.0;
+    for (int i : obs) error += (q_model.col(i) - q_obs.col(i)).norm();
+    error /= static_cast<double>(obs.size());
+    error_sum += error;
+    pts << points.point_id[tr] << " " << Num(scene.track_xy_mm(0, tr)) << " "
+        << Num(scene.track_xy_mm(1, tr)) << " 0 128 128 128 " << Num(error);
+    for (int i : obs) pts << " " << observations[i].tile + 1 << " " << point2d_index[i];
+    pts << "\n";
+    summary->num_observations += static_cast<int>(obs.size());
+  }
+  summary->num_points = points.num_points;
+  summary->mean_point_error_px = points.num_points > 0 ? error_sum / points.num_points : 0.0;
+  return pts.str();
+}
+
 }  // namespace
 
 ColmapExportSummary WriteColmapModel(const std::filesystem::path& dir, const CameraModel& camera,
@@ -44,38 +166,8 @@ ColmapExportSummary WriteColmapModel(const std::filesystem::path& dir, const Cam
     throw InputError("colmap export", "camera intrinsics do not fit '" + camera.lens_model + "'");
 
   ColmapExportSummary summary;
-  const Eigen::VectorXd& k = camera.intrinsics;
-  std::ostringstream cam;
-  cam << "# Camera list with one line of data per camera:\n"
-      << "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n# Number of cameras: 1\n";
-  std::vector<double> params = {k[0], k[1], k[2] + kColmapPixelShift, k[3] + kColmapPixelShift};
-  if (camera.lens_model == "LENSMODEL_PINHOLE") {
-    summary.camera_model = "PINHOLE";
-  } else if (camera.lens_model == "LENSMODEL_OPENCV4") {
-    summary.camera_model = "OPENCV";
-    for (int i = 4; i < 8; ++i) params.push_back(k[i]);
-  } else if (camera.lens_model == "LENSMODEL_OPENCV5" || camera.lens_model == "LENSMODEL_OPENCV8") {
-    summary.camera_model = "FULL_OPENCV";
-    for (int i = 4; i < 12; ++i) params.push_back(i < n_intrinsics ? k[i] : 0.0);
-  } else {
-    summary.camera_model = "PINHOLE";
-    summary.undistorted = true;
-  }
-  cam << "1 " << summary.camera_model << " " << camera.width_px << " " << camera.height_px;
-  for (double p : params) cam << " " << Num(p);
-  cam << "\n";
-
-  // Used observations grouped by track; tracks with two or more become points.
-  std::vector<std::vector<int>> track_obs(num_tracks);
-  for (size_t i = 0; i < observations.size(); ++i) {
-    if (observations[i].weight > 0.0)
-      track_obs[observations[i].track].push_back(static_cast<int>(i));
-  }
-  std::vector<int> point_id(num_tracks, -1);
-  int next_point = 1;
-  for (int tr = 0; tr < num_tracks; ++tr) {
-    if (track_obs[tr].size() >= 2) point_id[tr] = next_point++;
-  }
+  const std::string cameras_txt = CamerasTxt(camera, &summary);
+  const ColmapPoints points = PointsOf(observations, num_tracks);
 
   // Model pixels of every used observation (for ERROR), and the written 2-D
   // points (undistorted if the camera is written as PINHOLE for another model).
@@ -97,6 +189,7 @@ ColmapExportSummary WriteColmapModel(const std::filesystem::path& dir, const Cam
     throw InputError("colmap export", "the lens model cannot project the scene's points");
   Eigen::Matrix2Xd q_written = q_obs;
   if (summary.undistorted) {
+    const Eigen::VectorXd& k = camera.intrinsics;
     Eigen::Matrix3Xd v;
     if (!UnprojectPixels(camera, q_obs, &v))
       throw InputError("colmap export", "cannot undistort the observations");
@@ -104,63 +197,19 @@ ColmapExportSummary WriteColmapModel(const std::filesystem::path& dir, const Cam
       q_written.col(i) << k[0] * v(0, i) / v(2, i) + k[2], k[1] * v(1, i) / v(2, i) + k[3];
     }
   }
-
-  // images.txt: each tile's points2D are its used observations of points.
-  std::vector<std::vector<int>> tile_obs(num_tiles);
-  std::vector<int> point2d_index(observations.size(), -1);
-  for (int tr = 0; tr < num_tracks; ++tr) {
-    if (point_id[tr] < 0) continue;
-    for (int i : track_obs[tr]) {
-      point2d_index[i] = static_cast<int>(tile_obs[observations[i].tile].size());
-      tile_obs[observations[i].tile].push_back(i);
-    }
-  }
-  const Eigen::Quaterniond quat(r);
-  std::ostringstream img;
-  img << "# Image list with two lines of data per image:\n"
-      << "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n"
-      << "#   POINTS2D[] as (X, Y, POINT3D_ID)\n# Number of images: " << num_tiles << "\n";
-  for (int i = 0; i < num_tiles; ++i) {
-    const Eigen::Vector3d t =
-        r * Eigen::Vector3d(scene.table_pos_mm[i].x(), scene.table_pos_mm[i].y(), 0.0) +
-        scene.cam_from_part_t_mm;
-    img << i + 1 << " " << Num(quat.w()) << " " << Num(quat.x()) << " " << Num(quat.y()) << " "
-        << Num(quat.z()) << " " << Num(t.x()) << " " << Num(t.y()) << " " << Num(t.z()) << " 1 "
-        << image_names[i] << "\n";
-    for (size_t j = 0; j < tile_obs[i].size(); ++j) {
-      const int o = tile_obs[i][j];
-      img << (j ? " " : "") << Num(q_written(0, o) + kColmapPixelShift) << " "
-          << Num(q_written(1, o) + kColmapPixelShift) << " " << point_id[observations[o].track];
-    }
-    img << "\n";
-  }
-
-  std::ostringstream pts;
-  double error_sum = 0.0;
-  pts << "# 3D point list with one line of data per point:\n"
-      << "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n";
-  for (int tr = 0; tr < num_tracks; ++tr) {
-    if (point_id[tr] < 0) continue;
-    double error = 0.0;
-    for (int i : track_obs[tr]) error += (q_model.col(i) - q_obs.col(i)).norm();
-    error /= static_cast<double>(track_obs[tr].size());
-    error_sum += error;
-    pts << point_id[tr] << " " << Num(scene.track_xy_mm(0, tr)) << " "
-        << Num(scene.track_xy_mm(1, tr)) << " 0 128 128 128 " << Num(error);
-    for (int i : track_obs[tr]) pts << " " << observations[i].tile + 1 << " " << point2d_index[i];
-    pts << "\n";
-    summary.num_observations += static_cast<int>(track_obs[tr].size());
-  }
+  std::vector<int> point2d_index;
+  const std::string images_txt =
+      ImagesTxt(scene, r, image_names, observations, q_written, points, &point2d_index);
+  const std::string points3d_txt =
+      Points3DTxt(scene, observations, q_model, q_obs, points, point2d_index, &summary);
   summary.num_images = num_tiles;
-  summary.num_points = next_point - 1;
-  summary.mean_point_error_px = summary.num_points > 0 ? error_sum / summary.num_points : 0.0;
 
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) throw InputError(dir.string(), "cannot create the directory: " + ec.message());
-  WriteTextFileAtomically(dir / "cameras.txt", cam.str());
-  WriteTextFileAtomically(dir / "images.txt", img.str());
-  WriteTextFileAtomically(dir / "points3D.txt", pts.str());
+  WriteTextFileAtomically(dir / "cameras.txt", cameras_txt);
+  WriteTextFileAtomically(dir / "images.txt", images_txt);
+  WriteTextFileAtomically(dir / "points3D.txt", points3d_txt);
   char line[256];
   std::snprintf(
       line, sizeof(line),
