@@ -426,6 +426,84 @@ struct BuiltProblem {
 };
 
 // The problem with the intrinsics in the lens's blocks (split) or in one.
+// Each tile's table prior (none for input.tiles_without_table_prior, whose
+// positions the observations alone place); positions held where the config
+// does not refine them.
+void AddTablePriors(const PlaneBundleInput& input, const PlaneBundleConfig& config, Blocks* b,
+                    ceres::Problem* problem) {
+  for (size_t i = 0; i < input.commanded_table_pos_mm.size(); ++i) {
+    double* table_pos = b->table_pos[i].data();
+    if (std::binary_search(input.tiles_without_table_prior.begin(),
+                           input.tiles_without_table_prior.end(), static_cast<int>(i))) {
+      problem->AddParameterBlock(table_pos, 2);
+    } else {
+      problem->AddResidualBlock(
+          new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
+          table_pos);
+    }
+    if (!config.refine_table_positions) problem->SetParameterBlockConstant(table_pos);
+  }
+}
+
+// What the config holds of a problem with observations: the plane pose or
+// the gauge, the intrinsics (with their prior where refined, and the held
+// ones in each block: the number held in constant blocks is returned).
+int HoldAsConfigured(const ProblemInputs& in, const std::vector<int>& block_starts, Blocks* b,
+                     PlaneScene* scene, ceres::Problem* problem) {
+  const PlaneBundleConfig& config = in.config;
+  const PlaneBundleInput& input = in.input;
+  int held_in_constant_blocks = 0;
+  if (!config.refine_plane_pose) {
+    problem->SetParameterBlockConstant(b->r.data());
+    problem->SetParameterBlockConstant(b->t.data());
+  } else if (config.gauge == PlaneGauge::kOriginOnOpticalAxis) {
+    problem->SetManifold(b->t.data(), new ceres::SubsetManifold(3, {0, 1}));
+  }
+  if (config.refine_intrinsics) {
+    const size_t num_blocks = block_starts.size() - 1;
+    std::vector<double*> all_blocks;
+    for (size_t k = 0; k < num_blocks; ++k)
+      all_blocks.push_back(b->intrinsics.data() + block_starts[k]);
+    problem->AddResidualBlock(
+        new IntrinsicsPriorCost(in.calibrated_intrinsics, input.intrinsics_information,
+                                input.intrinsics_held, block_starts),
+        nullptr, all_blocks);
+    // The held intrinsics: each block's, in its own indices.
+    for (size_t k = 0; k < num_blocks; ++k) {
+      const int first = block_starts[k], size = block_starts[k + 1] - first;
+      std::vector<int> held;
+      for (int j : input.intrinsics_held)
+        if (j >= first && j < first + size) held.push_back(j - first);
+      if (static_cast<int>(held.size()) == size) {
+        problem->SetParameterBlockConstant(all_blocks[k]);
+        held_in_constant_blocks += size;
+      } else if (!held.empty()) {
+        problem->SetManifold(all_blocks[k], new ceres::SubsetManifold(size, held));
+      }
+    }
+  } else {
+    problem->SetParameterBlockConstant(b->intrinsics.data());
+  }
+  if (config.gauge == PlaneGauge::kFixedTrack) {
+    problem->SetParameterBlockConstant(b->point(scene, config.gauge_track));
+  }
+  return held_in_constant_blocks;
+}
+
+// A plate's height where the input gives it, and its scale unless refined,
+// held.
+void HoldPlateBlocks(const PlaneBundleInput& input, const PlaneBundleConfig& config, Blocks* b,
+                     ceres::Problem* problem) {
+  for (size_t g = 0; g < input.plates.size(); ++g) {
+    if (!problem->HasParameterBlock(b->plate_pose[g].data())) continue;
+    if (input.plates[g].height_mm.has_value()) {
+      b->plate_height[g] = *input.plates[g].height_mm;
+      problem->SetParameterBlockConstant(&b->plate_height[g]);
+    }
+    if (!config.refine_plate_scale) problem->SetParameterBlockConstant(&b->plate_scale[g]);
+  }
+}
+
 BuiltProblem BuildProblem(const ProblemInputs& in, bool split, Blocks* scene_blocks,
                           PlaneScene* scene) {
   const LensProjection& lens = in.lens;
@@ -453,9 +531,6 @@ BuiltProblem BuildProblem(const ProblemInputs& in, bool split, Blocks* scene_blo
     if (num_used[obs.track]++ == 0) first_used[obs.track] = static_cast<int>(n);
   }
   const double inv_sigma = 1.0 / input.observation_sigma_px;
-  const int num_tiles = static_cast<int>(input.commanded_table_pos_mm.size());
-  const int num_plates = static_cast<int>(input.plates.size());
-  const size_t num_blocks = block_starts.size() - 1;
   const Eigen::Matrix3d cam_from_part = RotationFromAngleAxis(Eigen::Vector3d(b.r.data()));
   const Eigen::Vector3d t(b.t.data());
   // An observation's intrinsics blocks, given its part-frame point.
@@ -509,59 +584,11 @@ BuiltProblem BuildProblem(const ProblemInputs& in, bool split, Blocks* scene_blo
                                                             obs.weight * inv_sigma, std::move(of)),
                               in.loss, parameters);
   }
-  for (int i = 0; i < num_tiles; ++i) {
-    if (std::binary_search(input.tiles_without_table_prior.begin(),
-                           input.tiles_without_table_prior.end(), i)) {
-      problem->AddParameterBlock(b.table_pos[i].data(), 2);
-    } else {
-      problem->AddResidualBlock(
-          new TablePriorCost(input.commanded_table_pos_mm[i], input.table_sigma_mm), nullptr,
-          b.table_pos[i].data());
-    }
-    if (!config.refine_table_positions) problem->SetParameterBlockConstant(b.table_pos[i].data());
-  }
+  AddTablePriors(input, config, &b, problem.get());
   if (in.has_observations) {
-    if (!config.refine_plane_pose) {
-      problem->SetParameterBlockConstant(b.r.data());
-      problem->SetParameterBlockConstant(b.t.data());
-    } else if (config.gauge == PlaneGauge::kOriginOnOpticalAxis) {
-      problem->SetManifold(b.t.data(), new ceres::SubsetManifold(3, {0, 1}));
-    }
-    if (config.refine_intrinsics) {
-      std::vector<double*> all_blocks;
-      for (size_t k = 0; k < num_blocks; ++k) all_blocks.push_back(intrinsics_block(k));
-      problem->AddResidualBlock(
-          new IntrinsicsPriorCost(in.calibrated_intrinsics, input.intrinsics_information,
-                                  input.intrinsics_held, block_starts),
-          nullptr, all_blocks);
-      // The held intrinsics: each block's, in its own indices.
-      for (size_t k = 0; k < num_blocks; ++k) {
-        const int first = block_starts[k], size = block_starts[k + 1] - first;
-        std::vector<int> held;
-        for (int j : input.intrinsics_held)
-          if (j >= first && j < first + size) held.push_back(j - first);
-        if (static_cast<int>(held.size()) == size) {
-          problem->SetParameterBlockConstant(intrinsics_block(k));
-          built.held_in_constant_blocks += size;
-        } else if (!held.empty()) {
-          problem->SetManifold(intrinsics_block(k), new ceres::SubsetManifold(size, held));
-        }
-      }
-    } else {
-      problem->SetParameterBlockConstant(b.intrinsics.data());
-    }
-    if (config.gauge == PlaneGauge::kFixedTrack) {
-      problem->SetParameterBlockConstant(b.point(scene, config.gauge_track));
-    }
+    built.held_in_constant_blocks = HoldAsConfigured(in, block_starts, &b, scene, problem.get());
   }
-  for (int g = 0; g < num_plates; ++g) {
-    if (!problem->HasParameterBlock(b.plate_pose[g].data())) continue;
-    if (input.plates[g].height_mm.has_value()) {
-      b.plate_height[g] = *input.plates[g].height_mm;
-      problem->SetParameterBlockConstant(&b.plate_height[g]);
-    }
-    if (!config.refine_plate_scale) problem->SetParameterBlockConstant(&b.plate_scale[g]);
-  }
+  HoldPlateBlocks(input, config, &b, problem.get());
   built.problem = std::move(problem);
   return built;
 }
