@@ -280,6 +280,81 @@ void LocateMarksOfACutPlate(const ImageF& tile, const BoardSpec& board, const Ca
 
 }  // namespace
 
+namespace {
+
+// Step 1: the whole plates in the tiles, searched at the scale the
+// registered scene gives a plate lying on the part (a chessboard is then
+// searched at one scale: where it is absent, as it mostly is, the whole image
+// took 0.35 s per tile), their marks numbered as in the first whole one.
+struct WholePlates {
+  std::vector<PlateObservation> observations;  // per tile
+  int num_reordered = 0;                       // tiles whose marks were renumbered
+};
+
+WholePlates DetectWholePlates(const std::vector<ImageF>& tiles, const BoardSpec& board,
+                              const CameraModel& camera, const PlaneScene& registered_scene,
+                              const PlateOnPartOptions& options) {
+  const int num_tiles = static_cast<int>(tiles.size());
+  PlateDetectionOptions detection = options.detection;
+  detection.expected_pitch_px = PlatePitchOnPartPx(board, camera, registered_scene);
+  WholePlates plates;
+  std::vector<PlateObservation>& whole = plates.observations;
+  whole.resize(num_tiles);
+  ParallelFor(num_tiles, options.num_threads, [&](int i) {
+    GrayImage image;
+    image.pixels = tiles[i];
+    whole[i] = DetectPlate(image, board, detection);
+  });
+  const auto first_whole =
+      std::find_if(whole.begin(), whole.end(), [](const PlateObservation& o) { return o.usable; });
+  for (int i = static_cast<int>(first_whole - whole.begin()) + 1; i < num_tiles; ++i) {
+    if (!whole[i].usable) continue;
+    const int reference = static_cast<int>(first_whole - whole.begin());
+    if (AlignMarkOrder(board, camera, registered_scene, reference, *first_whole, i, &whole[i]) != 0)
+      ++plates.num_reordered;
+  }
+  return plates;
+}
+
+// Step 4: the perspective bias of a tile's mark centres (those of sigma > 0)
+// taken out, with the plate's pose in that tile; the largest correction, px.
+double CorrectPerspectiveBias(const BoardSpec& board, const CameraModel& camera,
+                              const Eigen::Isometry3d& cam_from_plate,
+                              const Eigen::VectorXd& sigma_px, Eigen::Matrix2Xd* q_px) {
+  if ((sigma_px.array() <= 0).all()) return 0.0;
+  Eigen::Matrix2Xd delta;
+  if (!PerspectiveBiasCorrections(board, camera, cam_from_plate, &delta)) return 0.0;
+  double largest = 0.0;
+  for (Eigen::Index m = 0; m < sigma_px.size(); ++m) {
+    if (sigma_px(m) <= 0) continue;
+    q_px->col(m) += delta.col(m);
+    largest = std::max(largest, delta.col(m).norm());
+  }
+  return largest;
+}
+
+// The plate's height above the part: given, estimated where two tiles or
+// more see it, else unknown (taken as 0, and then the plate is no scale
+// reference).
+void SetPlateHeight(const std::optional<double>& given_mm, int num_seen, PlateOnPart* result) {
+  if (given_mm) {
+    result->marks.height_mm = *given_mm;
+    result->height_source = "given";
+  } else if (num_seen >= 2) {
+    result->marks.height_mm.reset();
+    result->height_source = "estimated (seen in " + std::to_string(num_seen) + " tiles)";
+  } else {
+    result->marks.height_mm = 0.0;
+    result->scale_reference = false;
+    result->height_source =
+        "unknown: seen in one tile only, where the plate's height and the scale are confounded; "
+        "taken as 0, the plate checks the table's scale but does not set it "
+        "(mosaic.plate_height_mm sets it)";
+  }
+}
+
+}  // namespace
+
 PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& board,
                             const CameraModel& camera, const PlaneBundleInput& registered_input,
                             const PlaneScene& registered_scene, const PlateOnPartOptions& options) {
@@ -297,24 +372,9 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
   // 1. Whole plates, at the scale the registered scene gives a plate lying
   // on the part (a chessboard is then searched at one scale: where it is
   // absent, as it mostly is, the whole image took 0.35 s per tile).
-  PlateDetectionOptions detection = options.detection;
-  detection.expected_pitch_px = PlatePitchOnPartPx(board, camera, registered_scene);
-  std::vector<PlateObservation> whole(num_tiles);
-  ParallelFor(num_tiles, options.num_threads, [&](int i) {
-    GrayImage image;
-    image.pixels = tiles[i];
-    whole[i] = DetectPlate(image, board, detection);
-  });
-  // One numbering of the marks in every tile: the first whole plate's.
-  int num_reordered = 0;
-  const auto first_whole =
-      std::find_if(whole.begin(), whole.end(), [](const PlateObservation& o) { return o.usable; });
-  for (int i = static_cast<int>(first_whole - whole.begin()) + 1; i < num_tiles; ++i) {
-    if (!whole[i].usable) continue;
-    const int reference = static_cast<int>(first_whole - whole.begin());
-    if (AlignMarkOrder(board, camera, registered_scene, reference, *first_whole, i, &whole[i]) != 0)
-      ++num_reordered;
-  }
+  const WholePlates whole_plates =
+      DetectWholePlates(tiles, board, camera, registered_scene, options);
+  const std::vector<PlateObservation>& whole = whole_plates.observations;
   const int num_marks = static_cast<int>(result.marks.mark_uv_mm.cols());
   // Per tile and mark: the located centre and its sigma (sigma 0: not seen).
   std::vector<Eigen::Matrix2Xd> q_px(num_tiles, Eigen::Matrix2Xd::Zero(2, num_marks));
@@ -370,18 +430,12 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
 
   // 4. Perspective bias of every centre, with the tile's plate pose.
   for (int i = 0; i < num_tiles; ++i) {
-    if ((sigma_px[i].array() <= 0).all()) continue;
-    Eigen::Matrix2Xd delta;
-    if (!PerspectiveBiasCorrections(
+    result.max_bias_correction_px = std::max(
+        result.max_bias_correction_px,
+        CorrectPerspectiveBias(
             board, camera,
             CamFromPlate(registered_scene, result.initial_pose, registered_scene.table_pos_mm[i]),
-            &delta))
-      continue;
-    for (int m = 0; m < num_marks; ++m) {
-      if (sigma_px[i](m) <= 0) continue;
-      q_px[i].col(m) += delta.col(m);
-      result.max_bias_correction_px = std::max(result.max_bias_correction_px, delta.col(m).norm());
-    }
+            sigma_px[i], &q_px[i]));
   }
 
   for (int i = 0; i < num_tiles; ++i) {
@@ -395,28 +449,16 @@ PlateOnPart FindPlateOnPart(const std::vector<ImageF>& tiles, const BoardSpec& b
   }
   const int num_seen = static_cast<int>(result.seen_in_tiles.size());
   result.scale_reference = true;
-  if (options.height_mm) {
-    result.marks.height_mm = *options.height_mm;
-    result.height_source = "given";
-  } else if (num_seen >= 2) {
-    result.marks.height_mm.reset();
-    result.height_source = "estimated (seen in " + std::to_string(num_seen) + " tiles)";
-  } else {
-    result.marks.height_mm = 0.0;
-    result.scale_reference = false;
-    result.height_source =
-        "unknown: seen in one tile only, where the plate's height and the scale are confounded; "
-        "taken as 0, the plate checks the table's scale but does not set it "
-        "(mosaic.plate_height_mm sets it)";
-  }
+  SetPlateHeight(options.height_mm, num_seen, &result);
   result.found = true;
   result.sigma_assumed = board.type == BoardType::kChessboard;
   std::ostringstream brief;
   brief << "plate on the part: whole in " << result.whole_in_tiles.size() << " tile(s), "
         << result.observations.size() << " marks in " << num_seen << " tile(s); height "
         << result.height_source;
-  if (num_reordered > 0)
-    brief << "; the marks renumbered in " << num_reordered << " tile(s) to match the first's";
+  if (whole_plates.num_reordered > 0)
+    brief << "; the marks renumbered in " << whole_plates.num_reordered
+          << " tile(s) to match the first's";
   result.brief = brief.str();
   result.seconds = SecondsSince(start);
   return result;
