@@ -590,6 +590,80 @@ double TableScaleSigmaPpm(const std::vector<Eigen::Vector2d>& commanded_table_po
   return std::sqrt(std::max(0.0, variance)) * 1e6;
 }
 
+namespace {
+
+// Misread marks of the plate (beyond plate_outlier_sigmas) dropped from
+// result->input and the scene solved again from `from`. Empty, or why the
+// plate is not used (most of its marks outliers).
+std::string DropPlateOutliers(const LensProjection& lens, const PlaneBundleConfig& config,
+                              const FinalAdjustmentOptions& options, PlaneScene from,
+                              FinalAdjustment* result) {
+  const double sigma = result->input.observation_sigma_px;
+  const std::vector<PlateMarkObservation>& observations = result->input.plate_observations;
+  std::vector<PlateMarkObservation> kept;
+  int num_dropped = 0;
+  for (size_t n = 0; n < observations.size(); ++n) {
+    const PlateMarkObservation& obs = observations[n];
+    const Eigen::Vector2d res = result->scene.plate_residual_px.col(static_cast<Eigen::Index>(n));
+    if (res.allFinite() && res.norm() * obs.weight <= options.plate_outlier_sigmas * sigma) {
+      kept.push_back(obs);
+    } else {
+      ++num_dropped;
+    }
+  }
+  result->plate_outliers += num_dropped;
+  if (2 * kept.size() < observations.size()) {
+    return std::to_string(num_dropped) + " of " + std::to_string(observations.size()) +
+           " marks are outliers";
+  }
+  if (num_dropped > 0) {
+    result->input.plate_observations = kept;
+    result->scene = std::move(from);
+    result->summary = SolvePlaneBundle(lens, result->input, config, options.bundle, &result->scene);
+  }
+  return {};
+}
+
+// The plate corners' scatter about the solve in *result, px: inside the
+// calibration's measured region, over its degrees of freedom, 2 per mark
+// less the plate's free parameters (the scene's are shared with the tracks
+// and neglected). 0 where there are none.
+double CornerScatterPx(const FinalAdjustment& result, const PlateOnPart& plate,
+                       const PlaneBundleConfig& config,
+                       const Eigen::Matrix2Xd& measured_region_px) {
+  const int num_plate_parameters =
+      3 + (plate.marks.height_mm.has_value() ? 0 : 1) + (config.refine_plate_scale ? 1 : 0);
+  const InsideResiduals inside = ResidualsInsideRegion(
+      result.input.plate_observations, result.scene.plate_residual_px, measured_region_px);
+  const int dof = 2 * inside.count - num_plate_parameters;
+  return dof > 0 && std::isfinite(inside.sum_sq) ? std::sqrt(inside.sum_sq / dof) : 0.0;
+}
+
+// The plate's check on the table's scale, from a usable solve with its
+// covariance: the plate's own scale where it is free (a plate that only
+// checks), else its scale released to first order (it agrees with a second
+// solve to 1e-4 ppm on the demos). Not ok without a plate.
+PlateScaleCheck ScaleCheckOf(const LensProjection& lens, const FinalAdjustment& result,
+                             bool plate_found, bool scale_free, const PlaneBundleOptions& bundle,
+                             int plate_index) {
+  PlateScaleCheck check;
+  if (scale_free) {
+    const int s = plate_index + 4;
+    check.ok = true;
+    check.scale_minus_1_ppm = (result.scene.plates[0].scale - 1) * 1e6;
+    check.sigma_ppm = std::sqrt(std::max(0.0, result.scene.covariance(s, s))) * 1e6;
+  } else if (plate_found) {
+    const PlateScaleRelease release =
+        ReleasePlateScale(lens, result.input, bundle, result.scene, 0);
+    check.ok = release.ok;
+    check.scale_minus_1_ppm = release.scale_minus_1 * 1e6;
+    check.sigma_ppm = release.sigma * 1e6;
+  }
+  return check;
+}
+
+}  // namespace
+
 FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
                                         const PlaneBundleInput& registered_input,
                                         const PlaneScene& registered_scene,
@@ -631,58 +705,24 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.scene = initial;
   result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
 
-  // Misread marks: dropped, the scene solved again from `from`. Empty, or
-  // why the plate is not used (most of its marks outliers).
-  const auto drop_plate_outliers = [&](PlaneScene from) -> std::string {
-    const double sigma = result.input.observation_sigma_px;
-    std::vector<PlateMarkObservation> kept;
-    int num_dropped = 0;
-    for (size_t n = 0; n < result.input.plate_observations.size(); ++n) {
-      const PlateMarkObservation& obs = result.input.plate_observations[n];
-      const Eigen::Vector2d res = result.scene.plate_residual_px.col(static_cast<Eigen::Index>(n));
-      if (res.allFinite() && res.norm() * obs.weight <= options.plate_outlier_sigmas * sigma) {
-        kept.push_back(obs);
-      } else {
-        ++num_dropped;
-      }
-    }
-    result.plate_outliers += num_dropped;
-    if (2 * kept.size() < result.input.plate_observations.size()) {
-      return std::to_string(num_dropped) + " of " +
-             std::to_string(result.input.plate_observations.size()) + " marks are outliers";
-    }
-    if (num_dropped > 0) {
-      result.input.plate_observations = kept;
-      result.scene = std::move(from);
-      result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
-    }
-    return {};
-  };
   std::string why_not_used;
-  if (plate.found && result.summary.usable) why_not_used = drop_plate_outliers(initial);
+  if (plate.found && result.summary.usable)
+    why_not_used = DropPlateOutliers(lens, config, options, initial, &result);
   if (plate.found && plate.sigma_assumed && why_not_used.empty() && result.summary.usable) {
     // The corners weighed by their scatter about this solve, solved again
     // from it, and screened again at that sigma. With the detector's assumed
     // 0.1 px, rendered corners that scatter by ~0.02 px counted 1/25 of what
     // they are worth, and the plate's scale was stated ~28 ppm where its
     // errors spread by ~14 (14 demo projects with a chessboard on the part).
-    const int num_plate_parameters =
-        3 + (plate.marks.height_mm.has_value() ? 0 : 1) + (config.refine_plate_scale ? 1 : 0);
-    // Their scatter inside the measured region over its degrees of freedom,
-    // 2 per mark less the plate's free parameters (the scene's are shared
-    // with the tracks and neglected).
-    const InsideResiduals inside = ResidualsInsideRegion(
-        result.input.plate_observations, result.scene.plate_residual_px, prior.measured_region_px);
-    const int dof = 2 * inside.count - num_plate_parameters;
-    const double scatter_px =
-        dof > 0 && std::isfinite(inside.sum_sq) ? std::sqrt(inside.sum_sq / dof) : 0.0;
+    const double scatter_px = CornerScatterPx(result, plate, config, prior.measured_region_px);
     if (scatter_px > 0) {
       result.corner_sigma_px = std::max(scatter_px, options.min_corner_sigma_px);
       WeighPlateMarks(prior.measured_region_px, options.extrapolation_px_per_px,
                       result.input.observation_sigma_px, result.corner_sigma_px,
                       &result.input.plate_observations);
       result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
-      if (result.summary.usable) why_not_used = drop_plate_outliers(result.scene);
+      if (result.summary.usable)
+        why_not_used = DropPlateOutliers(lens, config, options, result.scene, &result);
     }
   }
   if (options.rescale_observation_sigma && why_not_used.empty() && result.summary.usable &&
@@ -715,19 +755,9 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   result.scale_sigma_ppm =
       TableScaleSigmaPpm(registered_input.commanded_table_pos_mm, result.scene.covariance);
 
-  const int s = plate_index + 4;
-  if (config.refine_plate_scale && result.summary.usable && result.summary.covariance_ok) {
-    result.scale_check.ok = true;
-    result.scale_check.scale_minus_1_ppm = (result.scene.plates[0].scale - 1) * 1e6;
-    result.scale_check.sigma_ppm = std::sqrt(std::max(0.0, result.scene.covariance(s, s))) * 1e6;
-  } else if (plate.found && result.summary.usable && result.summary.covariance_ok) {
-    // The plate sets the scale: the check is its scale released, to first
-    // order (it agrees with a second solve to 1e-4 ppm on the demos).
-    const PlateScaleRelease release =
-        ReleasePlateScale(lens, result.input, options.bundle, result.scene, 0);
-    result.scale_check.ok = release.ok;
-    result.scale_check.scale_minus_1_ppm = release.scale_minus_1 * 1e6;
-    result.scale_check.sigma_ppm = release.sigma * 1e6;
+  if (result.summary.usable && result.summary.covariance_ok) {
+    result.scale_check = ScaleCheckOf(lens, result, plate.found, config.refine_plate_scale,
+                                      options.bundle, plate_index);
   }
   result.seconds = SecondsSince(start);
   return result;
