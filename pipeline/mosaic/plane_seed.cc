@@ -204,6 +204,56 @@ double SceneRms(const CameraModel& camera, const PlaneBundleInput& input, const 
   return count > 0 ? std::sqrt(sum_sq / count) : 0.0;
 }
 
+// Pairs of observations of one track in two tiles: their rays (columns of
+// `rays`, in the observations' order) and the commanded table move between
+// the tiles.
+std::vector<Pair> TrackPairs(const PlaneBundleInput& input, const Eigen::Matrix3Xd& rays) {
+  std::vector<std::vector<int>> obs_of_track(input.num_tracks);
+  for (size_t n = 0; n < input.observations.size(); ++n) {
+    if (input.observations[n].weight > 0.0)
+      obs_of_track[input.observations[n].track].push_back(static_cast<int>(n));
+  }
+  std::vector<Pair> pairs;
+  for (const std::vector<int>& obs : obs_of_track) {
+    for (size_t a = 0; a < obs.size(); ++a) {
+      for (size_t b = a + 1; b < obs.size(); ++b) {
+        const int i = input.observations[obs[a]].tile, j = input.observations[obs[b]].tile;
+        if (i == j) continue;
+        pairs.push_back({rays.col(obs[a]), rays.col(obs[b]),
+                         input.commanded_table_pos_mm[j] - input.commanded_table_pos_mm[i]});
+      }
+    }
+  }
+  return pairs;
+}
+
+// The rotation and translation taking the points `from` onto `to` in the
+// least-squares sense (2-D: the rotation's angle from the centred points'
+// summed cross and dot products). Two points or more.
+struct RigidMotion2d {
+  double angle_rad = 0.0;
+  Eigen::Vector2d translation = Eigen::Vector2d::Zero();
+};
+
+RigidMotion2d RigidFit2d(const std::vector<Eigen::Vector2d>& from,
+                         const std::vector<Eigen::Vector2d>& to) {
+  Eigen::Vector2d mean_from = Eigen::Vector2d::Zero(), mean_to = Eigen::Vector2d::Zero();
+  for (size_t k = 0; k < to.size(); ++k) {
+    mean_from += from[k] / to.size();
+    mean_to += to[k] / to.size();
+  }
+  double sin_sum = 0.0, cos_sum = 0.0;
+  for (size_t k = 0; k < to.size(); ++k) {
+    const Eigen::Vector2d w = from[k] - mean_from, p = to[k] - mean_to;
+    cos_sum += w.dot(p);
+    sin_sum += w.x() * p.y() - w.y() * p.x();
+  }
+  RigidMotion2d fit;
+  fit.angle_rad = std::atan2(sin_sum, cos_sum);
+  fit.translation = mean_to - Eigen::Rotation2Dd(fit.angle_rad) * mean_from;
+  return fit;
+}
+
 }  // namespace
 
 PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInput& input,
@@ -223,25 +273,7 @@ PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInpu
     return summary;
   }
 
-  // Pairs of observations of one track in two tiles.
-  std::vector<std::vector<int>> obs_of_track(input.num_tracks);
-  for (size_t n = 0; n < num_track_obs; ++n) {
-    if (input.observations[n].weight > 0.0) obs_of_track[input.observations[n].track].push_back(n);
-  }
-  std::vector<Pair> pairs;
-  auto add_pairs = [&](const std::vector<int>& obs, auto tile_of) {
-    for (size_t a = 0; a < obs.size(); ++a) {
-      for (size_t b = a + 1; b < obs.size(); ++b) {
-        const int i = tile_of(obs[a]), j = tile_of(obs[b]);
-        if (i == j) continue;
-        pairs.push_back({rays.col(obs[a]), rays.col(obs[b]),
-                         input.commanded_table_pos_mm[j] - input.commanded_table_pos_mm[i]});
-      }
-    }
-  };
-  for (const std::vector<int>& obs : obs_of_track) {
-    add_pairs(obs, [&](int n) { return input.observations[n].tile; });
-  }
+  std::vector<Pair> pairs = TrackPairs(input, rays);
   // A tile taken twice at one place: its pairs say nothing of K, and their
   // tiny residuals would lower the outlier threshold.
   const size_t num_all_pairs = pairs.size();
@@ -322,21 +354,10 @@ PlaneSeedSummary SeedPlaneScene(const CameraModel& camera, const PlaneBundleInpu
     PlatePose& pose = scene->plates[g];
     pose.height_mm = height;
     if (part.size() < 2) continue;  // unobserved: the plate's blocks stay out of the solve
-    Eigen::Vector2d mean_w = Eigen::Vector2d::Zero(), mean_p = Eigen::Vector2d::Zero();
-    for (size_t k = 0; k < part.size(); ++k) {
-      mean_w += mirrored[k] / part.size();
-      mean_p += part[k] / part.size();
-    }
-    double sin_sum = 0.0, cos_sum = 0.0;
-    for (size_t k = 0; k < part.size(); ++k) {
-      const Eigen::Vector2d w = mirrored[k] - mean_w, p = part[k] - mean_p;
-      cos_sum += w.dot(p);
-      sin_sum += w.x() * p.y() - w.y() * p.x();
-    }
-    pose.theta_rad = std::atan2(sin_sum, cos_sum);
-    const Eigen::Vector2d origin = mean_p - Eigen::Rotation2Dd(pose.theta_rad) * mean_w;
-    pose.x_mm = origin.x();
-    pose.y_mm = origin.y();
+    const RigidMotion2d part_from_mirrored = RigidFit2d(mirrored, part);
+    pose.theta_rad = part_from_mirrored.angle_rad;
+    pose.x_mm = part_from_mirrored.translation.x();
+    pose.y_mm = part_from_mirrored.translation.y();
   }
 
   summary.rms_px = SceneRms(camera, input, *scene);
