@@ -168,6 +168,61 @@ Eigen::Vector2d PairShiftPx(const PreparedTiles& prepared, const PairRegistratio
                                             prepared.commanded_table_pos_mm[pair.tile_a]);
 }
 
+// The pairs for the image motion: each tile with its nearest neighbour, and
+// with the nearest one in a direction more than 45 deg from that (lower
+// index first, each pair once). Tiles at one position are not neighbours.
+std::vector<std::pair<int, int>> NeighbourPairs(const std::vector<Eigen::Vector2d>& table_mm) {
+  const int num_tiles = static_cast<int>(table_mm.size());
+  std::vector<std::pair<int, int>> pairs;
+  for (int i = 0; i < num_tiles; ++i) {
+    int first = -1, second = -1;
+    for (int j = 0; j < num_tiles; ++j) {
+      if (j == i) continue;
+      const double d = (table_mm[j] - table_mm[i]).norm();
+      if (d <= 0) continue;
+      if (first < 0 || d < (table_mm[first] - table_mm[i]).norm()) first = j;
+    }
+    if (first < 0) continue;
+    const Eigen::Vector2d u = (table_mm[first] - table_mm[i]).normalized();
+    for (int j = 0; j < num_tiles; ++j) {
+      const Eigen::Vector2d d = table_mm[j] - table_mm[i];
+      if (j == i || d.norm() <= 0 || std::abs(u.dot(d.normalized())) > std::sqrt(0.5)) continue;
+      if (second < 0 || d.norm() < (table_mm[second] - table_mm[i]).norm()) second = j;
+    }
+    for (int j : {first, second}) {
+      if (j >= 0) pairs.emplace_back(std::min(i, j), std::max(i, j));
+    }
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  return pairs;
+}
+
+// Step 3's pairs: every two tiles whose images the motion `px_per_mm`
+// predicts to overlap by min_overlap_fraction of a width x height image or
+// more (diagonals too), with that fraction.
+std::vector<PairRegistration> PairsPredictedToOverlap(const Eigen::Matrix2d& px_per_mm,
+                                                      const std::vector<Eigen::Vector2d>& table_mm,
+                                                      int width, int height,
+                                                      double min_overlap_fraction) {
+  std::vector<PairRegistration> pairs;
+  const int num_tiles = static_cast<int>(table_mm.size());
+  for (int i = 0; i < num_tiles; ++i) {
+    for (int j = i + 1; j < num_tiles; ++j) {
+      const Eigen::Vector2d d = px_per_mm * (table_mm[j] - table_mm[i]);
+      const double overlap = std::max(0.0, width - std::abs(d.x())) *
+                             std::max(0.0, height - std::abs(d.y())) / (double(width) * height);
+      if (overlap < min_overlap_fraction) continue;
+      PairRegistration pair;
+      pair.tile_a = i;
+      pair.tile_b = j;
+      pair.predicted_overlap = overlap;
+      pairs.push_back(pair);
+    }
+  }
+  return pairs;
+}
+
 }  // namespace
 
 PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
@@ -224,33 +279,7 @@ PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
 
   // 2. Image motion per table mm from nearest-neighbour pairs.
   t0 = Clock::now();
-  std::vector<std::pair<int, int>> neighbour_pairs;
-  for (int i = 0; i < num_tiles; ++i) {
-    // The nearest tile, and the nearest one in a direction > 45 deg from it.
-    int first = -1, second = -1;
-    for (int j = 0; j < num_tiles; ++j) {
-      if (j == i) continue;
-      const double d = (commanded_table_pos_mm[j] - commanded_table_pos_mm[i]).norm();
-      if (d <= 0) continue;
-      if (first < 0 || d < (commanded_table_pos_mm[first] - commanded_table_pos_mm[i]).norm())
-        first = j;
-    }
-    if (first < 0) continue;
-    const Eigen::Vector2d u =
-        (commanded_table_pos_mm[first] - commanded_table_pos_mm[i]).normalized();
-    for (int j = 0; j < num_tiles; ++j) {
-      const Eigen::Vector2d d = commanded_table_pos_mm[j] - commanded_table_pos_mm[i];
-      if (j == i || d.norm() <= 0 || std::abs(u.dot(d.normalized())) > std::sqrt(0.5)) continue;
-      if (second < 0 || d.norm() < (commanded_table_pos_mm[second] - commanded_table_pos_mm[i]).norm())
-        second = j;
-    }
-    for (int j : {first, second}) {
-      if (j >= 0) neighbour_pairs.emplace_back(std::min(i, j), std::max(i, j));
-    }
-  }
-  std::sort(neighbour_pairs.begin(), neighbour_pairs.end());
-  neighbour_pairs.erase(std::unique(neighbour_pairs.begin(), neighbour_pairs.end()),
-                        neighbour_pairs.end());
+  const std::vector<std::pair<int, int>> neighbour_pairs = NeighbourPairs(commanded_table_pos_mm);
   ImageMotionOptions motion_options = options.motion;
   motion_options.num_threads = options.num_threads;
   prepared.motion =
@@ -259,24 +288,11 @@ PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
     prepared.matching_seconds = SecondsSince(t0);
     return prepared;
   }
-  const Eigen::Matrix2d& a_px_per_mm = prepared.motion.px_per_table_mm;
 
   // 3. Pairs predicted to overlap, and the Harris corners that can anchor
   // their matches.
-  for (int i = 0; i < num_tiles; ++i) {
-    for (int j = i + 1; j < num_tiles; ++j) {
-      const Eigen::Vector2d d =
-          a_px_per_mm * (commanded_table_pos_mm[j] - commanded_table_pos_mm[i]);
-      const double overlap = std::max(0.0, width - std::abs(d.x())) *
-                             std::max(0.0, height - std::abs(d.y())) / (double(width) * height);
-      if (overlap < options.min_overlap_fraction) continue;
-      PairRegistration pair;
-      pair.tile_a = i;
-      pair.tile_b = j;
-      pair.predicted_overlap = overlap;
-      prepared.pairs.push_back(pair);
-    }
-  }
+  prepared.pairs = PairsPredictedToOverlap(prepared.motion.px_per_table_mm, commanded_table_pos_mm,
+                                           width, height, options.min_overlap_fraction);
   const int candidate_margin = CandidateMarginPx(options);
   std::vector<std::vector<Eigen::AlignedBox2i>> harris_regions(num_tiles);
   for (const PairRegistration& pair : prepared.pairs) {
