@@ -393,6 +393,7 @@ std::string CalibrationSection(const Report& report, const ReportHtmlInputs& inp
   }
   return out;
 }
+
 // Where the table scatters significantly less than table.sigma_mm (below
 // the chi-square's 0.1 % quantile): said, not acted on. The sigmas keep the
 // stated sigma, which may hold what the scatter cannot show (a scale error

@@ -199,9 +199,12 @@ struct Linearisation {
   std::vector<Sample> samples;
 };
 
-Linearisation Linearise(const SmoothedOverlap& overlap, const GainBasis& basis,
-                        const Parameters& theta) {
-  Linearisation lin;
+void Linearise(const SmoothedOverlap& overlap, const GainBasis& basis, const Parameters& theta,
+               Linearisation* lin_out) {
+  Linearisation& lin = *lin_out;  // its buffers kept between iterations
+  lin.used.clear();
+  lin.residuals.clear();
+  lin.samples.clear();
   const Eigen::Vector2d shift = theta.head<2>();
   for (const Eigen::Vector2i& p : overlap.pixels) {
     double value;
@@ -217,7 +220,6 @@ Linearisation Linearise(const SmoothedOverlap& overlap, const GainBasis& basis,
     lin.samples.push_back({static_cast<float>(value), static_cast<float>(grad.x()),
                            static_cast<float>(grad.y()), static_cast<float>(gain)});
   }
-  return lin;
 }
 
 // J' W J and J' W r, W the Huber weights at `threshold`, by blocks of rows
@@ -322,7 +324,7 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   };
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     result.num_iterations = iteration + 1;
-    lin = Linearise(overlap, basis, theta);
+    Linearise(overlap, basis, theta, &lin);
     result.num_pixels = static_cast<int>(lin.residuals.size());
     if (result.num_pixels < options.min_pixels) {
       result.why = "too few pixels seen by both";
