@@ -12,6 +12,12 @@ namespace omm {
 // Row-major so that (row, col) addressing matches image files; rows = height.
 using ImageF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
+// Mosaics and their patches (orthorectify.h, ortho_patch.h) mark the pixels
+// no tile sees as 0 (project-format.md). A seen pixel is at least this, the
+// 16-bit mosaic file's first level: black ones (a through-hole over a black
+// table, a camera whose black level clips) stay seen, also when read back.
+inline constexpr float kDarkestCovered = 1.0f / 65535.0f;
+
 struct GrayImage {
   // Intensities scaled to [0, 1] of the file's full scale (255 or 65535).
   ImageF pixels;

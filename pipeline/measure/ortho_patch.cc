@@ -68,7 +68,7 @@ OrthoPatch RenderTilePatch(const OrthoGeometry& geometry, int tile, const ImageF
       if (!seen[i]) continue;
       const double v = SampleCubic(interpolator, sampled, q[i] - shift) /
                        exposure.Factor(geometry.vignetting.Rho2(q[i]));
-      patch.pixels(r, c) = static_cast<float>(std::clamp(v, 0.0, 1.0));
+      patch.pixels(r, c) = std::clamp(static_cast<float>(v), kDarkestCovered, 1.0f);
     }
   }
   return patch;

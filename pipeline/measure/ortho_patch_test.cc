@@ -22,18 +22,28 @@ std::vector<ImageF> RandomTiles(const CameraModel& camera, int num_tiles) {
   return tiles;
 }
 
+// The synthetic plane's 3 x 3 tiles on a mosaic grid of `gsd_mm`.
+struct PlaneMosaic {
+  SyntheticPlane plane = MakeSyntheticPlane(SyntheticPlaneOptions{});
+  OrthoOptions options;
+  OrthoGeometry geometry;
+  explicit PlaneMosaic(double gsd_mm) {
+    PlaneScene scene = plane.truth;
+    scene.intrinsics = plane.camera.intrinsics;
+    options.gsd_mm = gsd_mm;
+    geometry = ComputeOrthoGeometry(plane.camera, scene, options);
+  }
+};
+
 // A window over a corner tile's outer corner, where it meets the grid's
 // pixels no tile sees and, inwards, the tiles beside it: the patch is what the mosaic of
 // that tile alone holds there, and what the 9-tile mosaic holds where no
 // other tile sees. Float rounding only (values ~0.5: ulp 6e-8).
 TEST(OrthoPatch, IsTheMosaicOfThatTileAlone) {
-  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
-  PlaneScene scene = s.truth;
-  scene.intrinsics = s.camera.intrinsics;
-  OrthoOptions options;
-  options.gsd_mm = 0.25;
-  const OrthoGeometry geometry = ComputeOrthoGeometry(s.camera, scene, options);
-  const std::vector<ImageF> tiles = RandomTiles(s.camera, 9);
+  const PlaneMosaic m(0.25);
+  const OrthoGeometry& geometry = m.geometry;
+  const OrthoOptions& options = m.options;
+  const std::vector<ImageF> tiles = RandomTiles(m.plane.camera, 9);
   std::vector<TileExposure> exposure(9);
   for (int i = 0; i < 9; ++i) exposure[i] = {0.8 + 0.02 * i, 0.05 + 0.01 * i};
   const ImageF mosaic = ResampleMosaic(geometry, tiles, exposure, options);
@@ -87,6 +97,39 @@ TEST(OrthoPatch, IsTheMosaicOfThatTileAlone) {
   EXPECT_GT(num_seen, 10000);
   EXPECT_GT(num_unseen, 10000);
   EXPECT_GT(num_only, 1000);
+}
+
+// Black pixels that a tile sees (a through-hole over a black table, a clipped
+// black level) are not the 0 of pixels no tile sees: in the mosaic and in a
+// tile's patch they are kDarkestCovered, exactly where gray tiles draw.
+TEST(OrthoPatch, BlackPixelsATileSeesAreNotUnseen) {
+  const PlaneMosaic m(0.5);
+  const OrthoGeometry& geometry = m.geometry;
+  const OrthoOptions& options = m.options;
+  const CameraModel& camera = m.plane.camera;
+  const std::vector<TileExposure> exposure(9, TileExposure{0.8, 0.1});
+  const ImageF black_tile = ImageF::Zero(camera.height_px, camera.width_px);
+  const ImageF gray_tile = ImageF::Constant(camera.height_px, camera.width_px, 0.5f);
+  const ImageF black =
+      ResampleMosaic(geometry, std::vector<ImageF>(9, black_tile), exposure, options);
+  const ImageF gray =
+      ResampleMosaic(geometry, std::vector<ImageF>(9, gray_tile), exposure, options);
+  ASSERT_EQ(black.size(), gray.size());
+  const auto seen = (gray.array() > 0.0f).count();
+  EXPECT_GT(seen, black.size() / 2);
+  EXPECT_LT(seen, black.size());  // the grid's corners are unseen
+  EXPECT_EQ(((gray.array() > 0.0f) == (black.array() == kDarkestCovered)).count(), black.size());
+
+  const Eigen::Vector2i min_px(0, 0);
+  const OrthoPatch black_patch = RenderTilePatch(
+      geometry, 0, black_tile, exposure[0], options.interpolator, min_px, geometry.grid.size_px);
+  const OrthoPatch gray_patch = RenderTilePatch(
+      geometry, 0, gray_tile, exposure[0], options.interpolator, min_px, geometry.grid.size_px);
+  const ImageF& b = black_patch.pixels;
+  const ImageF& g = gray_patch.pixels;
+  ASSERT_EQ(b.size(), g.size());
+  EXPECT_GT((g.array() > 0.0f).count(), b.size() / 20);
+  EXPECT_EQ(((g.array() > 0.0f) == (b.array() == kDarkestCovered)).count(), b.size());
 }
 
 }  // namespace

@@ -441,7 +441,7 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
         }
         ++covered[block];
         if (v < 0.0 || v > 1.0) ++clipped[block];
-        out[col] = static_cast<float>(std::clamp(v, 0.0, 1.0));
+        out[col] = std::clamp(static_cast<float>(v), kDarkestCovered, 1.0f);
       }
     }
   });

@@ -27,7 +27,8 @@
 // from the seams the mosaic is one tile's pixels, not an average of two
 // slightly different blurs. Before blending, each tile's intensity is divided
 // by its exposure (exposure_compensation.h: gain and vignetting estimated from
-// the overlaps). Pixels no tile sees are 0; values are clamped to [0, 1].
+// the overlaps). Pixels no tile sees are 0 (project-format.md); the others
+// are clamped to [kDarkestCovered, 1].
 //
 // Features kept whole. The part's top surface is the same picture in every
 // tile, but a through-hole's bore wall is not: each tile sees it from its own

@@ -28,7 +28,8 @@ using Square = Eigen::Matrix<double, kNumParameters, kNumParameters>;
 
 // 1 where a pixel is seen and not clipped, else 0.
 ImageF ValidPixels(const ImageF& image, double max_value) {
-  return image.unaryExpr([max_value](float v) { return v > 0.0f && v < max_value ? 1.0f : 0.0f; });
+  return image.unaryExpr(
+      [max_value](float v) { return v > kDarkestCovered && v < max_value ? 1.0f : 0.0f; });
 }
 
 double HuberWeight(double r, double threshold) {

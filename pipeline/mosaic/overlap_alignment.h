@@ -80,8 +80,8 @@ struct OverlapAlignmentOptions {
   double shift_tolerance_px = 1e-4;
   // Huber's threshold in units of the residuals' robust sigma (1.4826 MAD).
   double huber_sigmas = 2.0;
-  // A valid pixel is within (0, max_value) in both patches (0: not seen;
-  // max_value: clipped).
+  // A valid pixel is within (kDarkestCovered, max_value) in both patches
+  // (0: not seen; kDarkestCovered: black, clipped; max_value: clipped).
   double max_value = 0.98;
   // Fewer valid pixels than this: not usable.
   int min_pixels = 2000;

@@ -1,0 +1,158 @@
+// `omm run` on cameras whose images are not the simulator's linear ones.
+//
+// Gamma (GenICam's Gamma: pixel = linear^gamma): every edge's mid-level
+// crossing assumes linear intensities. Rendered projects whose images are
+// gamma-encoded read every hole small (the crossing moves towards the dark
+// side: seed 281's diameters were 0.07-0.08 raw px small at gamma 0.8, 9-17
+// of their sigmas), while centres, which move symmetrically, stay. With
+// camera.gamma the images are linearized when read and the diameters come
+// out as from a linear camera.
+//
+// Black level: a camera whose black level is set above the dark scene clips
+// it to 0, and the mosaic marks the pixels no tile sees as 0. The holes'
+// openings over a black table were then taken for unseen pixels, and every
+// hole was "cut by the mosaic border".
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+
+#include "adapters/opencv/image_io.h"
+#include "adapters/png/png_codec.h"
+#include "adapters/project_io/project_reader.h"
+#include "adapters/project_io/report_json.h"
+#include "pipeline/orchestration/run_project.h"
+#include "tests/sim_cache.h"
+#include "tests/test_util.h"
+
+namespace fs = std::filesystem;
+
+namespace omm {
+namespace {
+
+constexpr double kGamma = 0.8;
+
+// Every image of calib/ and tiles/ (8-bit: the rendered files') with each
+// sample x replaced by encode(x).
+template <typename Encode>
+void Reencode(const fs::path& project_dir, Encode encode) {
+  for (const char* folder : {"calib", "tiles"}) {
+    for (const fs::directory_entry& entry : fs::directory_iterator(project_dir / folder)) {
+      StoredImage image = ReadStoredImage(entry.path());
+      ASSERT_EQ(image.bit_depth, 8) << entry.path();
+      for (std::uint8_t& sample : image.samples) sample = encode(sample);
+      testing::WriteTextFile(entry.path(), EncodeGrayPng(image));
+    }
+  }
+}
+
+// As a camera of kGamma would have stored them.
+void EncodeWithGamma(const fs::path& project_dir) {
+  Reencode(project_dir, [](std::uint8_t x) {
+    return static_cast<std::uint8_t>(std::lround(255.0 * std::pow(x / 255.0, kGamma)));
+  });
+}
+
+// Each found hole's diameter error against the truth, raw px.
+std::vector<double> DiameterErrorsRawPx(const fs::path& project_dir, const SimulationTruth& truth) {
+  const Report report = ReadReportJson(project_dir / "out" / "report.json");
+  std::vector<double> errors;
+  if (!report.features) return errors;
+  for (const FeatureReport& f : *report.features) {
+    for (const HoleTruth& hole : truth.holes) {
+      if (hole.name != f.name || !f.diameter_mm) continue;
+      errors.push_back((*f.diameter_mm - hole.diameter_mm) / testing::RawPxMm(truth));
+    }
+  }
+  return errors;
+}
+
+double Mean(const std::vector<double>& v) {
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size())).mean();
+}
+
+TEST(CameraGamma, LinearizedImagesMeasureDiametersAsALinearCamera) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 104, 14);
+  testing::TempDir dir;
+  const fs::path given = dir.path() / "given", ignored = dir.path() / "ignored";
+  for (const fs::path& project_dir : {given, ignored}) {
+    testing::CopyProject(sim.project_dir, project_dir);
+    EncodeWithGamma(project_dir);
+  }
+  testing::ReplaceInFile(given / "project.yaml", "camera:\n", "camera:\n  gamma: 0.8\n");
+  ASSERT_DOUBLE_EQ(LoadProject(given).camera.gamma, kGamma);
+  RunProject(LoadProject(given), RunOptions{});
+  RunProject(LoadProject(ignored), RunOptions{});
+  const std::vector<double> with = DiameterErrorsRawPx(given, sim.truth);
+  const std::vector<double> without = DiameterErrorsRawPx(ignored, sim.truth);
+  ASSERT_EQ(with.size(), sim.truth.holes.size());
+  ASSERT_EQ(without.size(), sim.truth.holes.size());
+  for (size_t i = 0; i < with.size(); ++i)
+    std::printf("hole %zu: diameter %+.4f raw px linearized, %+.4f not\n", i, with[i], without[i]);
+  // Issue 5's bound for the demo preset, each; together unbiased to the
+  // scatter of a linear camera's (0.01-0.02 raw px on demo seeds).
+  for (double e : with) EXPECT_LT(std::abs(e), 0.05);
+  EXPECT_LT(std::abs(Mean(with)), 0.02);
+  // Not linearized, every hole reads small.
+  EXPECT_LT(Mean(without), -0.04);
+}
+
+// The rendered table (0.04 of white) is at 8-10 of 255 in the demo's
+// images; a black level 12 above the simulator's clips it, in the holes'
+// openings and beyond the part, to 0. The walls and the surface stay above
+// it, so the rims' mid-level crossings are where a linear camera has them.
+constexpr int kBlackLevel = 12;
+
+TEST(CameraBlackLevel, HolesOverABlackTableAreMeasured) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 104, 14);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "black";
+  testing::CopyProject(sim.project_dir, project_dir);
+  Reencode(project_dir,
+           [](std::uint8_t x) { return static_cast<std::uint8_t>(std::max(x - kBlackLevel, 0)); });
+  // The premise: a good share of each tile is black.
+  for (const fs::directory_entry& entry : fs::directory_iterator(project_dir / "tiles")) {
+    const StoredImage tile = ReadStoredImage(entry.path());
+    const auto black = std::count(tile.samples.begin(), tile.samples.end(), 0);
+    EXPECT_GT(black, tile.samples.size() / 50) << entry.path();
+  }
+
+  RunProject(LoadProject(project_dir), RunOptions{});
+  const Report run = ReadReportJson(project_dir / "out" / "report.json");
+  ASSERT_TRUE(run.features && run.measurements);
+  for (const FeatureReport& f : *run.features)
+    EXPECT_TRUE(f.centre_mm) << f.name << ": " << f.error;
+  // Each within 3 of its sigmas of the truth. (Issue 5's 0.05 raw px does
+  // not hold here for the linear camera either: its dia_hole_14 is 0.050
+  // off, with a sigma of 0.026.)
+  for (const MeasurementReport& m : *run.measurements) {
+    ASSERT_TRUE(m.value_mm && m.sigma_mm) << m.name << ": " << m.error;
+    for (const MeasurementTruth& t : sim.truth.measurements) {
+      if (t.name != m.name) continue;
+      const double error_mm = *m.value_mm - t.value_mm;
+      std::printf("%s %+.4f raw px, %+.2f sigma\n", m.name.c_str(),
+                  error_mm / testing::RawPxMm(sim.truth), error_mm / *m.sigma_mm);
+      EXPECT_LT(std::abs(error_mm), 3.0 * *m.sigma_mm) << m.name;
+    }
+  }
+
+  // `omm measure` alone reads the 16-bit mosaic.png back: black stays seen.
+  RunOptions measure_alone;
+  measure_alone.stages = {Stage::kMeasure};
+  RunProject(LoadProject(project_dir), measure_alone);
+  const Report again = ReadReportJson(project_dir / "out" / "report.json");
+  ASSERT_TRUE(again.measurements);
+  ASSERT_EQ(again.measurements->size(), run.measurements->size());
+  for (size_t i = 0; i < run.measurements->size(); ++i) {
+    EXPECT_EQ((*again.measurements)[i].value_mm, (*run.measurements)[i].value_mm)
+        << (*run.measurements)[i].name;
+  }
+}
+
+}  // namespace
+}  // namespace omm
