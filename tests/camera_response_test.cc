@@ -8,6 +8,9 @@
 // camera.gamma the images are linearized when read and the diameters come
 // out as from a linear camera.
 //
+// Saturation: where the surface beside a rim clips at full scale, the rim
+// step's mid-level crossing moves; such rims are left out or refused.
+//
 // Black level: a camera whose black level is set above the dark scene clips
 // it to 0, and the mosaic marks the pixels no tile sees as 0. The holes'
 // openings over a black table were then taken for unseen pixels, and every
@@ -151,6 +154,32 @@ TEST(CameraBlackLevel, HolesOverABlackTableAreMeasured) {
   for (size_t i = 0; i < run.measurements->size(); ++i) {
     EXPECT_EQ((*again.measurements)[i].value_mm, (*run.measurements)[i].value_mm)
         << (*run.measurements)[i].name;
+  }
+}
+
+// An overexposed capture: the demo's tiles at 2.2 times their exposure
+// clip half their pixels, the surface beside every rim among them. Each
+// hole is refused as saturated in the tile that sees it, where fitting the
+// mosaic (which does not mark clipped pixels) read diameters 0.37 raw px off
+// on seed 281.
+TEST(CameraSaturation, HolesWhoseRimsAreClippedAreRefused) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 104, 14);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "overexposed";
+  testing::CopyProject(sim.project_dir, project_dir);
+  for (const fs::directory_entry& entry : fs::directory_iterator(project_dir / "tiles")) {
+    StoredImage image = ReadStoredImage(entry.path());
+    for (std::uint8_t& sample : image.samples)
+      sample = static_cast<std::uint8_t>(std::min(std::lround(2.2 * sample), 255L));
+    testing::WriteTextFile(entry.path(), EncodeGrayPng(image));
+  }
+  RunProject(LoadProject(project_dir), RunOptions{});
+  const Report report = ReadReportJson(project_dir / "out" / "report.json");
+  ASSERT_TRUE(report.features);
+  ASSERT_EQ(report.features->size(), sim.truth.holes.size());
+  for (const FeatureReport& f : *report.features) {
+    EXPECT_FALSE(f.centre_mm) << f.name;
+    EXPECT_EQ(f.error.rfind("rim saturated", 0), 0u) << f.name << ": " << f.error;
   }
 }
 

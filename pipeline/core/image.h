@@ -18,6 +18,9 @@ using ImageF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMa
 // table, a camera whose black level clips) stay seen, also when read back.
 inline constexpr float kDarkestCovered = 1.0f / 65535.0f;
 
+// A mask over an image's pixels (1: set), row-major like ImageF.
+using ImageMask = Eigen::Matrix<std::uint8_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
 struct GrayImage {
   // Intensities scaled to [0, 1] of the file's full scale (255 or 65535).
   ImageF pixels;

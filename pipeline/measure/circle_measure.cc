@@ -347,6 +347,7 @@ StepFit FitStep(const std::vector<double>& d, const std::vector<double>& v, doub
 struct WedgeEdge {
   double angle = 0.0;      // of the wedge's centre ray, rad
   bool uncovered = false;  // touches uncovered or off-image pixels
+  bool saturated = false;  // its rim step reads saturated pixels: left out
   bool ok = false;         // a clean rim step
   bool inner_ok = false;   // ... and a resolved bottom-rim step inside it
   bool narrow = false;     // the predicted wall is visible but too narrow to resolve
@@ -369,9 +370,14 @@ double BottomRimOffset(const Circle& circle, const Circle& bottom, const Eigen::
 }
 
 // A wedge's pixels in the annulus: radial distance d from the circle, px,
-// and value.
+// and value; the saturated ones' d apart.
 struct WedgePixels {
   std::vector<double> d, v;
+  std::vector<double> saturated_d;
+  bool SaturatedWithin(double lo, double hi) const {
+    return std::any_of(saturated_d.begin(), saturated_d.end(),
+                       [lo, hi](double x) { return x >= lo && x <= hi; });
+  }
 };
 
 // A step fit's samples: a wedge's pixels with d in [lo, hi].
@@ -390,11 +396,11 @@ struct StepSamples {
 };
 
 // The annulus d_lo <= d <= d_hi about `circle`, pixel by pixel into its
-// wedges. A wedge with an uncovered pixel outside radius `rcover` is marked
-// uncovered.
-std::vector<WedgePixels> GatherWedgePixels(const ImageF& image, const Circle& circle, double d_lo,
-                                           double d_hi, double rcover,
-                                           std::vector<WedgeEdge>* wedges) {
+// wedges; the `saturated` ones (if given) apart. A wedge with an uncovered
+// pixel outside radius `rcover` is marked uncovered.
+std::vector<WedgePixels> GatherWedgePixels(const ImageF& image, const ImageMask* saturated,
+                                           const Circle& circle, double d_lo, double d_hi,
+                                           double rcover, std::vector<WedgeEdge>* wedges) {
   const int num = static_cast<int>(wedges->size());
   std::vector<WedgePixels> pixels(static_cast<size_t>(num));
   const double rmax = circle.radius + d_hi, rmin = std::max(0.0, circle.radius + d_lo);
@@ -415,6 +421,10 @@ std::vector<WedgePixels> GatherWedgePixels(const ImageF& image, const Circle& ci
       const auto k = static_cast<size_t>(std::min(num - 1, static_cast<int>(t / (2 * kPi) * num)));
       if (!Covered(image, row, col)) {
         if (rho >= rcover) (*wedges)[k].uncovered = true;
+        continue;
+      }
+      if (saturated != nullptr && (*saturated)(row, col)) {
+        pixels[k].saturated_d.push_back(rho - circle.radius);
         continue;
       }
       pixels[k].d.push_back(rho - circle.radius);
@@ -552,9 +562,10 @@ void FitRimAndBottomRim(const WedgePixels& pixels, const RayProfile& profile, in
 // With kFixed, wedges whose wall is visible but narrower than `narrow_px`
 // are marked narrow (none if 0); given `narrow_wall_level` (BorePrior), they
 // are fitted with the wall tied to the rim at that level (kTied).
-EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, double sigma,
-                   Inner inner, const std::optional<Circle>& bottom, double narrow_px,
-                   std::optional<double> narrow_wall_level, const CircleMeasureOptions& options) {
+EdgePass FindEdges(const ImageF& image, const ImageMask* saturated, const Circle& circle,
+                   double band, double sigma, Inner inner, const std::optional<Circle>& bottom,
+                   double narrow_px, std::optional<double> narrow_wall_level,
+                   const CircleMeasureOptions& options) {
   const double hw = options.profile_half_width_px;
   const int num =
       std::max(options.min_wedges,
@@ -568,7 +579,7 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
   const double d_lo = -band - (inner == Inner::kFree ? reach : hw + 1.0), d_hi = band + hw + 1.0;
   const double rcover = circle.radius - band - hw - 1.0;  // uncovered pixels matter outside this
   const std::vector<WedgePixels> pixels =
-      GatherWedgePixels(image, circle, d_lo, d_hi, rcover, &pass.wedges);
+      GatherWedgePixels(image, saturated, circle, d_lo, d_hi, rcover, &pass.wedges);
   RayProfile profile(d_lo, d_hi);
   StepSamples samples;
   for (int k = 0; k < num; ++k) {
@@ -583,6 +594,10 @@ EdgePass FindEdges(const ImageF& image, const Circle& circle, double band, doubl
     const int peak = RimPeak(profile, -band, band);
     if (peak < 0) continue;
     const WedgePixels& wedge_pixels = pixels[static_cast<size_t>(k)];
+    if (wedge_pixels.SaturatedWithin(profile.Offset(peak) - hw, profile.Offset(peak) + hw)) {
+      wedge.saturated = true;
+      continue;
+    }
     if (inner == Inner::kFree) {
       FitRimAndBottomRim(wedge_pixels, profile, peak, band, reach, sigma, options, &samples,
                          &wedge);
@@ -810,7 +825,8 @@ struct BottomRim {
 
 // Wedges that could give a rim edge: all but the narrow-wall ones left out.
 int UsableWedges(const CircleMeasurement& result) {
-  return result.num_wedges - (result.narrow_wall_skipped ? result.num_narrow_wall : 0);
+  return result.num_wedges - (result.narrow_wall_skipped ? result.num_narrow_wall : 0) -
+         result.num_saturated;
 }
 
 // A pass's wedges: those whose rim edge the circle fit takes, and those that
@@ -825,6 +841,7 @@ WedgeSelection SelectWedges(const EdgePass& pass, CircleMeasurement* result) {
   const int num = static_cast<int>(pass.wedges.size());
   result->num_wedges = num;
   result->num_uncovered = 0;
+  result->num_saturated = 0;
   result->num_narrow_wall = 0;
   for (const WedgeEdge& w : pass.wedges) result->num_narrow_wall += w.narrow ? 1 : 0;
   // Left out while the rest spans half the rim or more; else the fit
@@ -835,6 +852,7 @@ WedgeSelection SelectWedges(const EdgePass& pass, CircleMeasurement* result) {
   for (int k = 0; k < num; ++k) {
     const WedgeEdge& w = pass.wedges[static_cast<size_t>(k)];
     if (w.uncovered) ++result->num_uncovered;
+    if (w.saturated) ++result->num_saturated;
     if (w.ok && !(w.narrow && result->narrow_wall_skipped)) selection.rim.push_back(k);
     if (w.inner_ok) selection.bottom_rim.push_back(k);
   }
@@ -848,6 +866,13 @@ std::string PassError(const CircleMeasurement& result, const CircleMeasureOption
     char text[128];
     std::snprintf(text, sizeof(text), "cut by the mosaic border (%.0f%% of the rim not covered)",
                   100.0 * result.num_uncovered / result.num_wedges);
+    return text;
+  }
+  if (result.num_saturated > options.max_saturated_fraction * result.num_wedges) {
+    char text[128];
+    std::snprintf(text, sizeof(text),
+                  "rim saturated (%.0f%% of it next to pixels at full scale: lower the exposure)",
+                  100.0 * result.num_saturated / result.num_wedges);
     return text;
   }
   const int usable = UsableWedges(result);
@@ -985,14 +1010,16 @@ std::string FitError(const CircleMeasurement& result, double nominal_radius_px,
 // unit of level): the covariance term of (cx, cy, r) by central
 // differences, refitting at the level +- its sigma; zero where a refit
 // fails or uses no prior.
-Eigen::Matrix3d WallLevelCovariance(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
+Eigen::Matrix3d WallLevelCovariance(const ImageF& image, const ImageMask* saturated,
+                                    const Eigen::Vector2d& expected_centre_px,
                                     double nominal_radius_px, const CircleMeasureOptions& options,
                                     const Eigen::Vector2d& nadir_px, const BorePrior& prior) {
   const auto refit = [&](double sign) {
     BorePrior shifted = prior;
     shifted.wall_contrast += sign * prior.wall_contrast_sigma;
     shifted.wall_contrast_sigma = 0.0;
-    return MeasureCircle(image, expected_centre_px, nominal_radius_px, options, nadir_px, shifted);
+    return MeasureCircle(image, expected_centre_px, nominal_radius_px, options, nadir_px, shifted,
+                         saturated);
   };
   const CircleMeasurement plus = refit(1.0), minus = refit(-1.0);
   if (!(plus.ok && minus.ok && plus.bore_prior_used && minus.bore_prior_used)) {
@@ -1021,6 +1048,9 @@ std::string CircleMeasureOptions::Check() const {
   if (!(max_uncovered_fraction >= 0.0 && max_uncovered_fraction < 1.0)) {
     why << "max_uncovered_fraction must be in [0, 1); ";
   }
+  if (!(max_saturated_fraction >= 0.0 && max_saturated_fraction < 1.0)) {
+    why << "max_saturated_fraction must be in [0, 1); ";
+  }
   if (!(min_found_fraction > 0.0 && min_found_fraction <= min_inlier_fraction &&
         min_inlier_fraction <= 1.0)) {
     why << "need 0 < min_found_fraction <= min_inlier_fraction <= 1; ";
@@ -1045,13 +1075,15 @@ std::string CircleMeasurement::Brief() const {
                 centre_px.x(), centre_px.y(), radius_px, std::sqrt(covariance_px2(0, 0)),
                 std::sqrt(covariance_px2(1, 1)), std::sqrt(covariance_px2(2, 2)), num_edge_points,
                 num_wedges, num_inliers, rms_px, edge_sigma_px, correlation_px);
-  return line;
+  if (num_saturated == 0) return line;
+  return std::string(line) + "; " + std::to_string(num_saturated) +
+         " wedges next to saturated pixels left out";
 }
 
 CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
                                 double nominal_radius_px, const CircleMeasureOptions& options,
                                 const std::optional<Eigen::Vector2d>& nadir_px,
-                                const std::optional<BorePrior>& prior) {
+                                const std::optional<BorePrior>& prior, const ImageMask* saturated) {
   assert(options.Check().empty() && nominal_radius_px > 0.0);
   CircleMeasurement result;
   const double search =
@@ -1071,7 +1103,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
                         : p == 1         ? Inner::kFree
                         : bottom.Known() ? Inner::kFixed
                                          : Inner::kRamp;
-    pass = FindEdges(image, circle, band, sigma, inner, bottom.Below(circle, nadir_px),
+    pass = FindEdges(image, saturated, circle, band, sigma, inner, bottom.Below(circle, nadir_px),
                      bottom.scale ? options.min_wall_blurs * sigma : 0.0,
                      result.bore_prior_used ? std::optional(prior->wall_contrast) : std::nullopt,
                      options);
@@ -1113,8 +1145,8 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
       spectrum.samples_per_independent * 2 * kPi * circle.radius / result.num_wedges;
   result.ok = true;
   if (result.bore_prior_used && prior->wall_contrast_sigma > 0.0) {
-    result.covariance_px2 += WallLevelCovariance(image, expected_centre_px, nominal_radius_px,
-                                                 options, *nadir_px, *prior);
+    result.covariance_px2 += WallLevelCovariance(image, saturated, expected_centre_px,
+                                                 nominal_radius_px, options, *nadir_px, *prior);
   }
   return result;
 }

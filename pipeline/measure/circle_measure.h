@@ -121,7 +121,10 @@
 // col) is the value at (x = col, y = row). Pixels equal to 0 are "no tile
 // sees this": a wedge whose rim band touches one (or leaves the image) is
 // uncovered, and too many uncovered wedges make the hole "cut by the mosaic
-// border".
+// border". A wedge whose rim step would read saturated pixels (clipped at
+// the camera's full scale: a mask given beside the image) is left out: a
+// clipped bright side moves the step's mid-level crossing. Where more than
+// max_saturated_fraction of the rim is so, the hole is "rim saturated".
 #pragma once
 
 #include <optional>
@@ -144,6 +147,7 @@ struct CircleMeasureOptions {
   double max_profile_rms_ratio = 3.0;    // wedge dropped above this x the median wedge fit RMS
   double tukey_sigmas = 4.685;           // biweight cut-off, robust sigmas of the residuals
   double max_uncovered_fraction = 0.02;  // of the wedges touching uncovered (0) or off-image pixels
+  double max_saturated_fraction = 0.5;   // ... or whose rim step reads saturated ones
   double min_found_fraction = 0.3;       // inliers below this fraction of the wedges: not found
   double min_inlier_fraction = 0.6;      // ... below this: poor fit
   double max_radius_deviation = 0.05;    // |r / nominal - 1| above this: not the expected hole
@@ -168,6 +172,7 @@ struct CircleMeasurement {
   Eigen::Matrix3d covariance_px2 = Eigen::Matrix3d::Zero();
   int num_wedges = 0;                // wedges cast in the last pass
   int num_uncovered = 0;             // ... touching uncovered or off-image pixels
+  int num_saturated = 0;             // ... whose rim step reads saturated pixels, left out
   int num_edge_points = 0;           // ... giving a clean step
   int num_inliers = 0;               // edge points kept by the robust fit
   double rms_px = 0.0;               // RMS radial residual of the inliers
@@ -207,11 +212,15 @@ struct BorePrior {
 // more than half the rim (the Limits above): the later passes take the
 // bottom rim from its k and fit those narrow wedges with the wall tied to
 // the rim, x1 = x0 - w(a), at its level (no free wall contrast to trade
-// against x0). A data failure is a result with ok = false and `error` set.
-// Preconditions: options.Check() is empty, nominal_radius_px > 0.
+// against x0). `saturated`, if given, marks the image's pixels whose value
+// is clipped (the header's saturation). A data failure is a result with
+// ok = false and `error` set.
+// Preconditions: options.Check() is empty, nominal_radius_px > 0, saturated
+// (if given) of the image's size.
 CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expected_centre_px,
                                 double nominal_radius_px, const CircleMeasureOptions& options = {},
                                 const std::optional<Eigen::Vector2d>& nadir_px = std::nullopt,
-                                const std::optional<BorePrior>& prior = std::nullopt);
+                                const std::optional<BorePrior>& prior = std::nullopt,
+                                const ImageMask* saturated = nullptr);
 
 }  // namespace omm

@@ -20,6 +20,11 @@ double FitReachPx(const CircleMeasureOptions& options) {
   return options.rim_band_px + options.profile_half_width_px + 1.0;
 }
 
+// A fit that failed for its rim's saturated pixels (CircleMeasureOptions::max_saturated_fraction).
+bool RimSaturated(const CircleMeasurement& circle, const CircleMeasureOptions& options) {
+  return !circle.ok && circle.num_saturated > options.max_saturated_fraction * circle.num_wedges;
+}
+
 CircleMeasureOptions FitOptions(const HoleViewInputs& in) {
   CircleMeasureOptions options;
   options.source_px = in.source_px;
@@ -49,7 +54,7 @@ HoleFit FitInTile(const HoleViewInputs& in, int tile, const Eigen::Vector2d& exp
     return fit;
   }
   fit.circle = MeasureCircle(patch.pixels, expected_px - origin, radius_px, options, nadir_px,
-                             in.bore_prior);
+                             in.bore_prior, patch.saturated.size() ? &patch.saturated : nullptr);
   fit.circle.centre_px += origin;
   fit.circle.coarse_centre_px += origin;
   return fit;
@@ -107,9 +112,10 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
   std::optional<HoleFit> found;
   if (!first.empty()) {
     found = FitInTile(in, first[0], expected_px, radius_px, options, search_px);
+    if (RimSaturated(found->circle, options)) result.saturated_fit = *found;
     if (!found->circle.ok) found.reset();
   }
-  if (!found && in.mosaic != nullptr) {
+  if (!found && in.mosaic != nullptr && !result.saturated_fit) {
     result.mosaic_fit = FitHoleInMosaic(in, near_part_mm, radius_mm);
     if (result.mosaic_fit->circle.ok) found = *result.mosaic_fit;
   }
@@ -123,6 +129,7 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
     HoleFit fit = found->tile == t
                       ? std::move(*found)
                       : FitInTile(in, t, centre_px, radius_px, options, options.search_margin_px);
+    if (RimSaturated(fit.circle, options) && !result.saturated_fit) result.saturated_fit = fit;
     if (fit.circle.ok) result.fits.push_back(std::move(fit));
   }
   return result;

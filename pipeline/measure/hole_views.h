@@ -76,10 +76,14 @@ struct HoleViews {
   std::vector<HoleFit> fits;          // the tiles' fits that succeeded
   int num_seeing = 0;                 // tiles that see the hole whole
   std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole (and a mosaic is given)
+  // A tile's fit that failed as "rim saturated". The mosaic blends the same
+  // clipped pixels without marking them, so it is not fitted then.
+  std::optional<HoleFit> saturated_fit;
 };
 
 // The hole of nominal radius radius_mm near the part point near_part_mm,
-// fitted in every tile that sees it whole. Pure.
+// fitted in every tile that sees it whole (and in the mosaic where none
+// finds it, unless one found its rim saturated). Pure.
 HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
                        double radius_mm);
 

@@ -1,7 +1,10 @@
 // One tile alone, orthorectified on the mosaic's own grid over a window: what
 // ResampleMosaic (orthorectify.h) draws there when that tile is the only one,
 // with the same map (OrthoGeometry::TileRowPixels), the same support test
-// (border distance > 0), the same interpolator, exposure division and clamp.
+// (border distance > 0), the same interpolator, exposure division and clamp;
+// beside them, which pixels read a saturated tile sample (1, the file's full
+// scale) in their 4 x 4 interpolation support: their value is not the
+// scene's.
 // A hole that several tiles see whole is measured in each such patch: each is
 // an independent picture, with one bottom rim about that tile's nadir
 // (bore_view.h), where the mosaic blends two.
@@ -22,7 +25,8 @@ namespace omm {
 
 struct OrthoPatch {
   Eigen::Vector2i origin_px = Eigen::Vector2i::Zero();  // mosaic (col, row) of pixel (0, 0)
-  ImageF pixels;  // [0, 1]; 0 where the tile does not see (as in the mosaic)
+  ImageF pixels;        // [kDarkestCovered, 1]; 0 where the tile does not see (as in the mosaic)
+  ImageMask saturated;  // pixels' size, or empty where no pixel reads a saturated sample
 };
 
 // Tile `tile` (its image `tile_image`, gray [0, 1], and its exposure) over

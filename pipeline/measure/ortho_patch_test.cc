@@ -1,6 +1,8 @@
 #include "pipeline/measure/ortho_patch.h"
 
+#include <cmath>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -130,6 +132,42 @@ TEST(OrthoPatch, BlackPixelsATileSeesAreNotUnseen) {
   ASSERT_EQ(b.size(), g.size());
   EXPECT_GT((g.array() > 0.0f).count(), b.size() / 20);
   EXPECT_EQ(((g.array() > 0.0f) == (b.array() == kDarkestCovered)).count(), b.size());
+}
+
+// A patch marks the pixels whose 4 x 4 interpolation support reads a tile
+// sample at full scale (the camera clipped it), and only those.
+TEST(OrthoPatch, MarksThePixelsThatReadSaturatedSamples) {
+  const PlaneMosaic m(0.25);
+  const OrthoGeometry& geometry = m.geometry;
+  ImageF tile = RandomTiles(m.plane.camera, 1)[0];  // values below 0.95
+  const TileExposure exposure{0.9, 0.1};
+  const Eigen::Vector2i min_px(0, 0);
+  const OrthoPatch clean = RenderTilePatch(geometry, 0, tile, exposure, m.options.interpolator,
+                                           min_px, geometry.grid.size_px);
+  EXPECT_EQ(clean.saturated.size(), 0);
+  for (const auto& [x, y] : {std::pair{400, 300}, {401, 300}, {900, 750}}) tile(y, x) = 1.0f;
+  const OrthoPatch patch = RenderTilePatch(geometry, 0, tile, exposure, m.options.interpolator,
+                                           min_px, geometry.grid.size_px);
+  ASSERT_EQ(patch.saturated.rows(), patch.pixels.rows());
+  ASSERT_EQ(patch.saturated.cols(), patch.pixels.cols());
+  int marked = 0;
+  for (int row = 0; row < patch.pixels.rows(); ++row) {
+    for (int col = 0; col < patch.pixels.cols(); ++col) {
+      Eigen::Vector2d q;
+      bool reads = false;
+      if (patch.pixels(row, col) > 0.0f && geometry.TilePixel(0, col, row, &q)) {
+        const int x0 = static_cast<int>(std::floor(q.x())) - 1;
+        const int y0 = static_cast<int>(std::floor(q.y())) - 1;
+        for (const auto& [x, y] : {std::pair{400, 300}, {401, 300}, {900, 750}})
+          reads = reads || (x >= x0 && x <= x0 + 3 && y >= y0 && y <= y0 + 3);
+      }
+      ASSERT_EQ(patch.saturated(row, col) != 0, reads) << col << ", " << row;
+      marked += reads ? 1 : 0;
+    }
+  }
+  // Each sample reaches ~4 x 4 tile px: ~(4 x 0.146 / 0.25)^2 mosaic px.
+  EXPECT_GT(marked, 10);
+  EXPECT_LT(marked, 60);
 }
 
 }  // namespace

@@ -207,6 +207,12 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
 
   HoleViews views_found = FitHoleViews(in, *near_part, radius_mm);
   std::vector<HoleFit>& fits = views_found.fits;
+  if (fits.empty() && views_found.saturated_fit) {
+    const HoleFit& fit = *views_found.saturated_fit;
+    report.extra.emplace_back("fit", fit.circle.Brief());
+    report.error = fmt::format("{} in {}", fit.circle.error, saved.tile_images[*fit.tile]);
+    return located;
+  }
   if (fits.empty()) {
     HoleFit fit = views_found.mosaic_fit ? std::move(*views_found.mosaic_fit)
                                          : FitHoleInMosaic(in, *near_part, radius_mm);
