@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
 #include <iterator>
 #include <map>
@@ -662,6 +663,21 @@ void ListCalibImages(const fs::path& dir, Project& project) {
   }
 }
 
+// Project::sample_bits of these images.
+int SampleBits(const std::vector<LoadedImage>& loaded) {
+  std::uint16_t largest = 0;
+  for (const LoadedImage& file : loaded) {
+    const StoredImage& image = file.image;
+    if (image.bit_depth != 16) return 16;
+    const auto* samples = reinterpret_cast<const std::uint16_t*>(image.samples.data());
+    const std::size_t count = image.samples.size() / 2;
+    if (count > 0) largest = std::max(largest, *std::max_element(samples, samples + count));
+  }
+  for (const int bits : {10, 12, 14})
+    if (largest < (1 << bits)) return bits;
+  return 16;
+}
+
 // Every image read, hashed and decoded once, here: a corrupt file is found
 // now, not halfway through, and the stages take the decoded images from
 // memory. All must have one size.
@@ -693,6 +709,7 @@ void LoadImages(const fs::path& dir, int num_threads, Project& project) {
                       project.image_width_px, project.image_height_px));
     }
   }
+  project.sample_bits = SampleBits(loaded);
   auto images = std::make_shared<LoadedImages>();
   const auto calib_end = loaded.begin() + static_cast<std::ptrdiff_t>(project.calib_images.size());
   images->calib.assign(std::make_move_iterator(loaded.begin()), std::make_move_iterator(calib_end));

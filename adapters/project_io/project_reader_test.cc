@@ -1,5 +1,10 @@
 #include "adapters/project_io/project_reader.h"
 
+#include <cstdint>
+#include <cstring>
+#include <utility>
+#include <vector>
+
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -454,6 +459,39 @@ TEST_F(ProjectReaderTest, LoadedImagesAreThoseOfTheFiles) {
     EXPECT_EQ(loaded->image.samples, file.samples) << path;
     EXPECT_EQ(loaded->sha256, Sha256Hex(testing::ReadTextFile(path))) << path;
   }
+}
+
+// Every image a 16-bit file whose samples stay below 2^b: b-bit samples
+// (b = 10, 12, 14); 8-bit files, or any sample at 2^14 or above: 16.
+TEST_F(ProjectReaderTest, SampleBitsAreTheFewestThatHoldEverySample) {
+  EXPECT_EQ(LoadProject(project_.dir).sample_bits, 16);  // 8-bit files
+  std::vector<fs::path> images = project_.calib_images;
+  for (const TilePosition& tile : project_.tiles) images.push_back(project_.TilePath(tile.image));
+  const StoredImage last_eight_bit = ReadStoredImage(images.back());
+  const auto store_as_16_bit = [&](std::uint16_t largest) {
+    for (const fs::path& path : images) {
+      const StoredImage eight = ReadStoredImage(path);
+      std::vector<std::uint16_t> samples(eight.samples.begin(), eight.samples.end());
+      samples[0] = largest;
+      StoredImage sixteen{eight.width, eight.height, 16,
+                          std::vector<std::uint8_t>(2 * samples.size())};
+      std::memcpy(sixteen.samples.data(), samples.data(), sixteen.samples.size());
+      WriteStoredImage(path, sixteen);
+    }
+  };
+  for (const auto& [largest, bits] : {std::pair<std::uint16_t, int>{1023, 10},
+                                      {1024, 12},
+                                      {4095, 12},
+                                      {16383, 14},
+                                      {16384, 16},
+                                      {65535, 16}}) {
+    store_as_16_bit(largest);
+    EXPECT_EQ(LoadProject(project_.dir).sample_bits, bits) << largest;
+  }
+  // One 8-bit file among them: the 16-bit ones are taken at their full scale.
+  store_as_16_bit(4095);
+  WriteStoredImage(images.back(), last_eight_bit);
+  EXPECT_EQ(LoadProject(project_.dir).sample_bits, 16);
 }
 
 TEST_F(ProjectReaderTest, CalibrationOnlyProjectHasNoTiles) {

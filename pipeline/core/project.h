@@ -95,6 +95,12 @@ struct Project {
   // Size shared by all images (calib/ and tiles/), px.
   int image_width_px = 0;
   int image_height_px = 0;
+  // The bits the images' samples use. Cameras of 10, 12 or 14 bits often
+  // store them in 16-bit files unshifted: where every image is such a file
+  // and no sample exceeds 2^b - 1 for b in {10, 12, 14}, the smallest such b
+  // (2^b - 1 is then full scale); else 16. Those images read 16 to 64 times
+  // too dark, and plate detection found no plate.
+  int sample_bits = 16;
 
   // The images as loaded, shared by copies of the project (read only); null:
   // the stages read the files.

@@ -157,6 +157,12 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
   RunSummary summary;
   try {
     spdlog::info("hashing the inputs of {}", project.dir.string());
+    if (project.sample_bits < 16) {
+      spdlog::info(
+          "images: 16-bit files whose samples stay below 2^{}: read as {}-bit samples "
+          "(full scale {})",
+          project.sample_bits, project.sample_bits, (1 << project.sample_bits) - 1);
+    }
     Report report = StartingReport(project, HashProjectInputs(project));
     DropSectionsFrom(options.stages.front(), report);
     StageContext context{project,

@@ -26,6 +26,8 @@ std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stag
 GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
                            const std::filesystem::path& path) {
   GrayImage image = decoded ? ToGrayImage(*decoded) : ReadGrayImage(path);
+  if (image.bit_depth == 16 && project.sample_bits < 16)
+    image.pixels *= static_cast<float>(65535.0 / ((1 << project.sample_bits) - 1));
   LinearizeResponse(project.camera.gamma, &image.pixels);
   return image;
 }

@@ -99,7 +99,9 @@ struct StageContext {
 
 // A project image (calib/ or tiles/) as the stages see it: the one
 // LoadProject decoded (`decoded`; null if it kept none), else read from
-// `path`, linearized with the camera's gamma (LinearizeResponse).
+// `path`, scaled to the full scale of its samples' bits
+// (Project::sample_bits), linearized with the camera's gamma
+// (LinearizeResponse).
 GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
                            const std::filesystem::path& path);
 
