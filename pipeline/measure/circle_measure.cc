@@ -823,7 +823,8 @@ struct BottomRim {
   }
 };
 
-// Wedges that could give a rim edge: all but the narrow-wall ones left out.
+// Wedges that could give a rim edge: all but the narrow-wall ones left out
+// and those next to saturated pixels.
 int UsableWedges(const CircleMeasurement& result) {
   return result.num_wedges - (result.narrow_wall_skipped ? result.num_narrow_wall : 0) -
          result.num_saturated;

@@ -3,6 +3,8 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdint>
+#include <cstring>
 #include <future>
 #include <thread>
 
@@ -81,6 +83,21 @@ TEST_F(RunProjectTest, ProjectImagesAreLinearizedWithTheCameraGamma) {
   EXPECT_FLOAT_EQ(
       ProjectGrayImage(project_, &project_.images->calib.front().image, calib).pixels(0, 0),
       stored * stored);
+}
+
+// 12-bit samples in a 16-bit file are read over 4095: full scale is 1
+// exactly, as saturation is told.
+TEST_F(RunProjectTest, ProjectImagesAreScaledToTheirSamplesBits) {
+  StoredImage image{2, 1, 16, std::vector<std::uint8_t>(4)};
+  const std::uint16_t samples[2] = {4095, 2048};
+  std::memcpy(image.samples.data(), samples, sizeof(samples));
+  project_.sample_bits = 12;
+  const ImageF pixels = ProjectGrayImage(project_, &image, "twelve.png").pixels;
+  EXPECT_EQ(pixels(0, 0), 1.0f);
+  EXPECT_FLOAT_EQ(pixels(0, 1), 2048.0f / 4095.0f);
+  project_.sample_bits = 16;
+  EXPECT_FLOAT_EQ(ProjectGrayImage(project_, &image, "twelve.png").pixels(0, 0),
+                  4095.0f / 65535.0f);
 }
 
 TEST_F(RunProjectTest, FailedStageStopsTheRunAndLeavesNoOut) {

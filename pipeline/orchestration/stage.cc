@@ -26,8 +26,12 @@ std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stag
 GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
                            const std::filesystem::path& path) {
   GrayImage image = decoded ? ToGrayImage(*decoded) : ReadGrayImage(path);
-  if (image.bit_depth == 16 && project.sample_bits < 16)
-    image.pixels *= static_cast<float>(65535.0 / ((1 << project.sample_bits) - 1));
+  if (image.bit_depth == 16 && project.sample_bits < 16) {
+    // Back to the samples (exact in float), then over their full scale: a
+    // sample at it is 1 exactly, as saturation is told (ortho_patch.h).
+    const auto full_scale = static_cast<float>((1 << project.sample_bits) - 1);
+    image.pixels = (image.pixels.array() * 65535.0f).round() / full_scale;
+  }
   LinearizeResponse(project.camera.gamma, &image.pixels);
   return image;
 }
