@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <initializer_list>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -42,11 +43,12 @@ namespace {
 
 constexpr double kGamma = 0.8;
 
-// Every image of calib/ and tiles/ (8-bit: the rendered files') with each
-// sample x replaced by encode(x).
+// Every image of `folders` (8-bit: the rendered files') with each sample x
+// replaced by encode(x).
 template <typename Encode>
-void Reencode(const fs::path& project_dir, Encode encode) {
-  for (const char* folder : {"calib", "tiles"}) {
+void Reencode(const fs::path& project_dir, Encode encode,
+              std::initializer_list<const char*> folders = {"calib", "tiles"}) {
+  for (const char* folder : folders) {
     for (const fs::directory_entry& entry : fs::directory_iterator(project_dir / folder)) {
       StoredImage image = ReadStoredImage(entry.path());
       ASSERT_EQ(image.bit_depth, 8) << entry.path();
@@ -178,12 +180,11 @@ TEST(CameraSaturation, HolesWhoseRimsAreClippedAreRefused) {
   testing::TempDir dir;
   const fs::path project_dir = dir.path() / "overexposed";
   testing::CopyProject(sim.project_dir, project_dir);
-  for (const fs::directory_entry& entry : fs::directory_iterator(project_dir / "tiles")) {
-    StoredImage image = ReadStoredImage(entry.path());
-    for (std::uint8_t& sample : image.samples)
-      sample = static_cast<std::uint8_t>(std::min(std::lround(2.2 * sample), 255L));
-    testing::WriteTextFile(entry.path(), EncodeGrayPng(image));
-  }
+  Reencode(project_dir,
+           [](std::uint8_t x) {
+             return static_cast<std::uint8_t>(std::min(std::lround(2.2 * x), 255L));
+           },
+           {"tiles"});
   RunProject(LoadProject(project_dir), RunOptions{});
   const Report report = ReadReportJson(project_dir / "out" / "report.json");
   ASSERT_TRUE(report.features);
