@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -12,6 +13,7 @@
 #include <sstream>
 #include <tuple>
 
+#include "adapters/opencv/image_io.h"
 #include "adapters/process/process.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/timing.h"
@@ -126,6 +128,20 @@ std::string LastLine(const fs::path& path) {
   return lines.empty() ? "(no output)" : lines.back();
 }
 
+// A 16-bit image of `sample_bits`-bit samples as 8 bits over their full scale.
+StoredImage EightBitCopy(const StoredImage& image, int sample_bits) {
+  StoredImage copy{image.width, image.height, 8, {}};
+  const size_t num_samples = image.samples.size() / 2;
+  copy.samples.resize(num_samples);
+  const double scale = 255.0 / ((1 << sample_bits) - 1);
+  for (size_t i = 0; i < num_samples; ++i) {
+    std::uint16_t sample;
+    std::memcpy(&sample, image.samples.data() + 2 * i, 2);
+    copy.samples[i] = static_cast<std::uint8_t>(std::min(255.0, std::round(sample * scale)));
+  }
+  return copy;
+}
+
 }  // namespace
 
 std::string ColmapSiftOptions::Check() const {
@@ -135,6 +151,7 @@ std::string ColmapSiftOptions::Check() const {
   if (!(max_error_px > 0.0)) return "max_error_px must be > 0";
   if (min_num_inliers < 1) return "min_num_inliers must be >= 1";
   if (!(timeout_seconds > 0.0)) return "timeout_seconds must be > 0";
+  if (sample_bits < 8 || sample_bits > 16) return "sample_bits must be in [8, 16]";
   return "";
 }
 
@@ -252,7 +269,17 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
   fs::create_directory(image_dir);
   std::vector<std::string> names;
   for (size_t i = 0; i < tile_paths.size(); ++i) {
-    names.push_back("tile_" + std::to_string(i) + tile_paths[i].extension().string());
+    const std::string name = "tile_" + std::to_string(i);
+    if (options.sample_bits < 16) {
+      const StoredImage tile = ReadStoredImage(tile_paths[i]);
+      if (tile.bit_depth == 16) {
+        names.push_back(name + ".png");
+        WriteStoredImage(image_dir / names.back(), EightBitCopy(tile, options.sample_bits),
+                         /*png_deflate_level=*/0);
+        continue;
+      }
+    }
+    names.push_back(name + tile_paths[i].extension().string());
     fs::create_symlink(fs::absolute(tile_paths[i]), image_dir / names.back());
   }
 

@@ -20,6 +20,11 @@
 //   the pair's verified two-view model; pair_id = image_id1 * 2147483647 +
 //   image_id2 with image_id1 < image_id2.
 //
+// COLMAP reads a 16-bit sample as its high byte, which leaves samples of
+// fewer bits stored unshifted (a 12-bit camera's, at most 15 of 255) almost
+// black: no keypoints. With sample_bits < 16, 16-bit tiles are given to it as
+// 8-bit copies over their own full scale (2^sample_bits - 1) instead.
+//
 // Pixels: COLMAP puts (0, 0) at the corner of the top-left pixel, omm at its
 // centre (pipeline/README.md): every keypoint gets - 0.5 here.
 #pragma once
@@ -46,6 +51,8 @@ struct ColmapSiftOptions {
   // A pair with fewer verified inliers gets no matches (SiftMatching.min_num_inliers).
   int min_num_inliers = 15;
   double timeout_seconds = 600.0;  // per colmap command; killed after that, a failure
+  // The bits the tiles' samples use (Project::sample_bits), 8 to 16.
+  int sample_bits = 16;
   // Keep the temporary directory (database, colmap.log) and report its path.
   bool keep_work_dir = false;
 

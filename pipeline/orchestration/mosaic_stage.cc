@@ -717,6 +717,7 @@ std::vector<ColmapPairMatches> SiftMatches(const StageContext& context) {
     tile_paths.push_back(context.project.TilePath(tile.image));
   ColmapSiftOptions sift_options;
   sift_options.num_threads = context.num_threads;
+  sift_options.sample_bits = context.project.sample_bits;
   const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, sift_options);
   spdlog::info("mosaic: {}", sift.brief);
   if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
