@@ -192,6 +192,7 @@ TEST(CameraSaturation, HolesWhoseRimsAreClippedAreRefused) {
   for (const FeatureReport& f : *report.features) {
     EXPECT_FALSE(f.centre_mm) << f.name;
     EXPECT_EQ(f.error.rfind("rim saturated", 0), 0u) << f.name << ": " << f.error;
+    EXPECT_FALSE(Member(f.extra, "fit")) << f.name << ": a failed fit's brief is its error";
   }
 }
 

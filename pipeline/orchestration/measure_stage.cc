@@ -209,7 +209,6 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
   std::vector<HoleFit>& fits = views_found.fits;
   if (fits.empty() && views_found.saturated_fit) {
     const HoleFit& fit = *views_found.saturated_fit;
-    report.extra.emplace_back("fit", fit.circle.Brief());
     report.error = fmt::format("{} in {}", fit.circle.error, saved.tile_images[*fit.tile]);
     return located;
   }
@@ -217,8 +216,6 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
     HoleFit fit = views_found.mosaic_fit ? std::move(*views_found.mosaic_fit)
                                          : FitHoleInMosaic(in, *near_part, radius_mm);
     const int num_seeing = views_found.num_seeing;
-    report.extra.emplace_back("fit", fit.circle.Brief());
-    report.extra.emplace_back("bore", BoreNote(fit, saved));
     report.extra.emplace_back(
         "views", num_seeing == 0
                      ? std::string("measured in the mosaic: no tile sees the hole whole")
@@ -226,9 +223,11 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
                                    "that see it whole",
                                    num_seeing, num_seeing > 1 ? "s" : ""));
     if (!fit.circle.ok) {
-      report.error = fit.circle.error;
+      report.error = fit.circle.error;  // the failed fit's only brief
       return located;
     }
+    report.extra.emplace_back("fit", fit.circle.Brief());
+    report.extra.emplace_back("bore", BoreNote(fit, saved));
     fits.push_back(std::move(fit));
   }
   located.bore = BoreEvidenceOf(fits);
