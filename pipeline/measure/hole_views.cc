@@ -110,17 +110,25 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
   const std::vector<int> first = TilesSeeingDisc(in.lens, in.scene, near_part_mm,
                                                  radius_mm + reach_mm, width_px, height_px, 0.0);
   std::optional<HoleFit> found;
-  if (!first.empty()) {
-    found = FitInTile(in, first[0], expected_px, radius_px, options, search_px);
-    if (RimSaturated(found->circle, options)) result.saturated_fit = *found;
-    if (!found->circle.ok) found.reset();
+  for (const int t : first) {
+    HoleFit fit = FitInTile(in, t, expected_px, radius_px, options, search_px);
+    if (fit.circle.ok) {
+      found = std::move(fit);
+      break;
+    }
+    result.failed.push_back(std::move(fit));
   }
-  if (!found && in.mosaic != nullptr && !result.saturated_fit) {
+  if (!found && in.mosaic != nullptr && !result.SaturatedFit()) {
     result.mosaic_fit = FitHoleInMosaic(in, near_part_mm, radius_mm);
     if (result.mosaic_fit->circle.ok) found = *result.mosaic_fit;
   }
-  if (!found) return result;
-  // Centres agree to well within a pixel: a small search about it.
+  if (!found) {
+    result.num_seeing = static_cast<int>(first.size());
+    return result;
+  }
+  // Centres agree to well within a pixel: a small search about it, in every
+  // tile again (one that failed the wide search may find it there).
+  result.failed.clear();
   const Eigen::Vector2d centre_px = found->circle.centre_px;
   const double fitted_mm = found->circle.radius_px * grid.gsd_mm;
   for (const int t : TilesSeeingDisc(in.lens, in.scene, grid.PartFromMosaic(centre_px),
@@ -129,10 +137,15 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
     HoleFit fit = found->tile == t
                       ? std::move(*found)
                       : FitInTile(in, t, centre_px, radius_px, options, options.search_margin_px);
-    if (RimSaturated(fit.circle, options) && !result.saturated_fit) result.saturated_fit = fit;
-    if (fit.circle.ok) result.fits.push_back(std::move(fit));
+    (fit.circle.ok ? result.fits : result.failed).push_back(std::move(fit));
   }
   return result;
+}
+
+const HoleFit* HoleViews::SaturatedFit() const {
+  for (const HoleFit& fit : failed)
+    if (RimSaturated(fit.circle, CircleMeasureOptions{})) return &fit;
+  return nullptr;
 }
 
 std::optional<OrthoGeometry> MeasurementGeometry(const CameraModel& camera,

@@ -74,16 +74,20 @@ struct HoleFit {
 
 struct HoleViews {
   std::vector<HoleFit> fits;          // the tiles' fits that succeeded
+  std::vector<HoleFit> failed;        // the tiles' fits that failed, each with its error
   int num_seeing = 0;                 // tiles that see the hole whole
   std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole (and a mosaic is given)
-  // A tile's fit that failed as "rim saturated". The mosaic blends the same
-  // clipped pixels without marking them, so it is not fitted then.
-  std::optional<HoleFit> saturated_fit;
+  // The first of `failed` that failed as "rim saturated", if any. The mosaic
+  // blends the same clipped pixels without marking them, so it is not fitted
+  // then.
+  const HoleFit* SaturatedFit() const;
 };
 
-// The hole of nominal radius radius_mm near the part point near_part_mm,
-// fitted in every tile that sees it whole (and in the mosaic where none
-// finds it, unless one found its rim saturated). Pure.
+// The hole of nominal radius radius_mm near the part point near_part_mm:
+// looked for in the tiles that see it whole, one after another, until one
+// finds it (or in the mosaic where none does, unless one found its rim
+// saturated: a tile exposed brighter than the others may clip it alone);
+// then fitted about that centre in every tile that sees it whole. Pure.
 HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
                        double radius_mm);
 

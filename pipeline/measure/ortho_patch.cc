@@ -82,7 +82,7 @@ OrthoPatch RenderTilePatch(const OrthoGeometry& geometry, int tile, const ImageF
       if (any_saturated && ReadsSaturated(crop, q[i] - shift)) patch.saturated(r, c) = 1;
       const double v = SampleCubic(interpolator, sampled, q[i] - shift) /
                        exposure.Factor(geometry.vignetting.Rho2(q[i]));
-      patch.pixels(r, c) = std::clamp(static_cast<float>(v), kDarkestCovered, 1.0f);
+      patch.pixels(r, c) = std::max(static_cast<float>(v), kDarkestCovered);
     }
   }
   return patch;

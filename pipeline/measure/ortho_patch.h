@@ -1,10 +1,17 @@
 // One tile alone, orthorectified on the mosaic's own grid over a window: what
 // ResampleMosaic (orthorectify.h) draws there when that tile is the only one,
 // with the same map (OrthoGeometry::TileRowPixels), the same support test
-// (border distance > 0), the same interpolator, exposure division and clamp;
-// beside them, which pixels read a saturated tile sample (1, the file's full
-// scale) in their 4 x 4 interpolation support: their value is not the
-// scene's.
+// (border distance > 0), the same interpolator and exposure division, and
+// the same floor (kDarkestCovered); beside them, which pixels read a
+// saturated tile sample (1, the file's full scale) in their 4 x 4
+// interpolation support: their value is not the scene's.
+//
+// Unlike the mosaic (a file of full scale 1), a patch is not clamped at 1.
+// The exposure gauge is the brightest tile (exposure_compensation.h): the
+// others are scaled up, above 1 where that tile clipped. Clamped, their rims
+// lost the bright side of their steps, unmarked: demo seed 281 with one tile
+// at 2.2 times the others' gain read the diameters in the other tiles 0.2
+// raw px small, 4-6 of their sigmas.
 // A hole that several tiles see whole is measured in each such patch: each is
 // an independent picture, with one bottom rim about that tile's nadir
 // (bore_view.h), where the mosaic blends two.
@@ -25,7 +32,7 @@ namespace omm {
 
 struct OrthoPatch {
   Eigen::Vector2i origin_px = Eigen::Vector2i::Zero();  // mosaic (col, row) of pixel (0, 0)
-  ImageF pixels;        // [kDarkestCovered, 1]; 0 where the tile does not see (as in the mosaic)
+  ImageF pixels;        // >= kDarkestCovered; 0 where the tile does not see (as in the mosaic)
   ImageMask saturated;  // pixels' size, or empty where no pixel reads a saturated sample
 };
 

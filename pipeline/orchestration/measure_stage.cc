@@ -120,10 +120,19 @@ std::string BoreNote(const HoleFit& fit, const SavedScene& saved) {
   return "no bore wall resolved";
 }
 
+// "; tile_X left out: why" for each tile that sees the hole whole and failed to fit it.
+std::string FailedViewsNote(const std::vector<HoleFit>& failed, const SavedScene& saved) {
+  std::string note;
+  for (const HoleFit& fit : failed)
+    note += fmt::format("; {} left out: {}", saved.tile_images[*fit.tile], fit.circle.error);
+  return note;
+}
+
 // The report's notes on a hole measured in tiles: which tiles, their bores
-// and fits, and whether the views agree.
-void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& combined,
-                      const Eigen::Matrix3d& to_mm, const OrthoGrid& grid, const SavedScene& saved,
+// and fits, the tiles that failed, and whether the views agree.
+void AddTileViewNotes(const std::vector<HoleFit>& fits, const std::vector<HoleFit>& failed,
+                      const CombinedCircle& combined, const Eigen::Matrix3d& to_mm,
+                      const OrthoGrid& grid, const SavedScene& saved,
                       const std::string& name_of_feature, FeatureReport* report) {
   const CircleFeatureValue& value = combined.value;
   std::string views_note =
@@ -144,6 +153,7 @@ void AddTileViewNotes(const std::vector<HoleFit>& fits, const CombinedCircle& co
     bore_note += (i > 0 ? "; " : "") + name + ": " + BoreNote(fit, saved);
     tile_fits.emplace_back(name, fit.circle.Brief());
   }
+  views_note += FailedViewsNote(failed, saved);
   if (fits.size() > 1) {
     const Eigen::Matrix3d cov_px =
         to_mm.inverse() * value.edge_covariance * to_mm.inverse().transpose();
@@ -207,8 +217,8 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
 
   HoleViews views_found = FitHoleViews(in, *near_part, radius_mm);
   std::vector<HoleFit>& fits = views_found.fits;
-  if (fits.empty() && views_found.saturated_fit) {
-    const HoleFit& fit = *views_found.saturated_fit;
+  if (const HoleFit* saturated = views_found.SaturatedFit(); fits.empty() && saturated) {
+    const HoleFit& fit = *saturated;
     report.error = fmt::format("{} in {}", fit.circle.error, saved.tile_images[*fit.tile]);
     return located;
   }
@@ -220,8 +230,9 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
         "views", num_seeing == 0
                      ? std::string("measured in the mosaic: no tile sees the hole whole")
                      : fmt::format("measured in the mosaic: not found in the {} tile{} "
-                                   "that see it whole",
-                                   num_seeing, num_seeing > 1 ? "s" : ""));
+                                   "that see it whole{}",
+                                   num_seeing, num_seeing > 1 ? "s" : "",
+                                   FailedViewsNote(views_found.failed, saved)));
     if (!fit.circle.ok) {
       report.error = fit.circle.error;  // the failed fit's only brief
       return located;
@@ -268,7 +279,8 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
     num_inliers += fit.circle.num_inliers;
     sum_squares += fit.circle.num_inliers * fit.circle.rms_px * fit.circle.rms_px;
   }
-  if (fits[0].tile) AddTileViewNotes(fits, combined, to_mm, grid, saved, spec.name, &report);
+  if (fits[0].tile)
+    AddTileViewNotes(fits, views_found.failed, combined, to_mm, grid, saved, spec.name, &report);
   report.centre_mm = value.centre_mm;
   report.diameter_mm = value.diameter_mm;
   report.extra.emplace_back("num_views", static_cast<int>(fits.size()));
