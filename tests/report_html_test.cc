@@ -169,6 +169,7 @@ Report FullReport() {
   FeatureReport lost;
   lost.name = "<lost>";
   lost.error = "not found near <812, 400>";
+  lost.extra = {{"expected_mosaic_px", ReportValue::Array{ReportValue(300.0), ReportValue(200.0)}}};
   report.features =
       std::vector<FeatureReport>{Feature("hole_A", PixelCentreMm(123, 45), 4.0),
                                  Feature("hole_B", PixelCentreMm(400, 250), 6.0), lost};
@@ -234,8 +235,12 @@ TEST(ReportHtml, OverlayFollowsThePixelConvention) {
   EXPECT_THAT(html, HasSubstr("viewBox=\"0 0 600 400\""));
   EXPECT_THAT(html, HasSubstr("<circle cx=\"123.500\" cy=\"45.500\" r=\"20.000\""));
   EXPECT_THAT(html, HasSubstr("<circle cx=\"400.500\" cy=\"250.500\" r=\"30.000\""));
-  EXPECT_EQ(Count(html, "<g class=\"feature\">"), 2);  // <lost> is not drawn
+  EXPECT_EQ(Count(html, "<g class=\"feature\">"), 2);  // <lost> is not drawn as found ...
   EXPECT_THAT(html, HasSubstr("Not found: &lt;lost&gt;."));
+  // ... but marked where it was looked for: expected_mosaic_px (300, 200).
+  EXPECT_EQ(Count(html, "<g class=\"not-found\">"), 1);
+  EXPECT_THAT(html, HasSubstr("<g class=\"not-found\"><circle cx=\"300.500\" cy=\"200.500\""));
+  EXPECT_THAT(html, HasSubstr("&lt;lost&gt; (not found)</text>"));
   // One distance between found features, labelled with value and sigma.
   EXPECT_EQ(Count(html, "<g class=\"distance\">"), 1);
   EXPECT_THAT(html, HasSubstr("<line x1=\"123.500\" y1=\"45.500\" x2=\"400.500\" y2=\"250.500\""));

@@ -58,6 +58,13 @@ std::string Number(const std::optional<double>& value, int decimals = 4) {
   return value ? fmt::format("{:.{}f}", *value, decimals) : "&ndash;";
 }
 
+// Element `axis` of the pair `key` of `object`, times `scale`.
+std::string PairElement(const ReportObject& object, const char* key, int axis, double scale,
+                        int decimals) {
+  const std::optional<Eigen::Vector2d> pair = AsPair(Member(object, key));
+  return Number(pair ? std::optional<double>((*pair)[axis] * scale) : std::nullopt, decimals);
+}
+
 // ------------------------------------------------- the report's extras ---
 
 // Any value as escaped text: numbers to 6 significant digits, arrays in
@@ -276,6 +283,19 @@ std::string MosaicFigure(const Report& report, const ReportHtmlInputs& inputs) {
     for (const FeatureReport& f : *report.features) {
       if (!f.centre_mm) {
         not_found += (not_found.empty() ? "" : ", ") + Escape(f.name);
+        // Where it was looked for (near_px through the scene, omm's pixel
+        // convention): a dashed mark, so that a reader finds the place.
+        if (const std::optional<Eigen::Vector2d> px =
+                AsPair(Member(f.extra, "expected_mosaic_px"))) {
+          const double x = px->x() + 0.5, y = px->y() + 0.5, r = 10 * unit;
+          svg += fmt::format(
+              "<g class=\"not-found\"><circle cx=\"{:.3f}\" cy=\"{:.3f}\" r=\"{:.3f}\" "
+              "fill=\"none\" stroke=\"#d00000\" stroke-width=\"2\" stroke-dasharray=\"4 3\" "
+              "vector-effect=\"non-scaling-stroke\"/><text x=\"{:.3f}\" y=\"{:.3f}\" "
+              "fill=\"#d00000\" stroke=\"white\" stroke-width=\"{:.2f}\" "
+              "paint-order=\"stroke\">{} (not found)</text></g>\n",
+              x, y, r, x + r, y - r, 3 * unit, Escape(f.name));
+        }
         continue;
       }
       const Eigen::Vector2d c = to_svg(*f.centre_mm);
@@ -546,9 +566,8 @@ std::string OverlapTiesTable(const ReportObject& extra) {
         if (tie == nullptr) continue;
         const ReportValue::Array* images = AsArray(Member(*tie, "images"));
         const bool two = images != nullptr && images->size() == 2;
-        auto element = [&](const char* key, size_t i) {
-          const ReportValue::Array* v = AsArray(Member(*tie, key));
-          return Number(v != nullptr && v->size() > i ? AsNumber(&(*v)[i]) : std::nullopt, 3);
+        auto element = [&](const char* key, int axis) {
+          return PairElement(*tie, key, axis, 1.0, 3);
         };
         const bool used = AsBool(Member(*tie, "used")).value_or(false);
         table.Row({two ? Text((*images)[0]) : "?", two ? Text((*images)[1]) : "?",
@@ -575,16 +594,10 @@ std::string TilesTable(const ReportObject& extra) {
     for (const ReportValue& row : *tiles) {
       const ReportObject* t = AsObject(&row);
       if (t == nullptr) continue;
-      auto component = [&](const char* key, int axis, double scale, int decimals) {
-        const ReportValue::Array* v = AsArray(Member(*t, key));
-        if (v == nullptr || v->size() != 2) return std::string("&ndash;");
-        const auto x = AsNumber(&(*v)[axis]);
-        return Number(x ? std::optional<double>(*x * scale) : std::nullopt, decimals);
-      };
-      table.Row({Text(Member(*t, "image")), component("commanded_mm", 0, 1.0, 3),
-                 component("commanded_mm", 1, 1.0, 3),
-                 component("adjusted_minus_commanded_mm", 0, 1000.0, 2),
-                 component("adjusted_minus_commanded_mm", 1, 1000.0, 2),
+      table.Row({Text(Member(*t, "image")), PairElement(*t, "commanded_mm", 0, 1.0, 3),
+                 PairElement(*t, "commanded_mm", 1, 1.0, 3),
+                 PairElement(*t, "adjusted_minus_commanded_mm", 0, 1000.0, 2),
+                 PairElement(*t, "adjusted_minus_commanded_mm", 1, 1000.0, 2),
                  Text(Member(*t, "held_by_prior")), Text(Member(*t, "table_prior_used")),
                  NumberOf(*t, "exposure_gain", 4)});
     }
@@ -608,13 +621,10 @@ std::string PriorsLeftOutTable(const ReportObject& extra) {
     for (const ReportValue& row : *left_out) {
       const ReportObject* t = AsObject(&row);
       if (t == nullptr) continue;
-      const ReportValue::Array* v = AsArray(Member(*t, "adjusted_minus_commanded_mm"));
-      const auto micrometres = [&](int axis) {
-        const auto x = v && v->size() == 2 ? AsNumber(&(*v)[axis]) : std::nullopt;
-        return Number(x ? std::optional<double>(*x * 1000.0) : std::nullopt, 1);
-      };
-      table.Row({Text(Member(*t, "image")), micrometres(0), micrometres(1), NumberOf(*t, "w2", 1),
-                 NumberOf(*t, "bound", 1)});
+      table.Row({Text(Member(*t, "image")),
+                 PairElement(*t, "adjusted_minus_commanded_mm", 0, 1000.0, 1),
+                 PairElement(*t, "adjusted_minus_commanded_mm", 1, 1000.0, 1),
+                 NumberOf(*t, "w2", 1), NumberOf(*t, "bound", 1)});
     }
     out += table.Html("priors-left-out-table");
   }

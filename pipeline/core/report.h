@@ -83,6 +83,15 @@ inline const ReportValue::Array* AsArray(const ReportValue* value) {
   return value == nullptr ? nullptr : std::get_if<ReportValue::Array>(&value->data());
 }
 
+// An array of two numbers ([x, y]).
+inline std::optional<Eigen::Vector2d> AsPair(const ReportValue* value) {
+  const ReportValue::Array* array = AsArray(value);
+  if (array == nullptr || array->size() != 2) return std::nullopt;
+  const std::optional<double> x = AsNumber(&(*array)[0]), y = AsNumber(&(*array)[1]);
+  if (!x || !y) return std::nullopt;
+  return Eigen::Vector2d(*x, *y);
+}
+
 inline const ReportObject* AsObject(const ReportValue* value) {
   return value == nullptr ? nullptr : std::get_if<ReportObject>(&value->data());
 }
