@@ -1,5 +1,6 @@
 #include "pipeline/measure/circle_measure.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -538,6 +539,39 @@ TEST(CircleMeasure, CutByTheBorderIsAnError) {
   hole.uncovered_offset_px = hole.uncovered_normal.dot(hole.centre_px) + 52.0;
   m = MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, 40.0);
   EXPECT_TRUE(m.ok) << m.error;
+}
+
+// Uncovered pixels deep inside a hole (a gap in the tiles' cover that only
+// its interior falls in) cut the inner end of the rays that cross them; the
+// rest of each ray, out to the rim and beyond, is fitted as before.
+TEST(CircleMeasure, UncoveredPixelsDeepInsideTheHoleDoNotMatter) {
+  for (const double radius : {40.0, 120.0}) {
+    const SyntheticHole hole = DemoHole(radius, 300.0, 1.0, 61);
+    ImageF image = RenderSyntheticHole(hole);
+    const CircleMeasurement covered = MeasureCircle(image, hole.centre_px, radius);
+    ASSERT_TRUE(covered.ok) << covered.error;
+    // The rays reach in to half the radius inside the rim (at most 30 px):
+    // the gap covers their inner 40-60 %.
+    const double gap_radius = radius - 0.7 * std::min(0.5 * radius, 30.0);
+    int num_gap = 0;
+    for (int y = 0; y < image.rows(); ++y) {
+      for (int x = 0; x < image.cols(); ++x) {
+        if ((Eigen::Vector2d(x, y) - hole.centre_px).norm() < gap_radius) {
+          image(y, x) = 0.0f;
+          ++num_gap;
+        }
+      }
+    }
+    const CircleMeasurement m = MeasureCircle(image, hole.centre_px, radius);
+    ASSERT_TRUE(m.ok) << m.error;
+    std::printf("r %.0f, gap r %.1f (%d px): centre moved (%.5f, %.5f) px, radius %+.5f px; %s\n",
+                radius, gap_radius, num_gap, m.centre_px.x() - covered.centre_px.x(),
+                m.centre_px.y() - covered.centre_px.y(), m.radius_px - covered.radius_px,
+                m.Brief().c_str());
+    EXPECT_EQ(m.num_uncovered, 0);
+    EXPECT_LT((m.centre_px - covered.centre_px).norm(), 0.1 * Sigma(covered, 0));
+    EXPECT_LT(std::abs(m.radius_px - covered.radius_px), 0.1 * Sigma(covered, 2));
+  }
 }
 
 // No hole where one is expected: textured surface only, or a hole of
