@@ -258,6 +258,22 @@ TEST(CameraSaturation, HolesClippedInOneTileAreMeasuredInTheOthers) {
   std::printf("%d holes measured without %s, %d refused (seen by it alone)\n", num_left_out,
               bright.c_str(), num_refused);
   EXPECT_GT(num_left_out, 0);
+
+  // The report says which tile is overexposed, and how much.
+  ASSERT_TRUE(run.mosaic);
+  const ReportValue::Array* tiles = AsArray(Member(run.mosaic->extra, "tiles"));
+  ASSERT_TRUE(tiles);
+  for (const ReportValue& row : *tiles) {
+    const ReportObject& tile = *AsObject(&row);
+    const std::string image = *AsString(Member(tile, "image"));
+    const double fraction = AsNumber(Member(tile, "saturated_fraction")).value_or(-1.0);
+    std::printf("%s: %.1f %% at full scale\n", image.c_str(), 100.0 * fraction);
+    if (image == bright) {
+      EXPECT_GT(fraction, 0.1);
+    } else {
+      EXPECT_EQ(fraction, 0.0) << image;
+    }
+  }
 }
 
 // A 12-bit camera whose samples its SDK stores unshifted in 16-bit files:

@@ -58,11 +58,16 @@ std::string Number(const std::optional<double>& value, int decimals = 4) {
   return value ? fmt::format("{:.{}f}", *value, decimals) : "&ndash;";
 }
 
+std::optional<double> Scaled(const std::optional<double>& value, double scale) {
+  return value ? std::optional<double>(*value * scale) : std::nullopt;
+}
+
 // Element `axis` of the pair `key` of `object`, times `scale`.
 std::string PairElement(const ReportObject& object, const char* key, int axis, double scale,
                         int decimals) {
   const std::optional<Eigen::Vector2d> pair = AsPair(Member(object, key));
-  return Number(pair ? std::optional<double>((*pair)[axis] * scale) : std::nullopt, decimals);
+  return Number(Scaled(pair ? std::optional<double>((*pair)[axis]) : std::nullopt, scale),
+                decimals);
 }
 
 // ------------------------------------------------- the report's extras ---
@@ -587,10 +592,10 @@ std::string TilesTable(const ReportObject& extra) {
   std::string out;
   if (const ReportValue::Array* tiles = AsArray(Member(extra, "tiles"))) {
     out += "<h3>Tiles: adjusted minus commanded table position</h3>\n";
-    Table table(
-        {"tile", "commanded x mm", "commanded y mm", "adjusted - commanded x &#181;m",
-         "adjusted - commanded y &#181;m", "held by prior", "table prior used", "exposure gain"},
-        "lrrrrllr");
+    Table table({"tile", "commanded x mm", "commanded y mm", "adjusted - commanded x &#181;m",
+                 "adjusted - commanded y &#181;m", "held by prior", "table prior used",
+                 "exposure gain", "pixels at full scale %"},
+                "lrrrrllrr");
     for (const ReportValue& row : *tiles) {
       const ReportObject* t = AsObject(&row);
       if (t == nullptr) continue;
@@ -599,7 +604,8 @@ std::string TilesTable(const ReportObject& extra) {
                  PairElement(*t, "adjusted_minus_commanded_mm", 0, 1000.0, 2),
                  PairElement(*t, "adjusted_minus_commanded_mm", 1, 1000.0, 2),
                  Text(Member(*t, "held_by_prior")), Text(Member(*t, "table_prior_used")),
-                 NumberOf(*t, "exposure_gain", 4)});
+                 NumberOf(*t, "exposure_gain", 4),
+                 Number(Scaled(AsNumber(Member(*t, "saturated_fraction")), 100.0), 1)});
     }
     out += table.Html("tiles-table");
   }

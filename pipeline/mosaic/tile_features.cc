@@ -43,6 +43,11 @@ std::optional<double> BlankImageLevel(const ImageF& image, double max_fraction) 
   return median;
 }
 
+double SaturatedFraction(const ImageF& image) {
+  if (image.size() == 0) return 0.0;
+  return static_cast<double>((image.array() >= 1.0f).count()) / static_cast<double>(image.size());
+}
+
 ImageF DownsampleBox(const ImageF& image, int factor) {
   const Eigen::Index rows = image.rows() / factor, cols = image.cols() / factor;
   ImageF out(rows, cols);

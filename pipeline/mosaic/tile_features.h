@@ -34,6 +34,9 @@ ImageF NormalizeTileIntensity(const ImageF& image);
 // part's pixels. nullopt if the image has content.
 std::optional<double> BlankImageLevel(const ImageF& image, double max_fraction = 0.01);
 
+// The fraction of `image`'s pixels at full scale (1): clipped, saturated.
+double SaturatedFraction(const ImageF& image);
+
 // Box-filter downsampling by an integer factor: output pixel (r, c) is the
 // mean of input rows [r f, r f + f), columns [c f, c f + f), so an offset of
 // d output pixels is exactly f d input pixels.

@@ -45,6 +45,14 @@ TEST(BlankImageLevel, ConstantFramesOnly) {
   EXPECT_FALSE(BlankImageLevel(table).has_value());
 }
 
+TEST(SaturatedFraction, CountsPixelsAtFullScale) {
+  ImageF image = ImageF::Constant(100, 200, 0.999f);
+  EXPECT_EQ(SaturatedFraction(image), 0.0);
+  image.topRows(25).setConstant(1.0f);
+  EXPECT_DOUBLE_EQ(SaturatedFraction(image), 0.25);
+  EXPECT_EQ(SaturatedFraction(ImageF()), 0.0);
+}
+
 TEST(DetectHarrisCorners, BlobAtItsCentre) {
   const Eigen::Vector2d centre(99.3, 100.2);
   const ImageF image = Blob(200, 200, centre.x(), centre.y());

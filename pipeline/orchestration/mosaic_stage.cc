@@ -43,6 +43,7 @@
 #include "pipeline/mosaic/plate_on_part.h"
 #include "pipeline/mosaic/register_tiles.h"
 #include "pipeline/mosaic/table_prior_check.h"
+#include "pipeline/mosaic/tile_features.h"
 #include "pipeline/mosaic/working_distance.h"
 #include "pipeline/orchestration/stage.h"
 
@@ -286,7 +287,7 @@ ReportValue PairsReport(const Project& project, const TileRegistration& registra
 }
 
 ReportValue TilesReport(const Project& project, const TileRegistration& registration,
-                        const OrthoSummary& ortho) {
+                        const OrthoSummary& ortho, const std::vector<double>& saturated_fraction) {
   ReportValue::Array rows;
   for (size_t i = 0; i < project.tiles.size(); ++i) {
     const bool held =
@@ -298,7 +299,8 @@ ReportValue TilesReport(const Project& project, const TileRegistration& registra
                      {"adjusted_minus_commanded_mm", Pair(registration.table_adjustment_mm[i])},
                      {"held_by_prior", held},
                      {"table_prior_used",
-                      !std::binary_search(unprior.begin(), unprior.end(), static_cast<int>(i))}};
+                      !std::binary_search(unprior.begin(), unprior.end(), static_cast<int>(i))},
+                     {"saturated_fraction", saturated_fraction[i]}};
     if (i < ortho.exposure.tiles.size()) {
       row.emplace_back("exposure_gain", ortho.exposure.tiles[i].gain);
       row.emplace_back("vignetting", ortho.exposure.tiles[i].vignetting);
@@ -781,6 +783,25 @@ ReportValue::Array HeldTilesReport(const Project& project, const TileRegistratio
   return held;
 }
 
+// Each tile's fraction of pixels at full scale; a warning for each tile
+// with more than kOverexposedFraction of them. The rims beside them are left
+// out, so an overexposed tile loses holes (circle_measure.h).
+constexpr double kOverexposedFraction = 0.02;
+std::vector<double> WarnOfOverexposedTiles(const Project& project,
+                                           const std::vector<ImageF>& tiles) {
+  std::vector<double> fractions;
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    fractions.push_back(SaturatedFraction(tiles[i]));
+    if (fractions.back() > kOverexposedFraction) {
+      spdlog::warn(
+          "mosaic: {}: {:.1f} % of its pixels at full scale (overexposed): the rims beside them "
+          "are left out, or the holes refused; lower the exposure",
+          project.tiles[i].image, 100.0 * fractions.back());
+    }
+  }
+  return fractions;
+}
+
 // Why the orthorectification failed: its brief, and the tiles the exposure
 // fit found nothing in with the likely cause.
 std::string WhyOrthoFailed(const Project& project, const std::vector<ImageF>& tiles,
@@ -956,6 +977,7 @@ void RunMosaicStage(StageContext& context) {
   const std::shared_ptr<const std::vector<ImageF>> tile_images = prepared_tiles.images;
   const std::vector<ImageF>& tiles = *tile_images;
   CheckTileSizes(project, tiles, camera);
+  const std::vector<double> saturated_fraction = WarnOfOverexposedTiles(project, tiles);
   const double read_seconds = SecondsSince(stage_start);
 
   const int num_tiles = static_cast<int>(tiles.size());
@@ -1067,7 +1089,7 @@ void RunMosaicStage(StageContext& context) {
       {"hole_ties", std::move(final_outcome.ties_report)},
       {"overlap_ties", std::move(final_outcome.overlap_report)},
       {"pairs", PairsReport(project, registration, pair_scatter)},
-      {"tiles", TilesReport(project, registration, ortho.summary)},
+      {"tiles", TilesReport(project, registration, ortho.summary, saturated_fraction)},
       {"tiles_held_by_prior", HeldTilesReport(project, registration)},
       {"table_priors_left_out", std::move(priors_left_out)},
       {"table_sigma_check", std::move(table_sigma_check)},
