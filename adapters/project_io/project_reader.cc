@@ -177,7 +177,8 @@ class YamlReader {
 };
 
 CameraSpec ReadCamera(const YamlReader& yaml, const YAML::Node& node) {
-  yaml.CheckKeys(node, "camera", {"pixel_pitch_um", "focal_length_mm", "lens_model", "gamma"});
+  yaml.CheckKeys(node, "camera",
+                 {"pixel_pitch_um", "focal_length_mm", "lens_model", "gamma", "sample_bits"});
   CameraSpec camera;
   camera.pixel_pitch_um =
       yaml.Positive(yaml.Required(node, "camera", "pixel_pitch_um"), "camera.pixel_pitch_um");
@@ -202,6 +203,14 @@ CameraSpec ReadCamera(const YamlReader& yaml, const YAML::Node& node) {
       yaml.Fail(
           gamma, "camera.gamma",
           fmt::format("expected the camera's gamma in [0.2, 5] (1: linear), got {}", camera.gamma));
+    }
+  }
+  if (const YAML::Node bits = node["sample_bits"]; bits.IsDefined() && !bits.IsNull()) {
+    camera.sample_bits = yaml.Int(bits, "camera.sample_bits", 8);
+    if (*camera.sample_bits > 16) {
+      yaml.Fail(bits, "camera.sample_bits",
+                fmt::format("expected the bits of the camera's samples, 8 to 16, got {}",
+                            *camera.sample_bits));
     }
   }
   return camera;
@@ -663,15 +672,35 @@ void ListCalibImages(const fs::path& dir, Project& project) {
   }
 }
 
-// Project::sample_bits of these images.
-int SampleBits(const std::vector<LoadedImage>& loaded) {
+// A 16-bit image's largest sample.
+std::uint16_t LargestSample(const StoredImage& image) {
+  const auto* samples = reinterpret_cast<const std::uint16_t*>(image.samples.data());
+  const std::size_t count = image.samples.size() / 2;
+  return count > 0 ? *std::max_element(samples, samples + count) : 0;
+}
+
+// Project::sample_bits of these images (paths: theirs, for errors): the
+// camera's stated bits, checked against every 16-bit image, or the fewest
+// that hold every sample.
+int SampleBits(const CameraSpec& camera, const std::vector<LoadedImage>& loaded,
+               const std::vector<fs::path>& paths) {
+  if (camera.sample_bits) {
+    const int full_scale = (1 << *camera.sample_bits) - 1;
+    for (size_t i = 0; i < loaded.size(); ++i) {
+      if (loaded[i].image.bit_depth != 16) continue;
+      if (const int largest = LargestSample(loaded[i].image); largest > full_scale) {
+        throw InputError(paths[i].string(),
+                         fmt::format("a sample of {}, beyond the full scale {} of "
+                                     "project.yaml's camera.sample_bits {}",
+                                     largest, full_scale, *camera.sample_bits));
+      }
+    }
+    return *camera.sample_bits;
+  }
   std::uint16_t largest = 0;
   for (const LoadedImage& file : loaded) {
-    const StoredImage& image = file.image;
-    if (image.bit_depth != 16) return 16;
-    const auto* samples = reinterpret_cast<const std::uint16_t*>(image.samples.data());
-    const std::size_t count = image.samples.size() / 2;
-    if (count > 0) largest = std::max(largest, *std::max_element(samples, samples + count));
+    if (file.image.bit_depth != 16) return 16;
+    largest = std::max(largest, LargestSample(file.image));
   }
   for (const int bits : {10, 12, 14})
     if (largest < (1 << bits)) return bits;
@@ -709,7 +738,7 @@ void LoadImages(const fs::path& dir, int num_threads, Project& project) {
                       project.image_width_px, project.image_height_px));
     }
   }
-  project.sample_bits = SampleBits(loaded);
+  project.sample_bits = SampleBits(project.camera, loaded, all_images);
   auto images = std::make_shared<LoadedImages>();
   const auto calib_end = loaded.begin() + static_cast<std::ptrdiff_t>(project.calib_images.size());
   images->calib.assign(std::make_move_iterator(loaded.begin()), std::make_move_iterator(calib_end));

@@ -192,6 +192,17 @@ TEST_F(ProjectReaderTest, CameraGammaOutOfRangeIsRejected) {
   ExpectError({"camera.gamma", "[0.2, 5]"});
 }
 
+TEST_F(ProjectReaderTest, CameraSampleBitsOutOfRangeIsRejected) {
+  Replace("project.yaml", "focal_length_mm: 12", "focal_length_mm: 12\n  sample_bits: 17");
+  ExpectError({"camera.sample_bits", "8 to 16, got 17"});
+  WriteProjectFiles(project_);
+  Replace("project.yaml", "focal_length_mm: 12", "focal_length_mm: 12\n  sample_bits: 7");
+  ExpectError({"camera.sample_bits", "expected an integer >= 8, got 7"});
+  WriteProjectFiles(project_);
+  Replace("project.yaml", "focal_length_mm: 12", "focal_length_mm: 12\n  sample_bits: twelve");
+  ExpectError({"camera.sample_bits", "expected an integer, got 'twelve'"});
+}
+
 // Not a mrcal name, an unknown one, and a splined model without its
 // configuration: each refused on its line (the unknown one used to reach the
 // calibration, which named neither the file's path nor the line).
@@ -488,6 +499,29 @@ TEST_F(ProjectReaderTest, SampleBitsAreTheFewestThatHoldEverySample) {
     store_as_16_bit(largest);
     EXPECT_EQ(LoadProject(project_.dir).sample_bits, bits) << largest;
   }
+  // camera.sample_bits is taken as stated: a 16-bit camera whose capture
+  // stays below 2^14, a 12-bit camera whose capture stays below 2^10.
+  store_as_16_bit(16000);
+  project_.camera.sample_bits = 16;
+  WriteProjectFiles(project_);
+  EXPECT_EQ(LoadProject(project_.dir).sample_bits, 16);
+  store_as_16_bit(1000);
+  project_.camera.sample_bits = 12;
+  WriteProjectFiles(project_);
+  EXPECT_EQ(LoadProject(project_.dir).sample_bits, 12);
+  // A sample beyond the stated full scale: the file is named.
+  store_as_16_bit(4096);
+  try {
+    LoadProject(project_.dir);
+    ADD_FAILURE() << "a sample of 4096 in 12-bit samples was accepted";
+  } catch (const InputError& error) {
+    EXPECT_THAT(error.what(), HasSubstr(images.front().filename().string()));
+    EXPECT_THAT(error.what(), HasSubstr("a sample of 4096, beyond the full scale 4095 of "
+                                        "project.yaml's camera.sample_bits 12"));
+  }
+  project_.camera.sample_bits.reset();
+  WriteProjectFiles(project_);
+
   // One 8-bit file among them: the 16-bit ones are taken at their full scale.
   store_as_16_bit(4095);
   WriteStoredImage(images.back(), last_eight_bit);

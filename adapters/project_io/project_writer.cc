@@ -34,6 +34,9 @@ std::string ProjectYaml(const Project& project) {
   if (project.camera.gamma != 1.0) {
     out << YAML::Key << "gamma" << YAML::Value << Number(project.camera.gamma);
   }
+  if (project.camera.sample_bits) {
+    out << YAML::Key << "sample_bits" << YAML::Value << *project.camera.sample_bits;
+  }
   out << YAML::EndMap;
 
   if (project.calibration_from) {

@@ -22,6 +22,10 @@ struct CameraSpec {
   // The camera's response, pixel = linear^gamma (GenICam's Gamma; 1: linear,
   // as metrology wants it). Every image is linearized with it when read.
   double gamma = 1.0;
+  // The bits of the camera's samples as project.yaml states them (8-16;
+  // GenICam's PixelFormat Mono12: 12); none: told from the images
+  // (Project::sample_bits).
+  std::optional<int> sample_bits;
 };
 
 // `calibration.from`: reuse an earlier calibration instead of calib/.
@@ -99,7 +103,10 @@ struct Project {
   // store them in 16-bit files unshifted: where every image is such a file
   // and no sample exceeds 2^b - 1 for b in {10, 12, 14}, the smallest such b
   // (2^b - 1 is then full scale); else 16. Those images read 16 to 64 times
-  // too dark, and plate detection found no plate.
+  // too dark, and plate detection found no plate. camera.sample_bits, where
+  // given, is taken instead (a 16-bit camera whose dim capture stays below
+  // 2^14 would otherwise read as 14-bit, its brightest sample as saturated).
+  // 16-bit files only: an 8-bit file's full scale is 255.
   int sample_bits = 16;
 
   // The images as loaded, shared by copies of the project (read only); null:

@@ -158,10 +158,11 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
   try {
     spdlog::info("hashing the inputs of {}", project.dir.string());
     if (project.sample_bits < 16) {
-      spdlog::info(
-          "images: 16-bit files whose samples stay below 2^{}: read as {}-bit samples "
-          "(full scale {})",
-          project.sample_bits, project.sample_bits, (1 << project.sample_bits) - 1);
+      spdlog::info("images: 16-bit files {}: read as {}-bit samples (full scale {})",
+                   project.camera.sample_bits
+                       ? std::string("of project.yaml's camera.sample_bits")
+                       : fmt::format("whose samples stay below 2^{}", project.sample_bits),
+                   project.sample_bits, (1 << project.sample_bits) - 1);
     }
     Report report = StartingReport(project, HashProjectInputs(project));
     DropSectionsFrom(options.stages.front(), report);
