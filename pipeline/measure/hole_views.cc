@@ -1,5 +1,6 @@
 #include "pipeline/measure/hole_views.h"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
@@ -23,6 +24,36 @@ double FitReachPx(const CircleMeasureOptions& options) {
 // A fit that failed for its rim's saturated pixels (CircleMeasureOptions::max_saturated_fraction).
 bool RimSaturated(const CircleMeasurement& circle, const CircleMeasureOptions& options) {
   return !circle.ok && circle.num_saturated > options.max_saturated_fraction * circle.num_wedges;
+}
+
+// The mosaic's pixels that stand for clipped ones, within `reach_px` of
+// `centre_px`: those at its full scale (1: clamped there, a tile's clipped
+// sample or a tile lifted beyond it by its exposure), and their neighbours
+// within 2 px, whose interpolation may have read the same clipped samples
+// (the tiles' 4 x 4 support: ortho_patch.h). An empty mask where there are
+// none, as RenderTilePatch gives.
+ImageMask SaturatedInMosaic(const ImageF& mosaic, const Eigen::Vector2d& centre_px,
+                            double reach_px) {
+  constexpr int kSupportPx = 2;
+  const auto clamp_to = [](double v, Eigen::Index size) {
+    return static_cast<int>(std::clamp<double>(v, 0.0, static_cast<double>(size)));
+  };
+  const int x0 = clamp_to(std::floor(centre_px.x() - reach_px), mosaic.cols());
+  const int x1 = clamp_to(std::ceil(centre_px.x() + reach_px) + 1, mosaic.cols());
+  const int y0 = clamp_to(std::floor(centre_px.y() - reach_px), mosaic.rows());
+  const int y1 = clamp_to(std::ceil(centre_px.y() + reach_px) + 1, mosaic.rows());
+  ImageMask mask;
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      if (mosaic(y, x) < 1.0f) continue;
+      if (mask.size() == 0) mask = ImageMask::Zero(mosaic.rows(), mosaic.cols());
+      const int ya = std::max(y - kSupportPx, 0), xa = std::max(x - kSupportPx, 0);
+      const int yb = std::min<int>(y + kSupportPx, static_cast<int>(mosaic.rows()) - 1);
+      const int xb = std::min<int>(x + kSupportPx, static_cast<int>(mosaic.cols()) - 1);
+      mask.block(ya, xa, yb - ya + 1, xb - xa + 1).setOnes();
+    }
+  }
+  return mask;
 }
 
 CircleMeasureOptions FitOptions(const HoleViewInputs& in) {
@@ -79,8 +110,14 @@ HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_
   if (fit.nadir_tile) nadir_px = grid.MosaicFromPart(TileNadirMm(in.scene, *fit.nadir_tile));
   CircleMeasureOptions options = FitOptions(in);
   if (in.mosaic_grid) options.source_px = in.mosaic_source_px;
-  fit.circle = MeasureCircle(*in.mosaic, grid.MosaicFromPart(centre_mm), radius_mm / grid.gsd_mm,
-                             options, nadir_px, in.bore_prior);
+  const Eigen::Vector2d expected_px = grid.MosaicFromPart(centre_mm);
+  const double radius_px = radius_mm / grid.gsd_mm;
+  const double reach_px = radius_px * (1.0 + options.max_radius_deviation) +
+                          options.search_fraction * 2.0 * radius_px + options.search_margin_px +
+                          FitReachPx(options) + 2.0;
+  const ImageMask saturated = SaturatedInMosaic(*in.mosaic, expected_px, reach_px);
+  fit.circle = MeasureCircle(*in.mosaic, expected_px, radius_px, options, nadir_px, in.bore_prior,
+                             saturated.size() ? &saturated : nullptr);
   if (in.mosaic_grid) {
     // To the views' grid: both grids run x along columns and y against rows.
     const OrthoGrid& to = in.geometry.grid;

@@ -78,8 +78,8 @@ struct HoleViews {
   int num_seeing = 0;                 // tiles that see the hole whole
   std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole (and a mosaic is given)
   // The first of `failed` that failed as "rim saturated", if any. The mosaic
-  // blends the same clipped pixels without marking them, so it is not fitted
-  // then.
+  // then is not fitted: it marks only its pixels at full scale, and where
+  // tiles blend, a clipped sample is averaged below it.
   const HoleFit* SaturatedFit() const;
 };
 
@@ -91,7 +91,9 @@ struct HoleViews {
 HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
                        double radius_mm);
 
-// The hole in the blended mosaic (in.mosaic, which must be set).
+// The hole in the blended mosaic (in.mosaic, which must be set); its pixels
+// at full scale (clamped there) and those within 2 px of them are taken for
+// saturated, as a tile patch's are (CircleMeasureOptions::max_saturated_fraction).
 HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_mm,
                         double radius_mm);
 

@@ -1,6 +1,7 @@
 #include "pipeline/measure/hole_views.h"
 
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -60,6 +61,54 @@ TEST(HoleViews, AFitInACoarserMosaicComesBackOnTheViewsGrid) {
   // here 0.009 mosaic px off centre, 0.001 in radius).
   EXPECT_LT((handed.circle.centre_px - views.grid.MosaicFromPart(centre_mm)).norm(), 0.05);
   EXPECT_NEAR(handed.circle.radius_px, radius_mm / fine.gsd_mm, 0.05);
+}
+
+// A hole found only in the blended mosaic, where the surface beside part of
+// its rim is at full scale: those wedges are left out, and a rim mostly so is
+// refused, as in a tile's patch (the mosaic's pixels at 1 stand for clipped
+// ones).
+TEST(HoleViews, AFitInTheMosaicLeavesOutItsPixelsAtFullScale) {
+  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  const PlaneScene scene = TruthPlaneScene(plan.truth);
+  const CameraModel& camera = plan.truth.camera.model;
+  const MrcalLensProjection lens(camera);
+  OrthoOptions options;
+  options.gsd_mm = 0.15;
+  const OrthoGeometry mosaic = ComputeOrthoGeometry(camera, scene, options);
+  const Eigen::Vector2d centre_mm =
+      mosaic.tiles[4].footprint_mm.rowwise().mean() + Eigen::Vector2d(40.0, 25.0);
+  const double radius_mm = 5.0;
+  testing::SyntheticHole hole;
+  hole.width_px = mosaic.grid.size_px.x();
+  hole.height_px = mosaic.grid.size_px.y();
+  hole.centre_px = mosaic.grid.MosaicFromPart(centre_mm);
+  hole.radius_px = hole.bottom_radius_px = radius_mm / options.gsd_mm;
+  hole.texture_seed = 7;
+  hole.psf_sigma_px = 0.75;
+  hole.noise_sigma = 0.003;
+  const ImageF rendered = testing::RenderSyntheticHole(hole);
+  const std::vector<ImageF> no_tiles;
+  const double source_px = 1.0 / TilePxPerMosaicPx(mosaic);
+
+  // The surface right of the centre overexposed: of the third of the rim
+  // beyond x = centre + r / 2, the wedges next to pixels at 1.
+  ImageF image = rendered;
+  const int x_clip = static_cast<int>(hole.centre_px.x() + 0.5 * hole.radius_px);
+  image.rightCols(image.cols() - x_clip) =
+      (image.rightCols(image.cols() - x_clip).array() * 2.2f).min(1.0f);
+  HoleViewInputs in{scene, lens, mosaic, camera, no_tiles, {}, source_px, &image};
+  const HoleFit partly = FitHoleInMosaic(in, centre_mm, radius_mm);
+  ASSERT_TRUE(partly.circle.ok) << partly.circle.error;
+  std::printf("partly clipped: %s\n", partly.circle.Brief().c_str());
+  EXPECT_GT(partly.circle.num_saturated, partly.circle.num_wedges / 10);
+  EXPECT_LT(partly.circle.num_saturated, partly.circle.num_wedges / 3);
+  EXPECT_LT((partly.circle.centre_px - hole.centre_px).norm(), 0.05);
+
+  // Clipped all round: refused.
+  image = (rendered.array() * 2.2f).min(1.0f);
+  const HoleFit clipped = FitHoleInMosaic(in, centre_mm, radius_mm);
+  EXPECT_FALSE(clipped.circle.ok);
+  EXPECT_EQ(clipped.circle.error.rfind("rim saturated", 0), 0u) << clipped.circle.error;
 }
 
 // The views' own grid only when the mosaic's pixel is far from the tiles'.
