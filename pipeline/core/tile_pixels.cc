@@ -20,6 +20,11 @@ std::optional<Eigen::Vector2d> TilePixelOfPartPoint(const LensProjection& lens,
   Eigen::Vector2d q;
   const Eigen::Vector3d p = CameraPointOfPartPoint(scene.cam_from_part_r, scene, tile, part_mm);
   if (!lens.Project(p, scene.intrinsics.data(), &q, nullptr, nullptr)) return std::nullopt;
+  // The unprojection converges to 1e-9 px: its point is within ~1e-9 mm of
+  // P where q is P's own pixel, tens of mm away where the lens folded.
+  constexpr double kRoundTripMm = 1e-6;
+  const std::optional<Eigen::Vector2d> back = PartPointOfTilePixel(lens, scene, tile, q);
+  if (!back || (*back - part_mm).norm() > kRoundTripMm) return std::nullopt;
   return q;
 }
 

@@ -20,7 +20,13 @@ Eigen::Vector3d CameraPointOfPartPoint(const Eigen::Vector3d& cam_from_part_r,
                                        const Eigen::Vector2d& part_mm);
 
 // Pixel of the part point P (Z = 0, mm) in tile `tile` under `scene`
-// (scene.intrinsics); nullopt where the lens cannot project it.
+// (scene.intrinsics); nullopt where the lens cannot project it, or where the
+// pixel is not the point's: far outside the image a polynomial lens model
+// (OPENCV8's rational one) folds back and maps the point into the image,
+// and the pixel's own part point (PartPointOfTilePixel) is another. That
+// fold had a tile on the far side of the mosaic count as seeing a hole
+// (lens-mismatch seed 347: taken first, its fit failed, "100 % of the rim
+// not covered").
 std::optional<Eigen::Vector2d> TilePixelOfPartPoint(const LensProjection& lens,
                                                     const PlaneScene& scene, int tile,
                                                     const Eigen::Vector2d& part_mm);

@@ -73,6 +73,25 @@ TEST(TilePixels, PartPointsComeBackFromTheirPixels) {
   }
 }
 
+// Beyond |u| = 1 / sqrt(3 |k1|) the radial term folds the image back: at
+// |u| = 1.75 and k1 = -0.3 a point lands at 0.14 f from the principal point,
+// inside the image, though the lens's own view of it would be far outside.
+// That is no pixel of the point.
+TEST(TilePixels, NoPixelWhereTheLensFoldsBack) {
+  const RadialLens lens;
+  PlaneScene scene = TiltedScene(-0.3);
+  scene.cam_from_part_r = Eigen::Vector3d::Zero();
+  scene.cam_from_part_t_mm = Eigen::Vector3d(0.0, 0.0, 400.0);
+  const Eigen::Vector2d folded(700.0, 0.0), seen(120.0, 0.0);  // |u| 1.75 and 0.3
+  Eigen::Vector2d q;
+  ASSERT_TRUE(lens.Project(CameraPointOfPartPoint(scene.cam_from_part_r, scene, 0, folded),
+                           scene.intrinsics.data(), &q, nullptr, nullptr));
+  EXPECT_GT(q.x(), 0.0);
+  EXPECT_LT(q.x(), 1600.0);  // inside the image
+  EXPECT_FALSE(TilePixelOfPartPoint(lens, scene, 0, folded).has_value());
+  EXPECT_TRUE(TilePixelOfPartPoint(lens, scene, 0, seen).has_value());
+}
+
 TEST(TilePixels, NoPartPointWhereTheRayMissesThePlane) {
   const RadialLens lens;
   PlaneScene behind = TiltedScene(0.0);
