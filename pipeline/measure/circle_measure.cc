@@ -1087,8 +1087,7 @@ CircleMeasurement MeasureCircle(const ImageF& image, const Eigen::Vector2d& expe
                                 const std::optional<BorePrior>& prior, const ImageMask* saturated) {
   assert(options.Check().empty() && nominal_radius_px > 0.0);
   CircleMeasurement result;
-  const double search =
-      options.search_fraction * 2.0 * nominal_radius_px + options.search_margin_px;
+  const double search = options.SearchPx(nominal_radius_px);
   result.coarse_centre_px = VoteCentre(image, expected_centre_px, nominal_radius_px, search);
   Circle circle{result.coarse_centre_px, nominal_radius_px};
   double band = options.rim_band_px;

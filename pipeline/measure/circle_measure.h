@@ -159,6 +159,10 @@ struct CircleMeasureOptions {
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
+  // How far from the expected centre the centre is looked for, px.
+  double SearchPx(double nominal_radius_px) const {
+    return search_fraction * 2.0 * nominal_radius_px + search_margin_px;
+  }
 };
 
 struct CircleMeasurement {

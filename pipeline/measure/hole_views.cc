@@ -21,6 +21,12 @@ double FitReachPx(const CircleMeasureOptions& options) {
   return options.rim_band_px + options.profile_half_width_px + 1.0;
 }
 
+// How far from the expected centre a fit of a hole of radius_px, searched
+// for within search_px, reads pixels (one more for rounding).
+double PixelsReachPx(double radius_px, double search_px, const CircleMeasureOptions& options) {
+  return radius_px * (1.0 + options.max_radius_deviation) + search_px + FitReachPx(options) + 2.0;
+}
+
 // A fit that failed for its rim's saturated pixels (CircleMeasureOptions::max_saturated_fraction).
 bool RimSaturated(const CircleMeasurement& circle, const CircleMeasureOptions& options) {
   return !circle.ok && circle.num_saturated > options.max_saturated_fraction * circle.num_wedges;
@@ -69,8 +75,7 @@ HoleFit FitInTile(const HoleViewInputs& in, int tile, const Eigen::Vector2d& exp
                   double radius_px, CircleMeasureOptions options, double search_px) {
   options.search_fraction = 0.0;
   options.search_margin_px = search_px;
-  const double reach =
-      radius_px * (1.0 + options.max_radius_deviation) + search_px + FitReachPx(options) + 2.0;
+  const double reach = PixelsReachPx(radius_px, search_px, options);
   const Eigen::Vector2i min_px = (expected_px.array() - reach).floor().cast<int>();
   const int size = static_cast<int>(std::ceil(2.0 * reach)) + 1;
   const OrthoPatch patch =
@@ -112,10 +117,8 @@ HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_
   if (in.mosaic_grid) options.source_px = in.mosaic_source_px;
   const Eigen::Vector2d expected_px = grid.MosaicFromPart(centre_mm);
   const double radius_px = radius_mm / grid.gsd_mm;
-  const double reach_px = radius_px * (1.0 + options.max_radius_deviation) +
-                          options.search_fraction * 2.0 * radius_px + options.search_margin_px +
-                          FitReachPx(options) + 2.0;
-  const ImageMask saturated = SaturatedInMosaic(*in.mosaic, expected_px, reach_px);
+  const ImageMask saturated = SaturatedInMosaic(
+      *in.mosaic, expected_px, PixelsReachPx(radius_px, options.SearchPx(radius_px), options));
   fit.circle = MeasureCircle(*in.mosaic, expected_px, radius_px, options, nadir_px, in.bore_prior,
                              saturated.size() ? &saturated : nullptr);
   if (in.mosaic_grid) {
@@ -142,7 +145,7 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
   const double radius_px = radius_mm / grid.gsd_mm;
   const double reach_mm = FitReachPx(options) * grid.gsd_mm;
   const int width_px = in.camera.width_px, height_px = in.camera.height_px;
-  const double search_px = options.search_fraction * 2.0 * radius_px + options.search_margin_px;
+  const double search_px = options.SearchPx(radius_px);
   const Eigen::Vector2d expected_px = grid.MosaicFromPart(near_part_mm);
   const std::vector<int> first = TilesSeeingDisc(in.lens, in.scene, near_part_mm,
                                                  radius_mm + reach_mm, width_px, height_px, 0.0);
