@@ -14,29 +14,49 @@
 namespace omm {
 namespace {
 
+// The simulator's default scene (its truth) and lens.
+struct DefaultScene {
+  SimulationPlan plan = PlanSimulation(SimulationOptions{});
+  PlaneScene scene = TruthPlaneScene(plan.truth);
+  const CameraModel& camera = plan.truth.camera.model;
+  MrcalLensProjection lens{camera};
+
+  OrthoGeometry Mosaic(double gsd_mm) const {
+    OrthoOptions options;
+    options.gsd_mm = gsd_mm;
+    return ComputeOrthoGeometry(camera, scene, options);
+  }
+};
+
+// Where the holes below lie: in tile 4, 47 mm from its centre.
+Eigen::Vector2d HoleCentreMm(const OrthoGeometry& mosaic) {
+  return mosaic.tiles[4].footprint_mm.rowwise().mean() + Eigen::Vector2d(40.0, 25.0);
+}
+
+// A hole of radius_mm there (flat, no wall) on `mosaic`'s whole grid.
+testing::SyntheticHole HoleOnMosaic(const OrthoGeometry& mosaic, double radius_mm) {
+  testing::SyntheticHole hole;
+  hole.width_px = mosaic.grid.size_px.x();
+  hole.height_px = mosaic.grid.size_px.y();
+  hole.centre_px = mosaic.grid.MosaicFromPart(HoleCentreMm(mosaic));
+  hole.radius_px = hole.bottom_radius_px = radius_mm / mosaic.grid.gsd_mm;
+  return hole;
+}
+
 // A hole found only in the blended mosaic, when the views are on a finer
 // grid than the mosaic's (MeasurementGeometry): the fit is made on the
 // mosaic's pixels and handed back in the views' px, where the truth is.
 TEST(HoleViews, AFitInACoarserMosaicComesBackOnTheViewsGrid) {
-  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
-  const PlaneScene scene = TruthPlaneScene(plan.truth);
-  const CameraModel& camera = plan.truth.camera.model;
-  const MrcalLensProjection lens(camera);
-  OrthoOptions coarse, fine;
-  coarse.gsd_mm = 0.3;
-  fine.gsd_mm = 0.15;
-  const OrthoGeometry mosaic = ComputeOrthoGeometry(camera, scene, coarse);
-  const OrthoGeometry views = ComputeOrthoGeometry(camera, scene, fine);
+  const DefaultScene d;
+  const PlaneScene& scene = d.scene;
+  const CameraModel& camera = d.camera;
+  const MrcalLensProjection& lens = d.lens;
+  const OrthoGeometry mosaic = d.Mosaic(0.3), views = d.Mosaic(0.15);
 
-  // A 20 mm hole (flat surface, no wall) in tile 4, 47 mm from its centre.
-  const Eigen::Vector2d centre_mm =
-      mosaic.tiles[4].footprint_mm.rowwise().mean() + Eigen::Vector2d(40.0, 25.0);
+  // A 20 mm hole.
+  const Eigen::Vector2d centre_mm = HoleCentreMm(mosaic);
   const double radius_mm = 10.0;
-  testing::SyntheticHole hole;
-  hole.width_px = mosaic.grid.size_px.x();
-  hole.height_px = mosaic.grid.size_px.y();
-  hole.centre_px = mosaic.grid.MosaicFromPart(centre_mm);
-  hole.radius_px = hole.bottom_radius_px = radius_mm / coarse.gsd_mm;
+  testing::SyntheticHole hole = HoleOnMosaic(mosaic, radius_mm);
   hole.noise_sigma = 0.01;
   const ImageF image = testing::RenderSyntheticHole(hole);
 
@@ -60,7 +80,7 @@ TEST(HoleViews, AFitInACoarserMosaicComesBackOnTheViewsGrid) {
   // ... near the truth there (the fit's own accuracy is circle_measure_test's:
   // here 0.009 mosaic px off centre, 0.001 in radius).
   EXPECT_LT((handed.circle.centre_px - views.grid.MosaicFromPart(centre_mm)).norm(), 0.05);
-  EXPECT_NEAR(handed.circle.radius_px, radius_mm / fine.gsd_mm, 0.05);
+  EXPECT_NEAR(handed.circle.radius_px, radius_mm / views.grid.gsd_mm, 0.05);
 }
 
 // A hole found only in the blended mosaic, where the surface beside part of
@@ -68,21 +88,11 @@ TEST(HoleViews, AFitInACoarserMosaicComesBackOnTheViewsGrid) {
 // refused, as in a tile's patch (the mosaic's pixels at 1 stand for clipped
 // ones).
 TEST(HoleViews, AFitInTheMosaicLeavesOutItsPixelsAtFullScale) {
-  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
-  const PlaneScene scene = TruthPlaneScene(plan.truth);
-  const CameraModel& camera = plan.truth.camera.model;
-  const MrcalLensProjection lens(camera);
-  OrthoOptions options;
-  options.gsd_mm = 0.15;
-  const OrthoGeometry mosaic = ComputeOrthoGeometry(camera, scene, options);
-  const Eigen::Vector2d centre_mm =
-      mosaic.tiles[4].footprint_mm.rowwise().mean() + Eigen::Vector2d(40.0, 25.0);
+  const DefaultScene d;
+  const OrthoGeometry mosaic = d.Mosaic(0.15);
+  const Eigen::Vector2d centre_mm = HoleCentreMm(mosaic);
   const double radius_mm = 5.0;
-  testing::SyntheticHole hole;
-  hole.width_px = mosaic.grid.size_px.x();
-  hole.height_px = mosaic.grid.size_px.y();
-  hole.centre_px = mosaic.grid.MosaicFromPart(centre_mm);
-  hole.radius_px = hole.bottom_radius_px = radius_mm / options.gsd_mm;
+  testing::SyntheticHole hole = HoleOnMosaic(mosaic, radius_mm);
   hole.texture_seed = 7;
   hole.psf_sigma_px = 0.75;
   hole.noise_sigma = 0.003;
@@ -96,7 +106,7 @@ TEST(HoleViews, AFitInTheMosaicLeavesOutItsPixelsAtFullScale) {
   const int x_clip = static_cast<int>(hole.centre_px.x() + 0.5 * hole.radius_px);
   image.rightCols(image.cols() - x_clip) =
       (image.rightCols(image.cols() - x_clip).array() * 2.2f).min(1.0f);
-  HoleViewInputs in{scene, lens, mosaic, camera, no_tiles, {}, source_px, &image};
+  HoleViewInputs in{d.scene, d.lens, mosaic, d.camera, no_tiles, {}, source_px, &image};
   const HoleFit partly = FitHoleInMosaic(in, centre_mm, radius_mm);
   ASSERT_TRUE(partly.circle.ok) << partly.circle.error;
   std::printf("partly clipped: %s\n", partly.circle.Brief().c_str());
@@ -113,15 +123,11 @@ TEST(HoleViews, AFitInTheMosaicLeavesOutItsPixelsAtFullScale) {
 
 // The views' own grid only when the mosaic's pixel is far from the tiles'.
 TEST(HoleViews, MeasurementGeometryOnlyForAMosaicFarFromTheTilesPixel) {
-  const SimulationPlan plan = PlanSimulation(SimulationOptions{});
-  const PlaneScene scene = TruthPlaneScene(plan.truth);
-  const CameraModel& camera = plan.truth.camera.model;
+  const DefaultScene d;
   for (const double gsd_mm : {0.1, 0.15, 0.3}) {
-    OrthoOptions options;
-    options.gsd_mm = gsd_mm;
-    const OrthoGeometry mosaic = ComputeOrthoGeometry(camera, scene, options);
+    const OrthoGeometry mosaic = d.Mosaic(gsd_mm);
     const double ratio = TilePxPerMosaicPx(mosaic);
-    const std::optional<OrthoGeometry> views = MeasurementGeometry(camera, scene, mosaic);
+    const std::optional<OrthoGeometry> views = MeasurementGeometry(d.camera, d.scene, mosaic);
     EXPECT_EQ(views.has_value(), ratio > 1.25 || ratio < 0.8) << gsd_mm << " mm: " << ratio;
     if (views) {
       EXPECT_NEAR(TilePxPerMosaicPx(*views), 1.0, 0.01) << gsd_mm;
