@@ -33,11 +33,11 @@ bool RimSaturated(const CircleMeasurement& circle, const CircleMeasureOptions& o
 }
 
 // The mosaic's pixels that stand for clipped ones, within `reach_px` of
-// `centre_px`: those at its full scale (1: clamped there, a tile's clipped
-// sample or a tile lifted beyond it by its exposure), and their neighbours
-// within 2 px, whose interpolation may have read the same clipped samples
-// (the tiles' 4 x 4 support: ortho_patch.h). An empty mask where there are
-// none, as RenderTilePatch gives.
+// `centre_px`: those at its full scale (1: where every tile that sees the
+// pixel read a clipped sample, or one was lifted beyond it by its exposure;
+// orthorectify.h), and their neighbours within 2 px, whose blend may be
+// near a clipped sample's support (ortho_patch.h). An empty mask where
+// there are none, as RenderTilePatch gives.
 ImageMask SaturatedInMosaic(const ImageF& mosaic, const Eigen::Vector2d& centre_px,
                             double reach_px) {
   constexpr int kSupportPx = 2;

@@ -78,8 +78,9 @@ struct HoleViews {
   int num_seeing = 0;                 // tiles that see the hole whole
   std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole (and a mosaic is given)
   // The first of `failed` that failed as "rim saturated", if any. The mosaic
-  // then is not fitted: it marks only its pixels at full scale, and where
-  // tiles blend, a clipped sample is averaged below it.
+  // then is not fitted: its rim there is at full scale where that tile alone
+  // sees it, else pieced from other tiles' partial views; "lower the
+  // exposure" is the more useful answer.
   const HoleFit* SaturatedFit() const;
 };
 
@@ -92,8 +93,9 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
                        double radius_mm);
 
 // The hole in the blended mosaic (in.mosaic, which must be set); its pixels
-// at full scale (clamped there) and those within 2 px of them are taken for
-// saturated, as a tile patch's are (CircleMeasureOptions::max_saturated_fraction).
+// at full scale (clipped or clamped there) and those within 2 px of them are
+// taken for saturated, as a tile patch's are
+// (CircleMeasureOptions::max_saturated_fraction).
 HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_mm,
                         double radius_mm);
 

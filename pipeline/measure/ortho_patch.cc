@@ -9,17 +9,6 @@ namespace {
 
 constexpr int kPrefilterMarginPx = 16;
 
-// Whether the 4 x 4 samples a cubic interpolator reads at q hold one at full
-// scale.
-bool ReadsSaturated(const ImageF& image, const Eigen::Vector2d& q) {
-  const int x0 = static_cast<int>(std::floor(q.x())) - 1;
-  const int y0 = static_cast<int>(std::floor(q.y())) - 1;
-  for (int y = std::max(y0, 0); y <= std::min(y0 + 3, static_cast<int>(image.rows()) - 1); ++y)
-    for (int x = std::max(x0, 0); x <= std::min(x0 + 3, static_cast<int>(image.cols()) - 1); ++x)
-      if (image(y, x) >= 1.0f) return true;
-  return false;
-}
-
 }  // namespace
 
 OrthoPatch RenderTilePatch(const OrthoGeometry& geometry, int tile, const ImageF& tile_image,
@@ -73,13 +62,17 @@ OrthoPatch RenderTilePatch(const OrthoGeometry& geometry, int tile, const ImageF
   const ImageF sampled =
       interpolator == OrthoInterpolator::kCubicBSpline ? CubicBSplineCoefficients(crop) : crop;
   const Eigen::Vector2d shift(x0, y0);  // integers: q - shift keeps q's fraction exactly
-  const bool any_saturated = crop.maxCoeff() >= 1.0f;
-  if (any_saturated) patch.saturated = ImageMask::Zero(height, width);
+  const ImageMask clipped = ClippedSupport(crop);
+  if (clipped.size() > 0) patch.saturated = ImageMask::Zero(height, width);
   for (int r = 0; r < height; ++r) {
     for (int c = 0; c < width; ++c) {
       const size_t i = static_cast<size_t>(r) * width + c;
       if (!seen[i]) continue;
-      if (any_saturated && ReadsSaturated(crop, q[i] - shift)) patch.saturated(r, c) = 1;
+      if (clipped.size() > 0) {
+        const Eigen::Vector2d in_crop = q[i] - shift;
+        patch.saturated(r, c) =
+            clipped(static_cast<int>(in_crop.y()), static_cast<int>(in_crop.x()));
+      }
       const double v = SampleCubic(interpolator, sampled, q[i] - shift) /
                        exposure.Factor(geometry.vignetting.Rho2(q[i]));
       patch.pixels(r, c) = std::max(static_cast<float>(v), kDarkestCovered);

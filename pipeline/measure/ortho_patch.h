@@ -4,14 +4,15 @@
 // (border distance > 0), the same interpolator and exposure division, and
 // the same floor (kDarkestCovered); beside them, which pixels read a
 // saturated tile sample (1, the file's full scale) in their 4 x 4
-// interpolation support: their value is not the scene's.
+// interpolation support (ClippedSupport): their value is not the scene's
+// (the mosaic draws them at 1).
 //
 // Unlike the mosaic (a file of full scale 1), a patch is not clamped at 1.
-// The exposure gauge is the brightest tile (exposure_compensation.h): the
-// others are scaled up, above 1 where that tile clipped. Clamped, their rims
-// lost the bright side of their steps, unmarked: demo seed 281 with one tile
-// at 2.2 times the others' gain read the diameters in the other tiles 0.2
-// raw px small, 4-6 of their sigmas.
+// The exposure gauge is the median tile (exposure_compensation.h): darker
+// ones are scaled up, above 1 where a brighter tile would have clipped.
+// Clamped, their rims lost the bright side of their steps, unmarked: demo
+// seed 281 with one tile at 2.2 times the others' gain (then the gauge) read
+// the diameters in the other tiles 0.2 raw px small, 4-6 of their sigmas.
 // A hole that several tiles see whole is measured in each such patch: each is
 // an independent picture, with one bottom rim about that tile's nadir
 // (bore_view.h), where the mosaic blends two.

@@ -139,6 +139,60 @@ TEST(OrthoPatch, BlackPixelsATileSeesAreNotUnseen) {
   EXPECT_EQ(((g.array() > 0.0f) == (b.array() == kDarkestCovered)).count(), b.size());
 }
 
+// The mosaic draws no clipped sample where another tile sees the pixel, and
+// 1 (full scale) where none does: of nine gray (0.5) tiles, a corner one
+// clipped (1) but for its top quarter. Every pixel is 0.5, the others' value,
+// but those that the corner tile alone sees and reads a clipped sample at
+// (its patch marks them saturated), which are 1; counted as clipped.
+// Catmull-Rom reads the 4 x 4 support alone; the B-spline's prefilter
+// spreads each sample's value beyond it (as (2 - sqrt(3))^d), so that pixels
+// beside the clipped part would differ from 0.5 by its tail.
+TEST(OrthoPatch, TheMosaicDrawsClippedSamplesOnlyWhereNoOtherTileSees) {
+  PlaneMosaic m(0.5);
+  m.options.interpolator = OrthoInterpolator::kCatmullRom;
+  const OrthoGeometry& geometry = m.geometry;
+  const CameraModel& camera = m.plane.camera;
+  constexpr int kCorner = 0;
+  const int quarter = camera.height_px / 4;
+  std::vector<ImageF> tiles(9, ImageF::Constant(camera.height_px, camera.width_px, 0.5f));
+  tiles[kCorner].bottomRows(camera.height_px - quarter).setOnes();
+  ResampleCounts counts;
+  const ImageF mosaic = ResampleMosaic(geometry, tiles, {}, m.options, {}, &counts);
+  const OrthoPatch patch =
+      RenderTilePatch(geometry, kCorner, tiles[kCorner], TileExposure{}, m.options.interpolator,
+                      Eigen::Vector2i::Zero(), geometry.grid.size_px);
+  ASSERT_EQ(patch.saturated.rows(), mosaic.rows());
+  int num_clipped_alone = 0, num_clipped_seen_by_others = 0, num_full_scale = 0;
+  for (int row = 0; row < mosaic.rows(); ++row) {
+    for (int col = 0; col < mosaic.cols(); ++col) {
+      num_full_scale += mosaic(row, col) == 1.0f;
+      // Away from the borders' and the clipped half's edges, where the row
+      // interpolation of the map (1e-5 px) could tip the tests.
+      bool others = false, ambiguous = false;
+      for (int t = 0; t < 9; ++t) {
+        Eigen::Vector2d q;
+        if (!geometry.TilePixel(t, col, row, &q)) continue;
+        const double d = geometry.BorderDistancePx(q);
+        ambiguous = ambiguous || std::abs(d) < 1e-3 ||
+                    (t == kCorner && std::abs(q.y() - std::round(q.y())) < 1e-3);
+        others = others || (t != kCorner && d > 0.0);
+      }
+      if (ambiguous || !(mosaic(row, col) > 0.0f)) continue;
+      const bool clipped = patch.saturated(row, col) != 0;
+      if (clipped && !others) {
+        ++num_clipped_alone;
+        ASSERT_EQ(mosaic(row, col), 1.0f) << col << ", " << row;
+      } else {
+        num_clipped_seen_by_others += clipped;
+        ASSERT_NEAR(mosaic(row, col), 0.5f, 1e-6) << col << ", " << row;
+      }
+    }
+  }
+  EXPECT_GT(num_clipped_alone, 1000);
+  EXPECT_GT(num_clipped_seen_by_others, 1000);
+  EXPECT_EQ(counts.clipped_px, num_full_scale);
+}
+
 // A patch marks the pixels whose 4 x 4 interpolation support reads a tile
 // sample at full scale (the camera clipped it), and only those.
 TEST(OrthoPatch, MarksThePixelsThatReadSaturatedSamples) {

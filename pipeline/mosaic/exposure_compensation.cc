@@ -300,18 +300,21 @@ std::optional<std::vector<TileExposure>> DescendAlong(const Samples& samples,
   return std::nullopt;
 }
 
-// The gauge: the brightest tile that has samples keeps gain 1. Its index.
+// The gauge: the tile of median gain (the lower of two) among those with
+// samples keeps gain 1. Its index. The median is a continuous function of
+// the gains, so the scale does not jump between iterations.
 int NormaliseGains(const std::vector<int>& tile_count, std::vector<TileExposure>* exposure) {
   std::vector<TileExposure>& e = *exposure;
-  int reference = -1;
+  std::vector<int> with_samples;
   for (size_t i = 0; i < e.size(); ++i) {
-    if (tile_count[i] > 0 && (reference < 0 || e[i].gain > e[reference].gain))
-      reference = static_cast<int>(i);
+    if (tile_count[i] > 0) with_samples.push_back(static_cast<int>(i));
   }
+  const auto median = with_samples.begin() + (with_samples.size() - 1) / 2;
+  std::nth_element(with_samples.begin(), median, with_samples.end(),
+                   [&e](int a, int b) { return e[a].gain < e[b].gain; });
+  const int reference = *median;
   const double scale = e[reference].gain;
-  for (size_t i = 0; i < e.size(); ++i) {
-    if (tile_count[i] > 0) e[i].gain /= scale;
-  }
+  for (const int i : with_samples) e[i].gain /= scale;
   return reference;
 }
 

@@ -62,4 +62,10 @@ inline float SampleCubic(OrthoInterpolator kind, const ImageF& image, const Eige
   return (wx * (wy(0) * r0 + wy(1) * r1 + wy(2) * r2 + wy(3) * r3)).sum();
 }
 
+// Per pixel (row, col) of `image`: whether the 4 x 4 samples SampleCubic
+// reads at a q with floor(q) = (col, row) hold one at full scale (>= 1, a
+// clipped sample: the value interpolated there is not the scene's). Empty
+// when no sample is at full scale. Pure.
+ImageMask ClippedSupport(const ImageF& image);
+
 }  // namespace omm

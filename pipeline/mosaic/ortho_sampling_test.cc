@@ -9,6 +9,7 @@
 #include <map>
 #include <random>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -33,6 +34,33 @@ TEST(CubicBSpline, CoefficientsReproduceThePixels) {
                    image(y, x)));
   // Float coefficients: a few float epsilons of the [0, 1] values.
   EXPECT_LT(max_error, 2e-6);
+}
+
+// ClippedSupport marks a pixel when the 4 x 4 samples that SampleCubic reads
+// for q in it (floor(q) - 1 .. floor(q) + 2 per axis) hold one at full
+// scale, and only then: against that definition, pixel by pixel, with
+// clipped samples inside and on the image's border.
+TEST(ClippedSupport, MarksThePixelsWhoseInterpolationReadsAClippedSample) {
+  ImageF image = ImageF::Constant(30, 41, 0.5f);
+  EXPECT_EQ(ClippedSupport(image).size(), 0);
+  const std::vector<std::pair<int, int>> clipped = {{12, 20}, {12, 21}, {0, 40}, {29, 3}};
+  for (const auto& [row, col] : clipped) image(row, col) = 1.0f;
+  const ImageMask mask = ClippedSupport(image);
+  ASSERT_EQ(mask.rows(), image.rows());
+  ASSERT_EQ(mask.cols(), image.cols());
+  int num_marked = 0;
+  for (int r = 0; r < image.rows(); ++r) {
+    for (int c = 0; c < image.cols(); ++c) {
+      bool reads = false;
+      for (const auto& [row, col] : clipped)
+        reads = reads || (row >= r - 1 && row <= r + 2 && col >= c - 1 && col <= c + 2);
+      EXPECT_EQ(mask(r, c) != 0, reads) << r << ", " << c;
+      num_marked += reads;
+    }
+  }
+  // Two adjacent samples inside: 4 x 5; at the corner (0, 40): 2 x 3; at
+  // the border row 29: 3 x 4.
+  EXPECT_EQ(num_marked, 20 + 6 + 12);
 }
 
 // A dark disc (0.2) on a bright ground (0.8) as the renderer images it

@@ -348,6 +348,9 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
     samples = &computed;
   }
   const std::vector<ImageF>& sampled = samples->empty() ? tiles : *samples;
+  // Where each tile's interpolation reads a clipped sample (header).
+  std::vector<ImageMask> clipped_support(num_tiles);
+  for (int i = 0; i < num_tiles; ++i) clipped_support[i] = ClippedSupport(tiles[i]);
 
   // Blocks of rows: the per-row buffers are allocated once per block.
   constexpr int kRowsPerBlock = 16;
@@ -358,11 +361,12 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
   constexpr double kNegligibleBands = 10.0;
   ParallelFor(num_blocks, options.num_threads, [&](int block) {
     // Per tile: its tile pixels along the row's span [min_px.x, max_px.x] and
-    // their border distances (<= 0: unseen).
+    // their border distances (<= 0: unseen, or a clipped sample read).
     std::vector<std::vector<Eigen::Vector2d>> q(num_tiles);
     std::vector<std::vector<char>> q_ok(num_tiles);
     std::vector<std::vector<float>> dist(num_tiles);
     std::vector<float> best(width);
+    std::vector<char> seen(width);  // by a tile, clipped or not
     std::vector<double> sum_w(width), sum_wv(width);
     std::vector<int> active;
     // The whole discs' share of a pixel (1 inside, falling across the band)
@@ -373,6 +377,7 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
          ++row) {
       active.clear();
       std::fill(best.begin(), best.end(), -1.0f);
+      std::fill(seen.begin(), seen.end(), 0);
       for (int i = 0; i < num_tiles; ++i) {
         const TileOrthoMap& map = geometry.tiles[i];
         if (row < map.min_px.y() || row > map.max_px.y()) continue;
@@ -381,9 +386,17 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
         geometry.TileRowPixels(i, row, map.min_px.x(), n, &q[i], &q_ok[i]);
         dist[i].resize(n);
         float* best_span = best.data() + map.min_px.x();
+        char* seen_span = seen.data() + map.min_px.x();
+        const ImageMask& clipped_at = clipped_support[i];
         for (int k = 0; k < n; ++k) {
-          const float d =
-              q_ok[i][k] ? static_cast<float>(geometry.BorderDistancePx(q[i][k])) : -1.0f;
+          float d = q_ok[i][k] ? static_cast<float>(geometry.BorderDistancePx(q[i][k])) : -1.0f;
+          if (d > 0.0f) {
+            seen_span[k] = 1;
+            const Eigen::Vector2d& qk = q[i][k];
+            if (clipped_at.size() > 0 &&
+                clipped_at(static_cast<int>(qk.y()), static_cast<int>(qk.x())) != 0)
+              d = -1.0f;
+          }
           dist[i][k] = d;
           best_span[k] = std::max(best_span[k], d);
         }
@@ -427,7 +440,13 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
       }
       float* out = mosaic.data() + static_cast<std::ptrdiff_t>(row) * width;
       for (int col = 0; col < width; ++col) {
-        if (!(best[col] > 0.0f)) continue;
+        if (!seen[col]) continue;
+        ++covered[block];
+        if (!(best[col] > 0.0f)) {  // every tile that sees it read a clipped sample
+          ++clipped[block];
+          out[col] = 1.0f;
+          continue;
+        }
         double v = sum_wv[col] / sum_w[col];
         if (share[col] > 0.0f) {
           const int t = share_tile[col];
@@ -439,7 +458,6 @@ ImageF ResampleMosaic(const OrthoGeometry& geometry, const std::vector<ImageF>& 
             v = (1.0 - share[col]) * v + share[col] * vt;
           }
         }
-        ++covered[block];
         if (v < 0.0 || v > 1.0) ++clipped[block];
         out[col] = std::clamp(static_cast<float>(v), kDarkestCovered, 1.0f);
       }
