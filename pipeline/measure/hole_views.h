@@ -78,9 +78,10 @@ struct HoleViews {
   int num_seeing = 0;                 // tiles that see the hole whole
   std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole (and a mosaic is given)
   // The first of `failed` that failed as "rim saturated", if any. The mosaic
-  // then is not fitted: its rim there is at full scale where that tile alone
-  // sees it, else pieced from other tiles' partial views; "lower the
-  // exposure" is the more useful answer.
+  // then is not fitted: it draws the hole from that tile where its samples
+  // are not clipped and from the others where they are, a picture of no one
+  // view. Fitted so, 11 holes of demo projects with one tile at 2.2 times
+  // the others' gain read diameters up to 0.26 raw px and 4.8 sigma off.
   const HoleFit* SaturatedFit() const;
 };
 

@@ -226,13 +226,12 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
     HoleFit fit = views_found.mosaic_fit ? std::move(*views_found.mosaic_fit)
                                          : FitHoleInMosaic(in, *near_part, radius_mm);
     const int num_seeing = views_found.num_seeing;
+    const char* outcome = fit.circle.ok ? "measured in the mosaic" : "not found in the mosaic";
     report.extra.emplace_back(
-        "views", num_seeing == 0
-                     ? std::string("measured in the mosaic: no tile sees the hole whole")
-                     : fmt::format("measured in the mosaic: not found in the {} tile{} "
-                                   "that see it whole{}",
-                                   num_seeing, num_seeing > 1 ? "s" : "",
-                                   FailedViewsNote(views_found.failed, saved)));
+        "views", num_seeing == 0 ? fmt::format("{}: no tile sees the hole whole", outcome)
+                                 : fmt::format("{}: not found in the {} tile{} that see it whole{}",
+                                               outcome, num_seeing, num_seeing > 1 ? "s" : "",
+                                               FailedViewsNote(views_found.failed, saved)));
     if (!fit.circle.ok) {
       report.error = fit.circle.error;  // the failed fit's only brief
       return located;
