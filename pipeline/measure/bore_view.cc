@@ -41,15 +41,24 @@ std::vector<int> TilesSeeingDisc(const LensProjection& lens, const PlaneScene& s
                                  const Eigen::Vector2d& centre_mm, double radius_mm, int width_px,
                                  int height_px, double min_border_px) {
   constexpr int kRimPoints = 32;
+  const double sagitta_per_radius = 1.0 - std::cos(std::numbers::pi / kRimPoints);
   std::vector<std::pair<double, int>> seeing;  // (-least border distance, tile)
   for (int tile = 0; tile < static_cast<int>(scene.table_pos_mm.size()); ++tile) {
     double least = INFINITY;
+    Eigen::Vector2d centre_px = Eigen::Vector2d::Zero();
     for (int m = -1; m < kRimPoints && least >= min_border_px; ++m) {
       const double angle = 2.0 * std::numbers::pi * m / kRimPoints;
       const Eigen::Vector2d p =
           centre_mm + (m < 0 ? 0.0 : radius_mm) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
       const auto q = TilePixelOfPartPoint(lens, scene, tile, p);
-      least = q ? std::min(least, TileBorderDistancePx(*q, width_px, height_px)) : -INFINITY;
+      if (!q) {
+        least = -INFINITY;
+        break;
+      }
+      if (m < 0) centre_px = *q;
+      // The rim between two points bulges beyond their chord by the sagitta.
+      const double sagitta = m < 0 ? 0.0 : sagitta_per_radius * (*q - centre_px).norm();
+      least = std::min(least, TileBorderDistancePx(*q, width_px, height_px) - sagitta);
     }
     if (least >= min_border_px) seeing.emplace_back(-least, tile);
   }

@@ -37,7 +37,10 @@ std::optional<int> RenderingTile(const LensProjection& lens, const PlaneScene& s
 
 // The tiles that see the whole disc (centre_mm, radius_mm): the border
 // distance of its pixel (TileBorderDistancePx) is >= min_border_px at the
-// centre and at 32 points of the rim. Best first: by that distance's minimum.
+// centre and at 32 points of the rim, less the most the rim bulges beyond
+// the polygon of those points (its sagitta, r (1 - cos(pi / 32)) for the
+// disc's radius r in tile px: 0.5 px at 108 px). Best first: by that
+// distance's minimum.
 std::vector<int> TilesSeeingDisc(const LensProjection& lens, const PlaneScene& scene,
                                  const Eigen::Vector2d& centre_mm, double radius_mm, int width_px,
                                  int height_px, double min_border_px);

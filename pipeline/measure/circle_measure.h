@@ -163,6 +163,10 @@ struct CircleMeasureOptions {
   double SearchPx(double nominal_radius_px) const {
     return search_fraction * 2.0 * nominal_radius_px + search_margin_px;
   }
+  // How far beyond the circle a fit reads pixels, px: its rays end at the
+  // rim band plus the step profile's half width plus 1, and each sample
+  // there reads a 2 x 2 block reaching sqrt(2) farther; rounded up.
+  double ReachPx() const { return rim_band_px + profile_half_width_px + 3.0; }
 };
 
 struct CircleMeasurement {

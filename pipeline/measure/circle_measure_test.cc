@@ -541,6 +541,40 @@ TEST(CircleMeasure, CutByTheBorderIsAnError) {
   EXPECT_TRUE(m.ok) << m.error;
 }
 
+// ReachPx bounds the pixels a fit reads beyond its circle (what a tile must
+// cover for its view of a hole: TilesSeeingDisc, hole_views.cc): with every
+// pixel beyond it uncovered, about a known centre (a hole's views after the
+// first), the fit is the same to the last bit; at the 8 px that
+// hole_views.cc took before, the rays' ends read uncovered pixels, and two
+// tiles of the reference projects that counted as seeing a hole whole failed
+// as "cut by the mosaic border (2 % / 7 % of the rim not covered)".
+TEST(CircleMeasure, ReachPxBoundsThePixelsAFitReads) {
+  CircleMeasureOptions options;
+  options.search_fraction = 0.0;
+  const double radius = 40.0;
+  // Off the axes (where a sample's 2 x 2 block reaches farthest out).
+  for (const Eigen::Vector2d& normal :
+       {Eigen::Vector2d(0.6, -0.8), Eigen::Vector2d(std::sqrt(0.5), std::sqrt(0.5))}) {
+    SyntheticHole hole = DemoHole(radius, 300.0, 1.0, 43);
+    const CircleMeasurement covered =
+        MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, radius, options);
+    ASSERT_TRUE(covered.ok) << covered.error;
+    hole.uncovered_normal = normal;
+    hole.uncovered_offset_px = normal.dot(hole.centre_px) + radius + options.ReachPx();
+    const CircleMeasurement beyond =
+        MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, radius, options);
+    ASSERT_TRUE(beyond.ok) << beyond.error;
+    EXPECT_EQ(beyond.num_uncovered, 0);
+    EXPECT_EQ(beyond.centre_px, covered.centre_px);
+    EXPECT_EQ(beyond.radius_px, covered.radius_px);
+
+    hole.uncovered_offset_px = normal.dot(hole.centre_px) + radius + options.ReachPx() - 2.0;
+    const CircleMeasurement nearer =
+        MeasureCircle(RenderSyntheticHole(hole), hole.centre_px, radius, options);
+    EXPECT_GT(nearer.num_uncovered, 0);
+  }
+}
+
 // Uncovered pixels deep inside a hole (a gap in the tiles' cover that only
 // its interior falls in) cut the inner end of the rays that cross them; the
 // rest of each ray, out to the rim and beyond, is fitted as before.

@@ -15,16 +15,10 @@ namespace {
 // less than this: their ghost bottom rim is under the mosaic's noise.
 constexpr double kMaxOtherTileWeight = 0.01;
 
-// Beyond the rim, a fit reads pixels out to its rim band plus the step
-// profile's half width (circle_measure.h); one more for rounding.
-double FitReachPx(const CircleMeasureOptions& options) {
-  return options.rim_band_px + options.profile_half_width_px + 1.0;
-}
-
 // How far from the expected centre a fit of a hole of radius_px, searched
 // for within search_px, reads pixels (one more for rounding).
 double PixelsReachPx(double radius_px, double search_px, const CircleMeasureOptions& options) {
-  return radius_px * (1.0 + options.max_radius_deviation) + search_px + FitReachPx(options) + 2.0;
+  return radius_px * (1.0 + options.max_radius_deviation) + search_px + options.ReachPx() + 2.0;
 }
 
 // A fit that failed for its rim's saturated pixels (CircleMeasureOptions::max_saturated_fraction).
@@ -143,7 +137,7 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
   const OrthoGrid& grid = in.geometry.grid;
   const CircleMeasureOptions options = FitOptions(in);
   const double radius_px = radius_mm / grid.gsd_mm;
-  const double reach_mm = FitReachPx(options) * grid.gsd_mm;
+  const double reach_mm = options.ReachPx() * grid.gsd_mm;
   const int width_px = in.camera.width_px, height_px = in.camera.height_px;
   const double search_px = options.SearchPx(radius_px);
   const Eigen::Vector2d expected_px = grid.MosaicFromPart(near_part_mm);
