@@ -104,5 +104,45 @@ TEST(BoreView, TilesSeeingDiscWholeBestFirst) {
   EXPECT_GE(most, 3u);  // some disc lies where three tiles overlap
 }
 
+// Between its 32 rim points the rim bulges beyond their polygon (1 px at
+// 200 px radius): a disc walked towards the centre tile's right border, in
+// 0.05 px steps over 6 px about where its rim meets it, is never listed
+// while the rim (720 points) crosses the border, and is listed up to
+// within 1 px of it.
+TEST(BoreView, TilesSeeingDiscNeverListsATileTheRimLeaves) {
+  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
+  PlaneScene scene = s.truth;
+  scene.intrinsics = s.camera.intrinsics;
+  const MrcalLensProjection lens(s.camera);
+  constexpr int kTile = 4;
+  const double radius = 30.0;
+  const auto centre_at = [&](double x) {
+    return *PartPointOfTilePixel(lens, scene, kTile, Eigen::Vector2d(x, 600.0));
+  };
+  const Eigen::Vector2d middle = centre_at(800.0);
+  const double radius_px =
+      (*TilePixelOfPartPoint(lens, scene, kTile, middle + Eigen::Vector2d(radius, 0.0)) -
+       Eigen::Vector2d(800.0, 600.0))
+          .norm();
+  int num_near_listed = 0;
+  for (double x = 1598.0 - radius_px - 3.0; x < 1598.0 - radius_px + 3.0; x += 0.05) {
+    const Eigen::Vector2d centre = centre_at(x);
+    double least = INFINITY;
+    for (int m = 0; m < 720; ++m) {
+      const double a = m * std::numbers::pi / 360.0;
+      const Eigen::Vector2d p = centre + radius * Eigen::Vector2d(std::cos(a), std::sin(a));
+      least = std::min(
+          least, TileBorderDistancePx(*TilePixelOfPartPoint(lens, scene, kTile, p), 1600, 1200));
+    }
+    const std::vector<int> tiles = TilesSeeingDisc(lens, scene, centre, radius, 1600, 1200, 0.0);
+    const bool listed = std::find(tiles.begin(), tiles.end(), kTile) != tiles.end();
+    if (listed) {
+      EXPECT_GE(least, -0.005) << x;  // the 720 points' own sagitta: 0.002 px
+      if (least < 1.0) ++num_near_listed;
+    }
+  }
+  EXPECT_GT(num_near_listed, 0);
+}
+
 }  // namespace
 }  // namespace omm

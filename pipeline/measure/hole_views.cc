@@ -16,7 +16,7 @@ namespace {
 constexpr double kMaxOtherTileWeight = 0.01;
 
 // How far from the expected centre a fit of a hole of radius_px, searched
-// for within search_px, reads pixels (one more for rounding).
+// for within search_px, reads pixels (two more for rounding).
 double PixelsReachPx(double radius_px, double search_px, const CircleMeasureOptions& options) {
   return radius_px * (1.0 + options.max_radius_deviation) + search_px + options.ReachPx() + 2.0;
 }
