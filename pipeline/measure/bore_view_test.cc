@@ -18,6 +18,19 @@ namespace {
 
 constexpr double kBandPx = 12.0;
 
+// The synthetic plane's scene with its camera's intrinsics, and its lens.
+struct PlaneAndLens {
+  SyntheticPlane plane = MakeSyntheticPlane(SyntheticPlaneOptions{});
+  PlaneScene scene = SceneWithIntrinsics(plane);
+  MrcalLensProjection lens{plane.camera};
+
+  static PlaneScene SceneWithIntrinsics(const SyntheticPlane& plane) {
+    PlaneScene scene = plane.truth;
+    scene.intrinsics = plane.camera.intrinsics;
+    return scene;
+  }
+};
+
 // The nadir lies on the camera's perpendicular to the plane: seen from the
 // camera it is straight along the plane's normal (tilted 3 degrees from the
 // optical axis here), for every tile.
@@ -36,10 +49,9 @@ TEST(BoreView, NadirIsTheFootOfThePerpendicular) {
 // A hole well inside the centre tile is rendered by it; moved onto the seam
 // with the next tile, where both weigh, by none.
 TEST(BoreView, RenderingTileOnlyAwayFromSeams) {
-  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
-  PlaneScene scene = s.truth;
-  scene.intrinsics = s.camera.intrinsics;
-  const MrcalLensProjection lens(s.camera);
+  const PlaneAndLens d;
+  const PlaneScene& scene = d.scene;
+  const MrcalLensProjection& lens = d.lens;
   const Eigen::Vector2d inside(-17.0, 23.0);  // seen by tile 4 only
   EXPECT_EQ(RenderingTile(lens, scene, inside, 5.0, 1600, 1200, kBandPx, 0.01), 4);
   // Walk along +x until two tiles weigh more than 1/4 each: the seam.
@@ -63,10 +75,9 @@ TEST(BoreView, RenderingTileOnlyAwayFromSeams) {
 // listed, one clearly outside (< -1 px) is not, best first; a margin no
 // tile has leaves none. Discs inside the centre tile and in overlaps.
 TEST(BoreView, TilesSeeingDiscWholeBestFirst) {
-  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
-  PlaneScene scene = s.truth;
-  scene.intrinsics = s.camera.intrinsics;
-  const MrcalLensProjection lens(s.camera);
+  const PlaneAndLens d;
+  const PlaneScene& scene = d.scene;
+  const MrcalLensProjection& lens = d.lens;
   size_t most = 0;
   // Where the centre tile sees its middle, a side and two corners.
   for (const Eigen::Vector2d& q :
@@ -110,10 +121,9 @@ TEST(BoreView, TilesSeeingDiscWholeBestFirst) {
 // while the rim (720 points) crosses the border, and is listed up to
 // within 1 px of it.
 TEST(BoreView, TilesSeeingDiscNeverListsATileTheRimLeaves) {
-  const SyntheticPlane s = MakeSyntheticPlane(SyntheticPlaneOptions{});
-  PlaneScene scene = s.truth;
-  scene.intrinsics = s.camera.intrinsics;
-  const MrcalLensProjection lens(s.camera);
+  const PlaneAndLens d;
+  const PlaneScene& scene = d.scene;
+  const MrcalLensProjection& lens = d.lens;
   constexpr int kTile = 4;
   const double radius = 30.0;
   const auto centre_at = [&](double x) {
