@@ -9,11 +9,13 @@
 #include <regex>
 #include <string>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "adapters/opencv/image_io.h"
 #include "adapters/project_io/report_json.h"
+#include "adapters/report_html/label_layout.h"
 #include "tests/test_util.h"
 
 namespace omm {
@@ -246,7 +248,7 @@ TEST(ReportHtml, OverlayFollowsThePixelConvention) {
   // One distance between found features, labelled with value and sigma.
   EXPECT_EQ(Count(html, "<g class=\"distance\">"), 1);
   EXPECT_THAT(html, HasSubstr("<line x1=\"123.500\" y1=\"45.500\" x2=\"400.500\" y2=\"250.500\""));
-  EXPECT_THAT(html, HasSubstr(">A_to_B 34.4000 &#177; 0.0030 mm</text>"));
+  EXPECT_THAT(html, HasSubstr(">A_to_B 34.4000 \u00b1 0.0030 mm</text>"));
 }
 
 TEST(ReportHtml, MeasurementsTableFlagsAndBreaksDown) {
@@ -442,20 +444,25 @@ TEST(ReportCommand, RegeneratesTheReportsFromOut) {
   EXPECT_EQ(testing::RunCommand(command).exit_code, 2);
 }
 
+// Headless Chromium's command line, its profile in `dir`; empty if it is
+// not installed.
+std::string ChromiumCommand(const fs::path& dir) {
+  if (testing::RunCommand("command -v chromium").exit_code != 0) return "";
+  return "timeout 60 chromium --headless --no-sandbox --disable-gpu "
+         "--disable-background-networking "
+         "--disable-component-update --no-first-run --hide-scrollbars --user-data-dir=\"" +
+         (dir / "profile").string() + "\" ";
+}
+
 // The page in headless Chromium: the DOM it builds holds the expected rows
 // (a parser's view of the escaping and the table structure), no console
 // message, and the screenshot shows the embedded mosaic.
 TEST(ReportHtmlChromium, RendersWithoutErrors) {
-  if (testing::RunCommand("command -v chromium").exit_code != 0) {
-    GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
-  }
   const testing::TempDir dir;
+  const std::string chromium = ChromiumCommand(dir.path());
+  if (chromium.empty()) GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
   const fs::path page = dir.path() / "report.html";
   testing::WriteTextFile(page, ReportHtml(FullReport(), FullInputs()));
-  const std::string chromium =
-      "timeout 60 chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
-      "--disable-component-update --no-first-run --hide-scrollbars --user-data-dir=\"" +
-      (dir.path() / "profile").string() + "\" ";
   const std::string url = "\"file://" + page.string() + "\"";
   const fs::path dom_path = dir.path() / "dom.html", log_path = dir.path() / "log.txt";
   const testing::CommandResult dump =
@@ -493,6 +500,81 @@ TEST(ReportHtmlChromium, RendersWithoutErrors) {
   const float gray = std::round(kMosaicGray * 255.f) / 255.f;
   const auto mosaic_px = ((image.pixels.array() - gray).abs() <= 1.5f / 255.f).count();
   EXPECT_GT(mosaic_px, 900 * 600);
+}
+
+// The mosaic figure's labels as the browser sets them: 16 holes on a ring
+// and the 8 distances across it, which all cross at the ring's centre (each
+// distance label's first choice is the same place). The script measures
+// each label's box in the real font (getBBox): no two overlap, and none is
+// wider than TextWidthEstimate, which the layout pads by the labels' halos.
+TEST(ReportHtmlChromium, MosaicLabelsDoNotOverlap) {
+  const testing::TempDir dir;
+  const std::string chromium = ChromiumCommand(dir.path());
+  if (chromium.empty()) GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
+  Report report = FullReport();
+  std::vector<FeatureReport> features;
+  std::vector<MeasurementReport> measurements;
+  std::vector<MeasurementSpec> specs;
+  for (int k = 0; k < 16; ++k) {
+    const double angle = 2 * M_PI * k / 16;
+    features.push_back(Feature(
+        fmt::format("hole_{:02d}", k),
+        PixelCentreMm(300 + 170 * std::cos(angle), 200 + 170 * std::sin(angle)), 1.0 + 0.2 * k));
+  }
+  for (int k = 0; k < 8; ++k) {
+    const std::string name = fmt::format("dist_hole_{:02d}_hole_{:02d}", k, k + 8);
+    measurements.push_back(Measurement(name, MeasurementType::kDistance, 34.0, 0.0021, 34.0));
+    specs.push_back({name, MeasurementType::kDistance, {features[k].name, features[k + 8].name}});
+  }
+  report.features = features;
+  report.measurements = measurements;
+  ReportHtmlInputs inputs = FullInputs();
+  inputs.measurements = specs;
+  std::string page_html = ReportHtml(report, inputs);
+  // The check runs in the page (a copy for the test: the report has no
+  // scripts); its result is a <pre> that --dump-dom shows. Estimated widths
+  // per label text at a font size of 1.
+  std::string estimates = "const em = {";
+  for (const FeatureReport& f : features)
+    estimates += fmt::format("'{}': {},", f.name, TextWidthEstimate(f.name, 1.0));
+  for (const MeasurementReport& m : measurements) {
+    const std::string text =
+        fmt::format("{} {:.4f} \u00b1 {:.4f} mm", m.name, *m.value_mm, *m.sigma_mm);
+    estimates += fmt::format("'{}': {},", text, TextWidthEstimate(text, 1.0));
+  }
+  const std::string script = "<script>\n" + estimates + "};\n" + R"(
+const svg = document.querySelector('svg.mosaic');
+const font_size = parseFloat(svg.getAttribute('font-size'));
+const texts = [...svg.querySelectorAll('text')];
+const boxes = texts.map(t => t.getBBox());
+let overlaps = 0, wider = 0;
+for (let i = 0; i < boxes.length; ++i) {
+  const a = boxes[i];
+  if (!(a.width <= em[texts[i].textContent] * font_size)) ++wider;
+  for (let j = 0; j < i; ++j) {
+    const b = boxes[j];
+    if (a.x < b.x + b.width && b.x < a.x + a.width && a.y < b.y + b.height && b.y < a.y + a.height)
+      ++overlaps;
+  }
+}
+const pre = document.createElement('pre');
+pre.id = 'layout';
+pre.textContent = `labels ${texts.length} overlaps ${overlaps} wider ${wider}` +
+    ` (${boxes.map((b, i) => texts[i].textContent + ": " + b.width.toFixed(1) + "/" + (em[texts[i].textContent] * font_size).toFixed(1)).join(", ")})`;
+document.body.appendChild(pre);
+</script>)";
+  page_html.insert(page_html.rfind("</body>"), script);
+  const fs::path page = dir.path() / "report.html";
+  testing::WriteTextFile(page, page_html);
+  const fs::path dom_path = dir.path() / "dom.html";
+  ASSERT_EQ(testing::RunCommand(chromium + "--dump-dom \"file://" + page.string() + "\" >\"" +
+                                dom_path.string() + "\" 2>/dev/null")
+                .exit_code,
+            0);
+  // 16 holes' names, 8 distances, and FullInputs' distance (A_to_B) whose
+  // holes are not in this report: not drawn.
+  EXPECT_THAT(testing::ReadTextFile(dom_path),
+              HasSubstr("<pre id=\"layout\">labels 24 overlaps 0 wider 0 ("));
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 
 #include "adapters/opencv/image_io.h"
 #include "adapters/project_io/text_file.h"
+#include "adapters/report_html/label_layout.h"
 #include "pipeline/core/error.h"
 #include "pipeline/core/statistics.h"
 
@@ -282,6 +283,20 @@ std::string MosaicFigure(const Report& report, const ReportHtmlInputs& inputs) {
       "<image x=\"0\" y=\"0\" width=\"{0:g}\" height=\"{1:g}\" preserveAspectRatio=\"none\" "
       "href=\"data:image/png;base64,{3}\"/>\n",
       w, h, 14 * unit, Base64(inputs.mosaic_png));
+  // Shapes first, then the labels over them, each placed where it covers
+  // no other label (label_layout.h): features' names first, then distances.
+  const double font_size = 14 * unit, halo = 3 * unit;
+  struct Label {
+    const char* css_class;
+    const char* colour;
+    std::string text;  // escaped
+    std::vector<Eigen::AlignedBox2d> candidates;
+  };
+  std::vector<Label> labels;
+  // A label's box: its ink (DejaVu Sans: ascent 0.93 em, descent 0.24 em)
+  // and its halo, half of which lies outside the glyphs, plus a unit.
+  const double pad = halo / 2 + unit, label_h = 1.17 * font_size + 2 * pad;
+  auto label_w = [&](std::string_view raw) { return TextWidthEstimate(raw, font_size) + 2 * pad; };
   std::map<std::string, Eigen::Vector2d> centres;  // features found, user space
   std::string not_found;
   if (report.features) {
@@ -292,14 +307,16 @@ std::string MosaicFigure(const Report& report, const ReportHtmlInputs& inputs) {
         // convention): a dashed mark, so that a reader finds the place.
         if (const std::optional<Eigen::Vector2d> px =
                 AsPair(Member(f.extra, "expected_mosaic_px"))) {
-          const double x = px->x() + 0.5, y = px->y() + 0.5, r = 10 * unit;
+          const Eigen::Vector2d c = *px + Eigen::Vector2d(0.5, 0.5);
+          const double r = 10 * unit;
           svg += fmt::format(
               "<g class=\"not-found\"><circle cx=\"{:.3f}\" cy=\"{:.3f}\" r=\"{:.3f}\" "
               "fill=\"none\" stroke=\"#d00000\" stroke-width=\"2\" stroke-dasharray=\"4 3\" "
-              "vector-effect=\"non-scaling-stroke\"/><text x=\"{:.3f}\" y=\"{:.3f}\" "
-              "fill=\"#d00000\" stroke=\"white\" stroke-width=\"{:.2f}\" "
-              "paint-order=\"stroke\">{} (not found)</text></g>\n",
-              x, y, r, x + r, y - r, 3 * unit, Escape(f.name));
+              "vector-effect=\"non-scaling-stroke\"/></g>\n",
+              c.x(), c.y(), r);
+          const std::string raw = f.name + " (not found)";
+          labels.push_back({"not-found-label", "#d00000", Escape(raw),
+                            CircleLabelCandidates(c, r, unit, label_w(raw), label_h)});
         }
         continue;
       }
@@ -308,10 +325,10 @@ std::string MosaicFigure(const Report& report, const ReportHtmlInputs& inputs) {
       const double r = f.diameter_mm ? *f.diameter_mm / 2 / gsd : 6 * unit;
       svg += fmt::format(
           "<g class=\"feature\"><circle cx=\"{:.3f}\" cy=\"{:.3f}\" r=\"{:.3f}\" fill=\"none\" "
-          "stroke=\"#ff2a6d\" stroke-width=\"2\" vector-effect=\"non-scaling-stroke\"/>"
-          "<text x=\"{:.3f}\" y=\"{:.3f}\" fill=\"#ff2a6d\" stroke=\"white\" "
-          "stroke-width=\"{:.2f}\" paint-order=\"stroke\">{}</text></g>\n",
-          c.x(), c.y(), r, c.x() + 0.75 * r, c.y() - 0.75 * r, 3 * unit, Escape(f.name));
+          "stroke=\"#ff2a6d\" stroke-width=\"2\" vector-effect=\"non-scaling-stroke\"/></g>\n",
+          c.x(), c.y(), r);
+      labels.push_back({"feature-label", "#ff2a6d", Escape(f.name),
+                        CircleLabelCandidates(c, r, unit, label_w(f.name), label_h)});
     }
   }
   std::map<std::string, const MeasurementReport*> values;
@@ -322,21 +339,33 @@ std::string MosaicFigure(const Report& report, const ReportHtmlInputs& inputs) {
     if (spec.type != MeasurementType::kDistance || spec.features.size() != 2) continue;
     const auto a = centres.find(spec.features[0]), b = centres.find(spec.features[1]);
     if (a == centres.end() || b == centres.end()) continue;
-    std::string label = Escape(spec.name);
+    std::string raw = spec.name;
     if (const auto m = values.find(spec.name); m != values.end() && m->second->value_mm) {
-      label += fmt::format(" {:.4f}", *m->second->value_mm);
-      if (m->second->sigma_mm) label += fmt::format(" &#177; {:.4f}", *m->second->sigma_mm);
-      label += " mm";
+      raw += fmt::format(" {:.4f}", *m->second->value_mm);
+      if (m->second->sigma_mm) raw += fmt::format(" \u00b1 {:.4f}", *m->second->sigma_mm);
+      raw += " mm";
     }
-    const Eigen::Vector2d mid = (a->second + b->second) / 2;
     svg += fmt::format(
         "<g class=\"distance\"><line x1=\"{:.3f}\" y1=\"{:.3f}\" x2=\"{:.3f}\" y2=\"{:.3f}\" "
-        "stroke=\"#05d9e8\" stroke-width=\"1.5\" vector-effect=\"non-scaling-stroke\"/>"
-        "<text x=\"{:.3f}\" y=\"{:.3f}\" text-anchor=\"middle\" fill=\"#005f73\" stroke=\"white\" "
-        "stroke-width=\"{:.2f}\" paint-order=\"stroke\">{}</text></g>\n",
-        a->second.x(), a->second.y(), b->second.x(), b->second.y(), mid.x(), mid.y() - 4 * unit,
-        3 * unit, label);
+        "stroke=\"#05d9e8\" stroke-width=\"1.5\" vector-effect=\"non-scaling-stroke\"/></g>\n",
+        a->second.x(), a->second.y(), b->second.x(), b->second.y());
+    labels.push_back({"distance-label", "#005f73", Escape(raw),
+                      SegmentLabelCandidates(a->second, b->second, unit, label_w(raw), label_h)});
   }
+  std::vector<std::vector<Eigen::AlignedBox2d>> candidates;
+  for (const Label& label : labels) candidates.push_back(label.candidates);
+  const std::vector<int> chosen =
+      PlaceLabels(candidates, Eigen::AlignedBox2d(Eigen::Vector2d::Zero(), Eigen::Vector2d(w, h)));
+  svg += fmt::format(
+      "<g class=\"labels\" stroke=\"white\" stroke-width=\"{:.2f}\" paint-order=\"stroke\">\n",
+      halo);
+  for (size_t i = 0; i < labels.size(); ++i) {
+    const Eigen::AlignedBox2d& box = labels[i].candidates[chosen[i]];
+    svg += fmt::format("<text class=\"{}\" x=\"{:.3f}\" y=\"{:.3f}\" fill=\"{}\">{}</text>\n",
+                       labels[i].css_class, box.min().x() + pad,
+                       box.max().y() - pad - 0.24 * font_size, labels[i].colour, labels[i].text);
+  }
+  svg += "</g>\n";
   svg += "</svg>\n";
   out += "<figure>" + svg + "<figcaption>";
   out += fmt::format(

@@ -11,7 +11,7 @@
 //    the located features;
 //  - the mosaic, downsampled, with every located feature (its circle, name)
 //    and every distance (a line between the centres, name and value) drawn
-//    over it;
+//    over it, the labels placed so that none covers another (label_layout.h);
 //  - calibration: lens model and why, rms, images used and rejected (why),
 //    residuals per image, the residual, uncertainty-map and study plots;
 //  - mosaic: rms, per-pair matches, per-tile adjusted-minus-commanded table
