@@ -147,6 +147,7 @@ StoredImage EightBitCopy(const StoredImage& image, int sample_bits) {
 std::string ColmapSiftOptions::Check() const {
   if (binary.empty()) return "binary is empty";
   if (max_num_features < 1) return "max_num_features must be >= 1";
+  if (first_octave < -1) return "first_octave must be >= -1";
   if (num_threads < 1) return "num_threads must be >= 1";
   if (!(max_error_px > 0.0)) return "max_error_px must be > 0";
   if (min_num_inliers < 1) return "min_num_inliers must be >= 1";
@@ -304,7 +305,8 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
       RunColmap({options.binary, "feature_extractor", "--database_path", database.string(),
                  "--image_path", image_dir.string(), "--ImageReader.single_camera", "1",
                  "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", threads,
-                 "--SiftExtraction.max_num_features", std::to_string(options.max_num_features)},
+                 "--SiftExtraction.max_num_features", std::to_string(options.max_num_features),
+                 "--SiftExtraction.first_octave", std::to_string(options.first_octave)},
                 log, options.timeout_seconds);
   result.extraction_seconds = SecondsSince(start);
   if (!extraction.ok) return fail("feature_extractor", extraction);

@@ -45,6 +45,13 @@ struct ColmapSiftOptions {
   // (holes 0.0267 vs 0.0266 raw px RMS, matches 0.024 px), the exhaustive
   // matching 5x faster (27 s vs 133 s on 2 cores).
   int max_num_features = 4000;
+  // The scale space's first octave (SiftExtraction.first_octave). COLMAP's
+  // default, -1, doubles the image first, for keypoints finer than a pixel;
+  // here keypoints only anchor template matches (register_tiles.h), which
+  // locate them. On the demo's tiles 0 gives as many keypoints and the same
+  // registration (holes 0.0268 raw px RMS either way, matches 0.0250 vs
+  // 0.0249 px), its extraction 2.8x faster (7.3 s vs 20.7 s on 2 cores).
+  int first_octave = 0;
   int num_threads = 2;  // extraction and matching threads
   // The verification RANSAC's inlier distance (SiftMatching.max_error), px.
   double max_error_px = 4.0;

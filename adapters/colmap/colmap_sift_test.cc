@@ -220,6 +220,9 @@ TEST(ColmapSiftOptions, CheckNamesTheBadField) {
   o.timeout_seconds = 0;
   EXPECT_NE(o.Check().find("timeout_seconds"), std::string::npos);
   o = ColmapSiftOptions();
+  o.first_octave = -2;
+  EXPECT_NE(o.Check().find("first_octave"), std::string::npos);
+  o = ColmapSiftOptions();
   o.sample_bits = 17;
   EXPECT_NE(o.Check().find("sample_bits"), std::string::npos);
   EXPECT_THROW(ColmapSiftMatches({"a.png", "b.png"}, o), InputError);
