@@ -250,10 +250,18 @@ ColmapDatabaseMatches ReadColmapDatabaseMatches(const fs::path& database_path,
 }
 
 ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
-                                   const ColmapSiftOptions& options) {
+                                   const ColmapSiftOptions& options,
+                                   const std::vector<std::pair<int, int>>& pairs) {
   if (const std::string problem = options.Check(); !problem.empty())
     throw InputError("colmap sift options", problem);
   if (tile_paths.size() < 2) throw InputError("colmap sift", "needs at least two tiles");
+  const int num_tiles = static_cast<int>(tile_paths.size());
+  for (const auto& [a, b] : pairs) {
+    if (a < 0 || b < 0 || a >= num_tiles || b >= num_tiles || a == b)
+      throw InputError("colmap sift", "pair (" + std::to_string(a) + ", " + std::to_string(b) +
+                                          ") is not two of the " + std::to_string(num_tiles) +
+                                          " tiles");
+  }
   for (const fs::path& path : tile_paths) {
     if (!fs::is_regular_file(path)) throw InputError(path.string(), "no such tile image");
   }
@@ -312,14 +320,24 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
   if (!extraction.ok) return fail("feature_extractor", extraction);
 
   start = Clock::now();
-  const RunOutcome matching =
-      RunColmap({options.binary, "exhaustive_matcher", "--database_path", database.string(),
-                 "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads,
-                 "--SiftMatching.max_error", std::to_string(options.max_error_px),
-                 "--SiftMatching.min_num_inliers", std::to_string(options.min_num_inliers)},
-                log, options.timeout_seconds);
+  std::vector<std::string> matcher = {options.binary, "exhaustive_matcher", "--database_path",
+                                      database.string()};
+  if (!pairs.empty()) {
+    const fs::path list = work_dir / "pairs.txt";
+    {
+      std::ofstream out(list);
+      for (const auto& [a, b] : pairs) out << names[a] << ' ' << names[b] << '\n';
+    }
+    matcher = {options.binary,      "matches_importer", "--database_path", database.string(),
+               "--match_list_path", list.string(),      "--match_type",    "pairs"};
+  }
+  matcher.insert(matcher.end(),
+                 {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads,
+                  "--SiftMatching.max_error", std::to_string(options.max_error_px),
+                  "--SiftMatching.min_num_inliers", std::to_string(options.min_num_inliers)});
+  const RunOutcome matching = RunColmap(matcher, log, options.timeout_seconds);
   result.matching_seconds = SecondsSince(start);
-  if (!matching.ok) return fail("exhaustive_matcher", matching);
+  if (!matching.ok) return fail(matcher[1], matching);
 
   start = Clock::now();
   try {

@@ -9,6 +9,11 @@
 //   colmap feature_extractor --database_path DB --image_path DIR
 //       --ImageReader.single_camera 1 --SiftExtraction.use_gpu 0 ...
 //   colmap exhaustive_matcher --database_path DB --SiftMatching.use_gpu 0 ...
+// or, for the given pairs of tiles only (those the table prior makes
+// overlap: the others cannot match; on the demo 20 pairs of 36, matched in
+// 4.8 s instead of 10.4 s),
+//   colmap matches_importer --database_path DB --match_list_path PAIRS
+//       --match_type pairs --SiftMatching.use_gpu 0 ...
 // with QT_QPA_PLATFORM=offscreen, their output captured in colmap.log, then
 // reads the database (https://colmap.github.io/database.html):
 // - images (image_id, name);
@@ -31,6 +36,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -97,12 +103,14 @@ struct ColmapSiftResult {
   std::filesystem::path work_dir;  // only with keep_work_dir
 };
 
-// Runs colmap on `tile_paths` (tile i = tile_paths[i]) as described above.
-// Throws InputError for invalid options or a tile file that does not exist;
-// a missing binary, a failing or timed-out colmap or an unreadable database
-// come back as usable = false with the reason (and the log's last line) in
-// brief.
+// Runs colmap on `tile_paths` (tile i = tile_paths[i]) as described above,
+// matching the tile index pairs `pairs` (either order), or every pair if it
+// is empty. Throws InputError for invalid options, a pair that is not two of
+// the tiles, or a tile file that does not exist; a missing binary, a failing
+// or timed-out colmap or an unreadable database come back as usable = false
+// with the reason (and the log's last line) in brief.
 ColmapSiftResult ColmapSiftMatches(const std::vector<std::filesystem::path>& tile_paths,
-                                   const ColmapSiftOptions& options);
+                                   const ColmapSiftOptions& options,
+                                   const std::vector<std::pair<int, int>>& pairs = {});
 
 }  // namespace omm

@@ -440,6 +440,26 @@ TEST(ColmapSiftMatches, TwelveBitSamplesInSixteenBitFilesAreMatched) {
   fs::remove_all(dir);
 }
 
+// Given pairs, only those are matched (colmap matches_importer): tile 2, a
+// copy of tile 0, matches both others, but only pair 0-1 is asked for.
+TEST(ColmapSiftMatches, OnlyTheGivenPairsAreMatched) {
+  const BlobImages blobs;
+  const fs::path dir = TempPath("omm_colmap_sift_test_pairs");
+  std::vector<fs::path> paths = blobs.Write(dir, 1.0f, 8);
+  paths.push_back(dir / "c.png");
+  fs::copy_file(paths[0], paths[2]);
+  const ColmapSiftResult all = ColmapSiftMatches(paths, ColmapSiftOptions());
+  std::printf("every pair: %s\n", all.brief.c_str());
+  ASSERT_TRUE(all.usable) << all.brief;
+  EXPECT_EQ(all.matches.pairs.size(), 3u);
+  const ColmapSiftResult listed = ColmapSiftMatches(paths, ColmapSiftOptions(), {{1, 0}});
+  std::printf("pair 0-1: %s\n", listed.brief.c_str());
+  blobs.ExpectMatchesAtTheCentres(listed);  // one pair, moved by the shift: 0-1
+  EXPECT_THROW(ColmapSiftMatches(paths, ColmapSiftOptions(), {{0, 3}}), InputError);
+  EXPECT_THROW(ColmapSiftMatches(paths, ColmapSiftOptions(), {{2, 2}}), InputError);
+  fs::remove_all(dir);
+}
+
 // The four tiles of the top-left corner of a demo project (all six pairs
 // overlap: 35-45 % side by side, ~15 % diagonally), rendered as 8-bit PNGs.
 TEST(ColmapSiftMatches, RealColmapMatchesAgreeWithTheTruth) {

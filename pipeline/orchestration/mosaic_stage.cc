@@ -710,9 +710,11 @@ FinalOutcome FinalAdjustmentWithHoles(const Project& project, const std::vector<
   return result;
 }
 
-// COLMAP's verified SIFT matches between the tiles, where the features use
-// them (none for Harris alone); throws StageFailedError if COLMAP fails.
-std::vector<ColmapPairMatches> SiftMatches(const StageContext& context) {
+// COLMAP's verified SIFT matches between the tiles of `pairs` (those the
+// table prior makes overlap), where the features use them (none for Harris
+// alone); throws StageFailedError if COLMAP fails.
+std::vector<ColmapPairMatches> SiftMatches(const StageContext& context,
+                                           const std::vector<PairRegistration>& pairs) {
   if (context.mosaic_features == FeatureSource::kHarris) return {};
   std::vector<fs::path> tile_paths;
   for (const TilePosition& tile : context.project.tiles)
@@ -720,7 +722,9 @@ std::vector<ColmapPairMatches> SiftMatches(const StageContext& context) {
   ColmapSiftOptions sift_options;
   sift_options.num_threads = context.num_threads;
   sift_options.sample_bits = context.project.sample_bits;
-  const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, sift_options);
+  std::vector<std::pair<int, int>> tile_pairs;
+  for (const PairRegistration& pair : pairs) tile_pairs.emplace_back(pair.tile_a, pair.tile_b);
+  const ColmapSiftResult sift = ColmapSiftMatches(tile_paths, sift_options, tile_pairs);
   spdlog::info("mosaic: {}", sift.brief);
   if (!sift.usable) throw StageFailedError(Stage::kMosaic, sift.brief);
   return sift.matches.pairs;
@@ -983,7 +987,8 @@ void RunMosaicStage(StageContext& context) {
   const int num_tiles = static_cast<int>(tiles.size());
   if (context.progress) context.progress(num_tiles, num_tiles + 4, "register tiles");
   TileRegistration registration =
-      RegisterTiles(prepared_tiles.prepared, project.table_sigma_mm, camera, SiftMatches(context));
+      RegisterTiles(prepared_tiles.prepared, project.table_sigma_mm, camera,
+                    SiftMatches(context, prepared_tiles.prepared.pairs));
   prepared_tiles.prepared = {};  // its matching images (the demo's: 143 MB) serve no later step
   spdlog::info("mosaic: {}", registration.brief);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
