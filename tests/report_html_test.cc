@@ -261,6 +261,9 @@ TEST(ReportHtml, MeasurementsTableFlagsAndBreaksDown) {
   EXPECT_THAT(html, HasSubstr("calibration 0.0011, registration 0.0022, edges 0.0015"));
   EXPECT_THAT(html, HasSubstr("<td class=\"r\">3.33</td>"));  // deviation / sigma
   EXPECT_THAT(html, HasSubstr("<td class=\"r\">-1.20</td>"));
+  // Each made measurement's largest part of sigma, counted (the failed one
+  // has none).
+  EXPECT_THAT(html, HasSubstr(" Largest part: registration for 2.</p>"));
 }
 
 TEST(ReportHtml, EverySectionWhenEveryStageRan) {
@@ -312,6 +315,32 @@ TEST(ReportHtml, ScaleFromTheTableAloneIsSaid) {
   EXPECT_THAT(ReportHtml(report, FullInputs()),
               HasSubstr("no plate on the part: scale from the table positions alone (sigma "
                         "&lt;46&gt; ppm)"));
+}
+
+// Where the table's part is the largest of some measurements' sigma, the
+// page says so, and, when no plate on the part gave the mosaic its scale,
+// what would; with the plate's scale it only counts.
+TEST(ReportHtml, ATableDominatedSigmaSaysWhatWouldShrinkIt) {
+  Report report = FullReport();
+  auto set_breakdown = [&](const ReportObject& breakdown) {
+    for (auto& [key, value] : (*report.measurements)[0].extra)
+      if (key == "sigma_breakdown_mm") value = breakdown;
+  };
+  set_breakdown({{"calibration", 0.0011}, {"table", 0.0031}, {"edges", 0.0015}});
+  const std::string advice = "project.yaml's calibration plate lying flat on the part";
+  std::string html = ReportHtml(report, FullInputs());
+  EXPECT_THAT(html, HasSubstr(" Largest part: registration for 1, table for 1."));
+  EXPECT_THAT(html, Not(HasSubstr(advice)));  // FullReport's plate gave the scale
+  for (auto& [key, value] : report.mosaic->extra) {
+    if (key == "plate_scale_check")
+      value = "no plate on the part: scale from the table positions alone (sigma 46 ppm)";
+  }
+  html = ReportHtml(report, FullInputs());
+  EXPECT_THAT(html, HasSubstr(advice));
+  set_breakdown({{"calibration", 0.0011}, {"table", 0.0001}, {"edges", 0.0015}});
+  html = ReportHtml(report, FullInputs());
+  EXPECT_THAT(html, HasSubstr(" Largest part: edges for 1, registration for 1."));
+  EXPECT_THAT(html, Not(HasSubstr(advice)));  // the table's part is nowhere the largest
 }
 
 // table.sigma_mm stated 5 mm for a table that scatters 0.0207 (15 dof): the

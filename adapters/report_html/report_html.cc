@@ -199,6 +199,30 @@ bool Beyond3Sigma(const MeasurementReport& m) {
   return m.deviation_sigma && std::abs(*m.deviation_sigma) > 3.0;
 }
 
+// " Largest part: table for 7, edges for 4." (most first, ties by name), and where the
+// table's is the largest for some and no plate on the part gave the mosaic
+// a scale, what would.
+std::string LargestSourcesSentence(const Report& report,
+                                   const std::map<std::string, int>& largest_counts) {
+  if (largest_counts.empty()) return "";
+  std::vector<std::pair<std::string, int>> counts(largest_counts.begin(), largest_counts.end());
+  std::stable_sort(counts.begin(), counts.end(),
+                   [](const auto& a, const auto& b) { return a.second > b.second; });
+  std::string out = " Largest part:";
+  for (size_t i = 0; i < counts.size(); ++i)
+    out += fmt::format("{} {} for {}", i ? "," : "", Escape(counts[i].first), counts[i].second);
+  out += ".";
+  const bool table_largest = largest_counts.count("table") > 0;
+  if (table_largest && report.mosaic &&
+      AsString(Member(report.mosaic->extra, "plate_scale_check"))) {
+    out +=
+        " The table's part is, over long distances, the scale that table.csv's positions alone "
+        "give the mosaic (see Mosaic registration, scale reference): project.yaml's calibration "
+        "plate lying flat on the part, seen whole in a tile, would measure the scale itself.";
+  }
+  return out;
+}
+
 std::string MeasurementsSection(const Report& report) {
   std::string out = "<h2 id=\"measurements\">Measurements</h2>\n";
   if (!report.measurements) return out + Missing("The measure stage has not run.");
@@ -207,12 +231,21 @@ std::string MeasurementsSection(const Report& report) {
                "deviation / sigma", "1-sigma by source, mm", "error"},
               "llrrrrrll");
   int beyond = 0, failed = 0;
+  std::map<std::string, int> largest_counts;  // measurements per largest source of sigma
   for (const MeasurementReport& m : *report.measurements) {
-    std::string sources;
+    std::string sources, largest;
+    double largest_mm = 0.0;
     if (const ReportObject* breakdown = AsObject(Member(m.extra, "sigma_breakdown_mm"))) {
-      for (const auto& [source, value] : *breakdown)
-        sources += (sources.empty() ? "" : ", ") + Escape(source) + " " + Number(AsNumber(&value));
+      for (const auto& [source, value] : *breakdown) {
+        const std::optional<double> mm = AsNumber(&value);
+        sources += (sources.empty() ? "" : ", ") + Escape(source) + " " + Number(mm);
+        if (mm && *mm > largest_mm) {
+          largest_mm = *mm;
+          largest = source;
+        }
+      }
     }
+    if (m.value_mm && !largest.empty()) ++largest_counts[largest];
     std::string css_class;
     if (!m.value_mm) {
       css_class = "failed";
@@ -231,9 +264,10 @@ std::string MeasurementsSection(const Report& report) {
       "<p>{} measurement(s): {} made, {} failed, {} beyond 3 sigma of the CMM "
       "value (highlighted). The 1-sigma by source are independent parts whose squares sum to "
       "the 1-sigma's: the calibration images' noise, the registration's (the tiles' matches and "
-      "plate marks), the table positions' errors and the edge fits'.</p>\n",
+      "plate marks), the table positions' errors and the edge fits'.",
       report.measurements->size(), report.measurements->size() - failed, failed, beyond);
-  return out + table.Html("measurements-table");
+  out += LargestSourcesSentence(report, largest_counts);
+  return out + "</p>\n" + table.Html("measurements-table");
 }
 
 std::string FeaturesSection(const Report& report) {
