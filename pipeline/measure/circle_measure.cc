@@ -823,11 +823,11 @@ struct BottomRim {
   }
 };
 
-// Wedges that could give a rim edge: all but the narrow-wall ones left out
-// and those next to saturated pixels.
+// Wedges that could give a rim edge: all but the narrow-wall ones left out,
+// those next to saturated pixels and the uncovered ones (a partial view's).
 int UsableWedges(const CircleMeasurement& result) {
   return result.num_wedges - (result.narrow_wall_skipped ? result.num_narrow_wall : 0) -
-         result.num_saturated;
+         result.num_saturated - result.num_uncovered;
 }
 
 // A pass's wedges: those whose rim edge the circle fit takes, and those that

@@ -80,7 +80,10 @@ std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<Ti
     if (tie.tiles.empty()) continue;
     tie.centre_mm = sum_mm / static_cast<double>(tie.tiles.size());
     if (located_mm) (*located_mm)[static_cast<size_t>(i)] = tie.centre_mm;
-    if (static_cast<int>(tie.tiles.size()) >= options.min_views) ties.push_back(std::move(tie));
+    // Partial views (each on its own arc of the rim) locate a hole, but tie
+    // nothing: no test shows their centres agree to a tie's sigma.
+    if (static_cast<int>(tie.tiles.size()) >= options.min_views && !views[i].partial)
+      ties.push_back(std::move(tie));
   }
   return ties;
 }

@@ -90,6 +90,25 @@ HoleFit FitInTile(const HoleViewInputs& in, int tile, const Eigen::Vector2d& exp
   return fit;
 }
 
+// Where every tile that sees the hole whole clipped its rim: the other
+// tiles that see its centre, each fitted on the wedges it covers; the fits
+// that succeed.
+std::vector<HoleFit> FitPartialViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
+                                     double radius_px, const std::vector<int>& whole,
+                                     CircleMeasureOptions options, double search_px) {
+  options.max_uncovered_fraction = kPartialViewMaxUncovered;
+  const OrthoGrid& grid = in.geometry.grid;
+  const Eigen::Vector2d expected_px = grid.MosaicFromPart(near_part_mm);
+  std::vector<HoleFit> fits;
+  for (const int t : TilesSeeingDisc(in.lens, in.scene, near_part_mm, 0.0, in.camera.width_px,
+                                     in.camera.height_px, 0.0)) {
+    if (std::find(whole.begin(), whole.end(), t) != whole.end()) continue;
+    HoleFit fit = FitInTile(in, t, expected_px, radius_px, options, search_px);
+    if (fit.circle.ok) fits.push_back(std::move(fit));
+  }
+  return fits;
+}
+
 }  // namespace
 
 // The bore's bottom rim shows scaled about the nadir of the tile the mosaic
@@ -152,7 +171,13 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
     }
     result.failed.push_back(std::move(fit));
   }
-  if (!found && in.mosaic != nullptr && !result.SaturatedFit()) {
+  if (!found && result.SaturatedFit()) {
+    result.num_seeing = static_cast<int>(first.size());
+    result.fits = FitPartialViews(in, near_part_mm, radius_px, first, options, search_px);
+    result.partial = !result.fits.empty();
+    return result;
+  }
+  if (!found && in.mosaic != nullptr) {
     result.mosaic_fit = FitHoleInMosaic(in, near_part_mm, radius_mm);
     if (result.mosaic_fit->circle.ok) found = *result.mosaic_fit;
   }

@@ -72,8 +72,14 @@ struct HoleFit {
   std::optional<int> nadir_tile;  // the tile whose nadir the bottom rim is about
 };
 
+// A partial view (FitHoleViews) may leave this much of the rim's wedges
+// uncovered, as much as a whole view may leave out saturated
+// (CircleMeasureOptions::max_saturated_fraction).
+inline constexpr double kPartialViewMaxUncovered = 0.5;
+
 struct HoleViews {
   std::vector<HoleFit> fits;          // the tiles' fits that succeeded
+  bool partial = false;               // fits are partial views (FitHoleViews)
   std::vector<HoleFit> failed;        // the tiles' fits that failed, each with its error
   int num_seeing = 0;                 // tiles that see the hole whole
   std::optional<HoleFit> mosaic_fit;  // made when no tile found the hole (and a mosaic is given)
@@ -87,9 +93,13 @@ struct HoleViews {
 
 // The hole of nominal radius radius_mm near the part point near_part_mm:
 // looked for in the tiles that see it whole, one after another, until one
-// finds it (or in the mosaic where none does, unless one found its rim
-// saturated: a tile exposed brighter than the others may clip it alone);
-// then fitted about that centre in every tile that sees it whole. Pure.
+// finds it (or in the mosaic where none does); then fitted about that centre
+// in every tile that sees it whole. Where a tile that sees it whole found its
+// rim saturated and none other found it (a tile exposed brighter than the
+// others may clip it alone), the mosaic is not fitted (SaturatedFit): the
+// other tiles that see the hole's centre are, each on the wedges of the rim
+// it covers (partial views: at most kPartialViewMaxUncovered of them
+// uncovered). Pure.
 HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
                        double radius_mm);
 

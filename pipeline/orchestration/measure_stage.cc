@@ -130,20 +130,29 @@ std::string FailedViewsNote(const std::vector<HoleFit>& failed, const SavedScene
 
 // The report's notes on a hole measured in tiles: which tiles, their bores
 // and fits, the tiles that failed, and whether the views agree.
-void AddTileViewNotes(const std::vector<HoleFit>& fits, const std::vector<HoleFit>& failed,
-                      const CombinedCircle& combined, const Eigen::Matrix3d& to_mm,
-                      const OrthoGrid& grid, const SavedScene& saved,
+void AddTileViewNotes(const HoleViews& views, const CombinedCircle& combined,
+                      const Eigen::Matrix3d& to_mm, const OrthoGrid& grid, const SavedScene& saved,
                       const std::string& name_of_feature, FeatureReport* report) {
+  const std::vector<HoleFit>& fits = views.fits;
+  const std::vector<HoleFit>& failed = views.failed;
   const CircleFeatureValue& value = combined.value;
   std::string views_note =
-      fmt::format("measured in {} tile{}:", fits.size(), fits.size() > 1 ? "s" : "");
+      fmt::format("measured in {} tile{}{}:", fits.size(), fits.size() > 1 ? "s" : "",
+                  views.partial ? fmt::format(" that see{} part of the rim (those that see it "
+                                              "whole clipped it)",
+                                              fits.size() > 1 ? "" : "s")
+                                : "");
   std::string bore_note;
   ReportObject tile_fits;
   for (size_t i = 0; i < fits.size(); ++i) {
     const HoleFit& fit = fits[i];
     const std::string& name = saved.tile_images[*fit.tile];
+    std::string uncovered;
+    if (fit.circle.num_uncovered > 0 && fit.circle.num_wedges > 0)
+      uncovered = fmt::format("{:.0f} % of the rim not covered, ",
+                              100.0 * fit.circle.num_uncovered / fit.circle.num_wedges);
     views_note += fmt::format(
-        "{} {} ({})", i > 0 ? "," : "", name,
+        "{} {} ({}{})", i > 0 ? "," : "", name, uncovered,
         fit.circle.bore_prior_used
             ? fmt::format("no bore wall resolved, project's k {:.4f}", fit.circle.bottom_rim_scale)
         : fit.circle.bottom_rim_scale > 0.0
@@ -278,8 +287,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
     num_inliers += fit.circle.num_inliers;
     sum_squares += fit.circle.num_inliers * fit.circle.rms_px * fit.circle.rms_px;
   }
-  if (fits[0].tile)
-    AddTileViewNotes(fits, views_found.failed, combined, to_mm, grid, saved, spec.name, &report);
+  if (fits[0].tile) AddTileViewNotes(views_found, combined, to_mm, grid, saved, spec.name, &report);
   report.centre_mm = value.centre_mm;
   report.diameter_mm = value.diameter_mm;
   report.extra.emplace_back("num_views", static_cast<int>(fits.size()));
