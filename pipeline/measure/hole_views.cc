@@ -104,7 +104,11 @@ std::vector<HoleFit> FitPartialViews(const HoleViewInputs& in, const Eigen::Vect
                                      in.camera.height_px, 0.0)) {
     if (std::find(whole.begin(), whole.end(), t) != whole.end()) continue;
     HoleFit fit = FitInTile(in, t, expected_px, radius_px, options, search_px);
-    if (fit.circle.ok) fits.push_back(std::move(fit));
+    // Uncovered and saturated wedges together: at most what either may be
+    // alone, so that half the rim or more gives the circle.
+    const CircleMeasurement& c = fit.circle;
+    if (c.ok && c.num_uncovered + c.num_saturated <= kPartialViewMaxUncovered * c.num_wedges)
+      fits.push_back(std::move(fit));
   }
   return fits;
 }

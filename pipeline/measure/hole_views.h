@@ -73,8 +73,8 @@ struct HoleFit {
 };
 
 // A partial view (FitHoleViews) may leave this much of the rim's wedges
-// uncovered, as much as a whole view may leave out saturated
-// (CircleMeasureOptions::max_saturated_fraction).
+// uncovered, or uncovered and saturated together: as much as a whole view
+// may leave out saturated (CircleMeasureOptions::max_saturated_fraction).
 inline constexpr double kPartialViewMaxUncovered = 0.5;
 
 struct HoleViews {
