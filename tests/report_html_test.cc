@@ -306,6 +306,23 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
 }
 
 // Without a plate on the part the report says where the scale came from.
+// The report's other top-level members in the header: an object (the
+// measure stage's section) as a table of its members, nested ones likewise,
+// every text escaped.
+TEST(ReportHtml, TopLevelObjectsAreTablesOfTheirMembers) {
+  Report report = FullReport();
+  report.extra.emplace_back("measure",
+                            ReportObject{{"brief", "2/3 <features> found"},
+                                         {"bore_prior", ReportObject{{"bottom_rim_scale", 0.9772}}},
+                                         {"seconds", 0.25}});
+  EXPECT_THAT(ReportHtml(report, FullInputs()),
+              HasSubstr("<tr><th>measure</th><td><table class=\"facts\">\n"
+                        "<tr><th>brief</th><td>2/3 &lt;features&gt; found</td></tr>\n"
+                        "<tr><th>bore_prior</th><td><table class=\"facts\">\n"
+                        "<tr><th>bottom_rim_scale</th><td>0.9772</td></tr>\n</table>\n</td></tr>\n"
+                        "<tr><th>seconds</th><td>0.25</td></tr>\n</table>\n</td></tr>"));
+}
+
 TEST(ReportHtml, ScaleFromTheTableAloneIsSaid) {
   Report report = FullReport();
   for (auto& [key, value] : report.mosaic->extra) {

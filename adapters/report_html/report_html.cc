@@ -181,6 +181,16 @@ svg.mosaic { width: 100%; max-width: 1200px; height: auto; max-height: 1000px; }
 
 // ------------------------------------------------------------ sections ---
 
+// A value for a facts table: an object as a facts table of its own (one row
+// per member, nested objects likewise), anything else as Text.
+std::string FactHtml(const ReportValue& value) {
+  const ReportObject* object = AsObject(&value);
+  if (object == nullptr || object->empty()) return Text(value);
+  Facts facts;
+  for (const auto& [key, member] : *object) facts.Add(Escape(key), FactHtml(member));
+  return facts.Html();
+}
+
 std::string HeaderSection(const Report& report) {
   std::string out = "<h1>omm report: " + Escape(report.project) + "</h1>\n";
   Facts facts;
@@ -188,7 +198,7 @@ std::string HeaderSection(const Report& report) {
   facts.Add("report format", Escape(report.format));
   facts.Add("omm version", Escape(report.software_version));
   facts.Add("inputs SHA-256", "<code>" + Escape(report.inputs_sha256) + "</code>");
-  for (const auto& [key, value] : report.extra) facts.Add(Escape(key), Text(value));
+  for (const auto& [key, value] : report.extra) facts.Add(Escape(key), FactHtml(value));
   return out + facts.Html();
 }
 
