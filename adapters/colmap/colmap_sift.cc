@@ -320,16 +320,17 @@ ColmapSiftResult ColmapSiftMatches(const std::vector<fs::path>& tile_paths,
   if (!extraction.ok) return fail("feature_extractor", extraction);
 
   start = Clock::now();
-  std::vector<std::string> matcher = {options.binary, "exhaustive_matcher", "--database_path",
-                                      database.string()};
-  if (!pairs.empty()) {
+  std::vector<std::string> matcher = {options.binary};
+  if (pairs.empty()) {
+    matcher.insert(matcher.end(), {"exhaustive_matcher", "--database_path", database.string()});
+  } else {
     const fs::path list = work_dir / "pairs.txt";
     {
       std::ofstream out(list);
       for (const auto& [a, b] : pairs) out << names[a] << ' ' << names[b] << '\n';
     }
-    matcher = {options.binary,      "matches_importer", "--database_path", database.string(),
-               "--match_list_path", list.string(),      "--match_type",    "pairs"};
+    matcher.insert(matcher.end(), {"matches_importer", "--database_path", database.string(),
+                                   "--match_list_path", list.string(), "--match_type", "pairs"});
   }
   matcher.insert(matcher.end(),
                  {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads,
