@@ -320,6 +320,61 @@ TEST(CameraSaturation, HolesClippedInOneTileAreMeasuredInTheOthers) {
   EXPECT_NEAR(median_ratio, 1.0, 0.05);
 }
 
+// Partial views locate a hole but tie no tiles in the mosaic (hole_ties.h):
+// each is fitted on its own arc of the rim. tile_r0c0 at 2.2 times its
+// exposure: a hole it alone sees whole is measured in two tiles that see
+// part of its rim, and is not among the mosaic's hole ties, which holes
+// seen whole by two tiles or more still make.
+TEST(CameraSaturation, PartialViewsTieNoTiles) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 104, 14);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "r0c0";
+  testing::CopyProject(sim.project_dir, project_dir);
+  ReencodeFile(project_dir / "tiles" / "tile_r0c0.png", Overexposed);
+  const Report run = RunAndCheckAgainstTruth(project_dir, sim.truth, /*all_found=*/false);
+  ASSERT_TRUE(run.features && run.mosaic);
+
+  std::vector<std::string> partial;  // holes measured in two partial views or more
+  for (const FeatureReport& f : *run.features) {
+    const std::string* note = AsString(Member(f.extra, "views"));
+    if (note && note->find(" tiles that see part of the rim") != std::string::npos) {
+      ASSERT_TRUE(f.diameter_mm) << f.name << ": " << f.error;
+      std::printf("%s: %s\n", f.name.c_str(), note->c_str());
+      partial.push_back(f.name);
+    }
+  }
+  ASSERT_FALSE(partial.empty());
+
+  const ReportObject* hole_ties = AsObject(Member(run.mosaic->extra, "hole_ties"));
+  ASSERT_NE(hole_ties, nullptr);
+  const ReportValue::Array* ties = AsArray(Member(*hole_ties, "ties"));
+  const ReportValue::Array* dropped = AsArray(Member(*hole_ties, "dropped"));
+  ASSERT_TRUE(ties && dropped);
+  std::printf("%s\n", AsString(Member(*hole_ties, "brief"))->c_str());
+  EXPECT_FALSE(ties->empty());
+  std::vector<std::string> tied;
+  for (const ReportValue& tie : *ties)
+    tied.push_back(*AsString(Member(*AsObject(&tie), "feature")));
+  for (const ReportValue& name : *dropped) tied.push_back(*AsString(&name));
+  for (const std::string& name : partial)
+    EXPECT_EQ(std::count(tied.begin(), tied.end(), name), 0) << name << " ties tiles";
+
+  // Located as well as the holes seen whole, to the 0.05 raw px
+  // RMS (#4).
+  double sum_squares = 0.0;
+  const auto errors = testing::HoleCentreErrorsAfterSimilarity(run, sim.truth);
+  for (const auto& [name, error_mm] : errors) {
+    const double error_px = error_mm / testing::RawPxMm(sim.truth);
+    std::printf("%s: %.4f raw px from the truth\n", name.c_str(), error_px);
+    sum_squares += error_px * error_px;
+    if (std::find(partial.begin(), partial.end(), name) != partial.end()) {
+      EXPECT_LT(error_px, 0.05) << name;
+    }
+  }
+  ASSERT_FALSE(errors.empty());
+  EXPECT_LT(std::sqrt(sum_squares / static_cast<double>(errors.size())), 0.05);
+}
+
 // A 12-bit camera whose samples its SDK stores unshifted in 16-bit files:
 // the images read 16 times too dark (at most 0.045 of full scale on the
 // demo), and no plate was found in calib/. They are read as 12-bit samples.
