@@ -20,6 +20,7 @@
 #include "adapters/project_io/report_json.h"
 #include "adapters/project_io/text_file.h"
 #include "adapters/report_html/report_html.h"
+#include "app/batch_summary.h"
 #include "app/child_process.h"
 #include "app/exit_codes.h"
 #include "app/terminal_progress.h"
@@ -72,40 +73,6 @@ int Finish(const Outcome& outcome) {
 
 std::string Optional(const std::optional<double>& value, const char* format_spec = "{:.4f}") {
   return value ? fmt::format(fmt::runtime(format_spec), *value) : "-";
-}
-
-// Measurements made / listed, and the largest |deviation| / sigma.
-std::string MeasurementBrief(const Report& report) {
-  if (!report.measurements) return "-";
-  int made = 0;
-  double worst = 0.0;
-  for (const MeasurementReport& m : *report.measurements) {
-    made += m.value_mm.has_value();
-    if (m.deviation_sigma) worst = std::max(worst, std::abs(*m.deviation_sigma));
-  }
-  return fmt::format("{}/{} made, max |dev|/sigma {:.2f}", made, report.measurements->size(),
-                     worst);
-}
-
-// How the batch's measurements agree with their CMM values.
-std::string CmmAgreement(const std::vector<ProjectMeasurements>& projects) {
-  int n = 0, within_2 = 0, beyond_3 = 0;
-  double sum_z2 = 0.0;
-  for (const ProjectMeasurements& project : projects) {
-    for (const MeasurementReport& m : project.measurements) {
-      if (!m.deviation_sigma) continue;
-      const double z = std::abs(*m.deviation_sigma);
-      ++n;
-      within_2 += z <= 2.0;
-      beyond_3 += z > 3.0;
-      sum_z2 += z * z;
-    }
-  }
-  if (n == 0) return "no measurement has a CMM value";
-  return fmt::format(
-      "against the CMM: {} measurements, |deviation| <= 2 sigma for {} ({:.1f} %), beyond 3 "
-      "sigma {}, rms deviation/sigma {:.2f}",
-      n, within_2, 100.0 * within_2 / n, beyond_3, std::sqrt(sum_z2 / n));
 }
 
 // Project directories named by `dirs` (a project, or a folder of projects).
@@ -473,13 +440,22 @@ int ReportCommand(const fs::path& project_dir, bool json) {
                  m.size_px.y(), m.gsd_mm, m.rms_px);
     }
     if (report.measurements) {
-      fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}\n", "measurement", "type",
-                 "value_mm", "sigma_mm", "cmm_mm", "dev_mm", "dev/sigma");
-      for (const MeasurementReport& m : *report.measurements) {
-        fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}{}\n", m.name,
+      // The CMM's sigma and the deviation against both, where cmm.csv states it.
+      const std::vector<MeasurementReport>& made = *report.measurements;
+      const bool with_cmm_sigma =
+          std::any_of(made.begin(), made.end(),
+                      [](const MeasurementReport& m) { return m.cmm_sigma_mm.has_value(); });
+      fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}{}\n", "measurement", "type",
+                 "value_mm", "sigma_mm", "cmm_mm", "dev_mm", "dev/sigma",
+                 with_cmm_sigma ? fmt::format(" {:>9} {:>9}", "cmm_sigma", "dev/both") : "");
+      for (const MeasurementReport& m : made) {
+        fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}{}{}\n", m.name,
                    MeasurementTypeName(m.type), Optional(m.value_mm), Optional(m.sigma_mm),
                    Optional(m.cmm_mm), Optional(m.deviation_mm),
                    Optional(m.deviation_sigma, "{:.2f}"),
+                   with_cmm_sigma ? fmt::format(" {:>9} {:>9}", Optional(m.cmm_sigma_mm),
+                                                Optional(m.deviation_combined_sigma, "{:.2f}"))
+                                  : "",
                    m.error.empty() ? "" : "  error: " + m.error);
       }
     }

@@ -149,12 +149,12 @@ TEST_F(CliTest, BatchReportsEveryProjectAndDoesNotStop) {
   EXPECT_THAT(result.output, HasSubstr("no measurement has a CMM value"));
   // The CSV: its header, then each failed project as one row saying why.
   const std::string table = testing::ReadTextFile(csv);
-  EXPECT_EQ(table.rfind("project,measurement,type,value_mm,sigma_mm,cmm_mm,deviation_mm,"
-                        "deviation_sigma,error\n",
+  EXPECT_EQ(table.rfind("project,measurement,type,value_mm,sigma_mm,cmm_mm,cmm_sigma_mm,"
+                        "deviation_mm,deviation_sigma,deviation_combined_sigma,error\n",
                         0),
             0u);
   EXPECT_EQ(std::count(table.begin(), table.end(), '\n'), 3) << table;
-  EXPECT_THAT(table, HasSubstr((bad.dir.string() + ",,,,,,,,")));
+  EXPECT_THAT(table, HasSubstr((bad.dir.string() + ",,,,,,,,,,")));
   EXPECT_THAT(table, HasSubstr("table.csv:1"));
 }
 

@@ -150,11 +150,16 @@ TEST(MeasureRun, ThirtyFiveProjectsAgainstTheirTruth) {
       ASSERT_TRUE(m.cmm_mm.has_value()) << name << " " << m.name;
       EXPECT_DOUBLE_EQ(*m.deviation_mm, *m.value_mm - *m.cmm_mm);
       EXPECT_DOUBLE_EQ(*m.deviation_sigma, *m.deviation_mm / *m.sigma_mm);
+      // The simulator states the CMM's sigma: the deviation is judged
+      // against both.
+      ASSERT_TRUE(m.cmm_sigma_mm && m.deviation_combined_sigma) << name << " " << m.name;
+      EXPECT_DOUBLE_EQ(*m.deviation_combined_sigma,
+                       *m.deviation_mm / std::hypot(*m.sigma_mm, *m.cmm_sigma_mm));
       bool flagged = false;
       for (const auto& [key, value] : m.extra) {
         if (key == "beyond_3_sigma") flagged = std::get<bool>(value.data());
       }
-      EXPECT_EQ(flagged, std::abs(*m.deviation_sigma) > 3.0) << name << " " << m.name;
+      EXPECT_EQ(flagged, std::abs(*m.deviation_combined_sigma) > 3.0) << name << " " << m.name;
       // Every project calibrates from its own calib/: the calibration's
       // covariance is a source of every sigma, whatever the lens model (a
       // splined model's held core once left it out: 0 on lens-mismatch).

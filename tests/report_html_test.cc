@@ -266,6 +266,28 @@ TEST(ReportHtml, MeasurementsTableFlagsAndBreaksDown) {
   EXPECT_THAT(html, HasSubstr(" Largest part: registration for 2.</p>"));
 }
 
+// Where cmm.csv states the CMM's sigma: its column and the deviation against
+// both sigmas beside omm's own, and the summary says which sigma it counts.
+// Without it (above) neither column is there.
+TEST(ReportHtml, TheCmmsSigmaWhereStated) {
+  Report report = FullReport();
+  MeasurementReport& m = report.measurements->front();
+  m.cmm_sigma_mm = 0.004;
+  m.deviation_combined_sigma = *m.deviation_mm / std::hypot(*m.sigma_mm, 0.004);
+  m.extra.back().second = std::abs(*m.deviation_combined_sigma) > 3.0;  // beyond_3_sigma
+  const std::string html = ReportHtml(report, FullInputs());
+  EXPECT_THAT(html, HasSubstr("<th class=\"r\">CMM 1-sigma mm</th>"));
+  EXPECT_THAT(html, HasSubstr("<th class=\"r\">deviation / both sigmas</th>"));
+  EXPECT_THAT(html, HasSubstr("<td class=\"r\">0.0040</td>"));
+  EXPECT_THAT(html, HasSubstr("<td class=\"r\">2.00</td>"));  // 0.010 against 0.003 and 0.004
+  EXPECT_THAT(html, HasSubstr("0 beyond 3 sigma of the CMM value (highlighted; where cmm.csv "
+                              "states the CMM's 1-sigma, of omm's and the CMM's combined)."));
+  EXPECT_FALSE(std::regex_search(html, std::regex("<tr class=\"beyond\"><td>A_to_B</td>")));
+  const std::string without = ReportHtml(FullReport(), FullInputs());
+  EXPECT_THAT(without, Not(HasSubstr("CMM 1-sigma")));
+  EXPECT_THAT(without, Not(HasSubstr("both sigmas")));
+}
+
 TEST(ReportHtml, EverySectionWhenEveryStageRan) {
   const std::string html = ReportHtml(FullReport(), FullInputs());
   for (const char* id :

@@ -27,17 +27,19 @@ std::string Field(const std::optional<double>& value) {
 
 std::string MeasurementsCsv(const std::vector<ProjectMeasurements>& projects) {
   std::string csv =
-      "project,measurement,type,value_mm,sigma_mm,cmm_mm,deviation_mm,deviation_sigma,error\n";
+      "project,measurement,type,value_mm,sigma_mm,cmm_mm,cmm_sigma_mm,deviation_mm,"
+      "deviation_sigma,deviation_combined_sigma,error\n";
   for (const ProjectMeasurements& project : projects) {
     if (project.measurements.empty()) {
-      csv += fmt::format("{},,,,,,,,{}\n", Field(project.project), Field(project.error));
+      csv += fmt::format("{},,,,,,,,,,{}\n", Field(project.project), Field(project.error));
       continue;
     }
     for (const MeasurementReport& m : project.measurements) {
-      csv += fmt::format("{},{},{},{},{},{},{},{},{}\n", Field(project.project), Field(m.name),
-                         MeasurementTypeName(m.type), Field(m.value_mm), Field(m.sigma_mm),
-                         Field(m.cmm_mm), Field(m.deviation_mm), Field(m.deviation_sigma),
-                         Field(m.error));
+      csv +=
+          fmt::format("{},{},{},{},{},{},{},{},{},{},{}\n", Field(project.project), Field(m.name),
+                      MeasurementTypeName(m.type), Field(m.value_mm), Field(m.sigma_mm),
+                      Field(m.cmm_mm), Field(m.cmm_sigma_mm), Field(m.deviation_mm),
+                      Field(m.deviation_sigma), Field(m.deviation_combined_sigma), Field(m.error));
     }
   }
   return csv;

@@ -4,7 +4,8 @@
 // quoted, quotes doubled). Empty fields where a value is absent.
 //
 // Columns: project, measurement, type, value_mm, sigma_mm, cmm_mm,
-// deviation_mm, deviation_sigma, error. A project without measurements (it
+// cmm_sigma_mm, deviation_mm, deviation_sigma, deviation_combined_sigma,
+// error (report.h's MeasurementReport). A project without measurements (it
 // failed before writing a report) is one row with only project and error.
 // Numbers are written with 9 significant digits (0.1 nm at 1 m).
 #pragma once

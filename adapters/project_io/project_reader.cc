@@ -479,9 +479,17 @@ struct CsvRow {
   std::vector<std::string> fields;
 };
 
-// A small comma-separated file with a fixed header; no quoting (names may not
-// contain commas). Blank lines are skipped; fields are trimmed.
-std::vector<CsvRow> ReadCsv(const fs::path& file, const std::vector<std::string>& header) {
+// A small comma-separated file with a fixed header, `header` or, if
+// `optional` is given, `header` followed by `optional` (every row then has
+// those columns too); no quoting (names may not contain commas). Blank lines
+// are skipped; fields are trimmed.
+std::vector<CsvRow> ReadCsv(const fs::path& file, std::vector<std::string> header,
+                            const std::vector<std::string>& optional = {}) {
+  std::vector<std::string> with_optional = header;
+  with_optional.insert(with_optional.end(), optional.begin(), optional.end());
+  const std::string expected = optional.empty()
+                                   ? fmt::format("'{}'", Join(header))
+                                   : fmt::format("'{}' or '{}'", Join(header), Join(with_optional));
   std::ifstream in(file, std::ios::binary);
   if (!in) throw InputError(file.string(), "cannot open file");
   std::vector<CsvRow> rows;
@@ -498,10 +506,10 @@ std::vector<CsvRow> ReadCsv(const fs::path& file, const std::vector<std::string>
     while (std::getline(fields, field, ',')) row.fields.push_back(Trim(field));
     if (!text.empty() && Trim(text).back() == ',') row.fields.push_back("");
     if (!header_seen) {
+      if (!optional.empty() && row.fields == with_optional) header = with_optional;
       if (row.fields != header) {
-        throw InputError(
-            fmt::format("{}:{}", file.string(), line),
-            fmt::format("expected the header '{}', got '{}'", Join(header), Trim(text)));
+        throw InputError(fmt::format("{}:{}", file.string(), line),
+                         fmt::format("expected the header {}, got '{}'", expected, Trim(text)));
       }
       header_seen = true;
       continue;
@@ -514,8 +522,7 @@ std::vector<CsvRow> ReadCsv(const fs::path& file, const std::vector<std::string>
     rows.push_back(std::move(row));
   }
   if (!header_seen) {
-    throw InputError(file.string(),
-                     fmt::format("empty file; expected the header '{}'", Join(header)));
+    throw InputError(file.string(), fmt::format("empty file; expected the header {}", expected));
   }
   return rows;
 }
@@ -639,7 +646,7 @@ void ReadCmm(const fs::path& dir, Project& project) {
     std::vector<std::string> names;
     for (const MeasurementSpec& m : project.measurements) names.push_back(m.name);
     std::set<std::string> seen;
-    for (const CsvRow& row : ReadCsv(cmm_file, {"name", "value_mm"})) {
+    for (const CsvRow& row : ReadCsv(cmm_file, {"name", "value_mm"}, {"sigma_mm"})) {
       const std::string where = fmt::format("{}:{}", cmm_file.string(), row.line);
       const std::string& name = row.fields[0];
       if (std::find(names.begin(), names.end(), name) == names.end()) {
@@ -649,7 +656,17 @@ void ReadCmm(const fs::path& dir, Project& project) {
       if (!seen.insert(name).second) {
         throw InputError(where, fmt::format("'{}' is listed twice", name));
       }
-      project.cmm.push_back({name, CsvNumber(cmm_file, row, 1, "value_mm")});
+      CmmValue value{name, CsvNumber(cmm_file, row, 1, "value_mm"), std::nullopt};
+      // An empty sigma_mm: this value's uncertainty is not stated.
+      if (row.fields.size() > 2 && !row.fields[2].empty()) {
+        value.sigma_mm = CsvNumber(cmm_file, row, 2, "sigma_mm");
+        if (!(*value.sigma_mm > 0.0)) {
+          throw InputError(where, fmt::format("column 'sigma_mm': expected a number > 0 (or "
+                                              "nothing: not stated), got '{}'",
+                                              row.fields[2]));
+        }
+      }
+      project.cmm.push_back(std::move(value));
     }
   }
 }

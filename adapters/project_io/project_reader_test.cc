@@ -420,6 +420,40 @@ TEST_F(ProjectReaderTest, CmmWrongColumnCount) {
   ExpectError({"cmm.csv:2", "expected 2 columns"});
 }
 
+// cmm.csv's optional third column: the CMM value's 1-sigma, empty where not
+// stated; written back only where some value states it.
+TEST_F(ProjectReaderTest, CmmSigmaIsAnOptionalColumn) {
+  EXPECT_FALSE(LoadProject(project_.dir).cmm[0].sigma_mm.has_value());
+  project_.cmm[0].sigma_mm = 0.0015;
+  WriteProjectFiles(project_);
+  const std::string text = testing::ReadTextFile(File("cmm.csv"));
+  EXPECT_EQ(text, "name,value_mm,sigma_mm\nA_to_B,202.6033,0.0015\nA_diameter,40.0012,\n");
+  const Project read = LoadProject(project_.dir);
+  ASSERT_EQ(read.cmm.size(), 2u);
+  EXPECT_EQ(read.cmm[0].value_mm, 202.6033);
+  EXPECT_EQ(read.cmm[0].sigma_mm, 0.0015);
+  EXPECT_FALSE(read.cmm[1].sigma_mm.has_value());
+  WriteProjectFiles(read);
+  EXPECT_EQ(testing::ReadTextFile(File("cmm.csv")), text);
+}
+
+TEST_F(ProjectReaderTest, CmmSigmaMustBePositive) {
+  project_.cmm[0].sigma_mm = 0.0015;
+  WriteProjectFiles(project_);
+  Replace("cmm.csv", "0.0015", "0");
+  ExpectError({"cmm.csv:2", "column 'sigma_mm'", "expected a number > 0", "got '0'"});
+  Replace("cmm.csv", "202.6033,0", "202.6033,1,5");
+  ExpectError({"cmm.csv:2", "expected 3 columns"});
+  Replace("cmm.csv", "202.6033,1,5", "202.6033,l.5");
+  ExpectError({"cmm.csv:2", "column 'sigma_mm'", "'l.5'"});
+}
+
+TEST_F(ProjectReaderTest, CmmHeaderNamesBothForms) {
+  Replace("cmm.csv", "name,value_mm", "name,value_mm,sigma");
+  ExpectError({"cmm.csv:1", "expected the header 'name, value_mm' or 'name, value_mm, sigma_mm'",
+               "sigma'"});
+}
+
 TEST_F(ProjectReaderTest, CmmDuplicateName) {
   Replace("cmm.csv", "A_diameter,", "A_to_B,");
   ExpectError({"cmm.csv:3", "'A_to_B' is listed twice"});

@@ -1,5 +1,6 @@
 #include "adapters/project_io/project_writer.h"
 
+#include <algorithm>
 #include <charconv>
 #include <system_error>
 
@@ -133,9 +134,15 @@ void WriteProjectFiles(const Project& project) {
   }
 
   if (!project.cmm.empty()) {
-    std::string cmm = "name,value_mm\n";
+    // The sigma_mm column only where some value states its sigma.
+    const bool with_sigma = std::any_of(project.cmm.begin(), project.cmm.end(),
+                                        [](const CmmValue& v) { return v.sigma_mm.has_value(); });
+    std::string cmm = with_sigma ? "name,value_mm,sigma_mm\n" : "name,value_mm\n";
     for (const CmmValue& value : project.cmm) {
-      cmm += value.measurement + "," + Number(value.value_mm) + "\n";
+      cmm += value.measurement + "," + Number(value.value_mm);
+      if (with_sigma) cmm += ',';
+      if (value.sigma_mm) cmm += Number(*value.sigma_mm);
+      cmm += '\n';
     }
     WriteTextFileAtomically(project.dir / "cmm.csv", cmm);
   }

@@ -222,8 +222,10 @@ MeasurementReport ReadMeasurement(const Json& json, const std::string& path,
   measurement.value_mm = section.Number("value_mm");
   measurement.sigma_mm = section.Number("sigma_mm");
   measurement.cmm_mm = section.Number("cmm_mm");
+  measurement.cmm_sigma_mm = section.Number("cmm_sigma_mm");
   measurement.deviation_mm = section.Number("deviation_mm");
   measurement.deviation_sigma = section.Number("deviation_sigma");
+  measurement.deviation_combined_sigma = section.Number("deviation_combined_sigma");
   measurement.error = section.String("error", /*required=*/false);
   measurement.extra = section.Extra();
   return measurement;
@@ -284,6 +286,10 @@ std::string ReportToJson(const Report& report) {
                    {"cmm_mm", Optional(m.cmm_mm)},
                    {"deviation_mm", Optional(m.deviation_mm)},
                    {"deviation_sigma", Optional(m.deviation_sigma)}};
+      // Beyond the contract: only where cmm.csv states the CMM's sigma.
+      if (m.cmm_sigma_mm) item["cmm_sigma_mm"] = *m.cmm_sigma_mm;
+      if (m.deviation_combined_sigma)
+        item["deviation_combined_sigma"] = *m.deviation_combined_sigma;
       if (!m.error.empty()) item["error"] = m.error;
       AppendExtra(item, m.extra, "measurements[]");
       list.push_back(std::move(item));

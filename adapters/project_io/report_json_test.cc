@@ -1,5 +1,8 @@
 #include "adapters/project_io/report_json.h"
 
+#include <cmath>
+#include <string>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -50,6 +53,8 @@ Report FullReport() {
   made.cmm_mm = 202.6033;
   made.deviation_mm = 202.6021 - 202.6033;
   made.deviation_sigma = (202.6021 - 202.6033) / 0.0031;
+  made.cmm_sigma_mm = 0.0012;
+  made.deviation_combined_sigma = (202.6021 - 202.6033) / std::hypot(0.0031, 0.0012);
   made.extra = {{"sigma_breakdown_mm", ReportObject{{"calibration", 0.001}, {"edges", nullptr}}}};
   MeasurementReport failed;
   failed.name = "A_diameter";
@@ -68,6 +73,8 @@ void ExpectSameMeasurement(const MeasurementReport& a, const MeasurementReport& 
   EXPECT_EQ(a.cmm_mm, b.cmm_mm);
   EXPECT_EQ(a.deviation_mm, b.deviation_mm);
   EXPECT_EQ(a.deviation_sigma, b.deviation_sigma);
+  EXPECT_EQ(a.cmm_sigma_mm, b.cmm_sigma_mm);
+  EXPECT_EQ(a.deviation_combined_sigma, b.deviation_combined_sigma);
   EXPECT_EQ(a.error, b.error);
   EXPECT_EQ(a.extra, b.extra);
 }
@@ -126,6 +133,16 @@ TEST(ReportJson, FollowsTheContract) {
   EXPECT_THAT(text, HasSubstr(R"("centre_mm": null)"));
   // Named fields come before extras.
   EXPECT_LT(text.find("\"deviation_sigma\""), text.find("\"sigma_breakdown_mm\""));
+  // The CMM's sigma and the deviation against both sigmas (beyond the
+  // contract) only where cmm.csv states it: once, for the measurement made.
+  const auto count = [&](const std::string& key) {
+    size_t n = 0;
+    for (size_t at = text.find(key); at != std::string::npos; at = text.find(key, at + 1)) ++n;
+    return n;
+  };
+  EXPECT_EQ(count("\"cmm_sigma_mm\""), 1u);
+  EXPECT_EQ(count("\"deviation_combined_sigma\""), 1u);
+  EXPECT_EQ(count("\"deviation_sigma\""), 2u);
 }
 
 TEST(ReportJson, SectionsAreOptional) {

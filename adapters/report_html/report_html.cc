@@ -203,10 +203,11 @@ std::string HeaderSection(const Report& report) {
 }
 
 // A measurement's row is highlighted when its deviation from the CMM value is
-// beyond 3 sigma: the stage's flag, else |deviation_sigma| > 3.
+// beyond 3 sigma: the stage's flag, else |JudgedDeviationSigma| > 3.
 bool Beyond3Sigma(const MeasurementReport& m) {
   if (const auto flag = AsBool(Member(m.extra, "beyond_3_sigma"))) return *flag;
-  return m.deviation_sigma && std::abs(*m.deviation_sigma) > 3.0;
+  const std::optional<double> z = JudgedDeviationSigma(m);
+  return z && std::abs(*z) > 3.0;
 }
 
 // " Largest part: table for 7, edges for 4." (most first, ties by name), and where the
@@ -237,12 +238,23 @@ std::string MeasurementsSection(const Report& report) {
   std::string out = "<h2 id=\"measurements\">Measurements</h2>\n";
   if (!report.measurements) return out + Missing("The measure stage has not run.");
   if (report.measurements->empty()) return out + Missing("project.yaml lists no measurements.");
-  Table table({"measurement", "type", "value mm", "1-sigma mm", "CMM mm", "deviation mm",
-               "deviation / sigma", "1-sigma by source, mm", "error"},
-              "llrrrrrll");
+  // The CMM's sigma and the deviation against both, where cmm.csv states it.
+  const std::vector<MeasurementReport>& measurements = *report.measurements;
+  const bool with_cmm_sigma =
+      std::any_of(measurements.begin(), measurements.end(),
+                  [](const MeasurementReport& m) { return m.cmm_sigma_mm.has_value(); });
+  std::vector<std::string> columns = {"measurement",      "type",   "value mm",
+                                      "1-sigma mm",       "CMM mm", "deviation mm",
+                                      "deviation / sigma"};
+  if (with_cmm_sigma) {
+    columns.insert(columns.begin() + 5, "CMM 1-sigma mm");
+    columns.push_back("deviation / both sigmas");
+  }
+  columns.insert(columns.end(), {"1-sigma by source, mm", "error"});
+  Table table(columns, with_cmm_sigma ? "llrrrrrrrll" : "llrrrrrll");
   int beyond = 0, failed = 0;
   std::map<std::string, int> largest_counts;  // measurements per largest source of sigma
-  for (const MeasurementReport& m : *report.measurements) {
+  for (const MeasurementReport& m : measurements) {
     std::string sources, largest;
     double largest_mm = 0.0;
     if (const ReportObject* breakdown = AsObject(Member(m.extra, "sigma_breakdown_mm"))) {
@@ -264,18 +276,29 @@ std::string MeasurementsSection(const Report& report) {
       css_class = "beyond";
       ++beyond;
     }
-    table.Row({Escape(m.name), MeasurementTypeName(m.type), Number(m.value_mm), Number(m.sigma_mm),
-               Number(m.cmm_mm), Number(m.deviation_mm), Number(m.deviation_sigma, 2),
-               sources.empty() ? "&ndash;" : sources,
-               "<span class=\"error\">" + Escape(m.error) + "</span>"},
-              css_class);
+    std::vector<std::string> cells = {Escape(m.name),
+                                      MeasurementTypeName(m.type),
+                                      Number(m.value_mm),
+                                      Number(m.sigma_mm),
+                                      Number(m.cmm_mm),
+                                      Number(m.deviation_mm),
+                                      Number(m.deviation_sigma, 2)};
+    if (with_cmm_sigma) {
+      cells.insert(cells.begin() + 5, Number(m.cmm_sigma_mm));
+      cells.push_back(Number(m.deviation_combined_sigma, 2));
+    }
+    cells.insert(cells.end(), {sources.empty() ? "&ndash;" : sources,
+                               "<span class=\"error\">" + Escape(m.error) + "</span>"});
+    table.Row(cells, css_class);
   }
   out += fmt::format(
       "<p>{} measurement(s): {} made, {} failed, {} beyond 3 sigma of the CMM "
-      "value (highlighted). The 1-sigma by source are independent parts whose squares sum to "
+      "value (highlighted{}). The 1-sigma by source are independent parts whose squares sum to "
       "the 1-sigma's: the calibration images' noise, the registration's (the tiles' matches and "
       "plate marks), the table positions' errors and the edge fits'.",
-      report.measurements->size(), report.measurements->size() - failed, failed, beyond);
+      measurements.size(), measurements.size() - failed, failed, beyond,
+      with_cmm_sigma ? "; where cmm.csv states the CMM's 1-sigma, of omm's and the CMM's combined"
+                     : "");
   out += LargestSourcesSentence(report, largest_counts);
   return out + "</p>\n" + table.Html("measurements-table");
 }

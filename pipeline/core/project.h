@@ -63,6 +63,9 @@ struct TilePosition {
 struct CmmValue {
   std::string measurement;  // a name in `measurements`
   double value_mm = 0.0;
+  // The value's 1-sigma standard uncertainty (cmm.csv's optional sigma_mm),
+  // if stated: the deviation is then also judged against both sigmas.
+  std::optional<double> sigma_mm;
 };
 
 // An image file as LoadProject read it: read once, its bytes hashed and

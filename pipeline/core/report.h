@@ -124,11 +124,23 @@ struct MeasurementReport {
   std::optional<double> value_mm;      // absent when it could not be made (then `error` says why)
   std::optional<double> sigma_mm;      // 1-sigma standard uncertainty of value_mm
   std::optional<double> cmm_mm;        // reference value from cmm.csv
+  std::optional<double> cmm_sigma_mm;  // its 1-sigma, where cmm.csv states it
   std::optional<double> deviation_mm;  // value_mm - cmm_mm
   std::optional<double> deviation_sigma;  // deviation_mm / sigma_mm
-  std::string error;                      // empty when value_mm is set
+  // deviation_mm / sqrt(sigma_mm^2 + cmm_sigma_mm^2), where the CMM's sigma
+  // is stated: the deviation against both values' uncertainties (ISO
+  // 13528's zeta score).
+  std::optional<double> deviation_combined_sigma;
+  std::string error;  // empty when value_mm is set
   ReportObject extra;
 };
+
+// The deviation in the sigmas it is judged by (the 3-sigma flag, the CMM
+// agreement of a batch): against both uncertainties where the CMM's is
+// stated, else against the measurement's.
+inline std::optional<double> JudgedDeviationSigma(const MeasurementReport& m) {
+  return m.deviation_combined_sigma ? m.deviation_combined_sigma : m.deviation_sigma;
+}
 
 // A located feature (a circle of project.yaml's `features`), part frame, mm.
 struct FeatureReport {

@@ -47,7 +47,8 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kSceneName = "mosaic/scene.json";
-// A deviation from the CMM beyond this many sigmas is flagged.
+// A deviation from the CMM beyond this many sigmas (of both values where the
+// CMM's is stated: JudgedDeviationSigma) is flagged.
 constexpr double kFlagSigmas = 3.0;
 
 ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.y()}; }
@@ -468,16 +469,20 @@ MeasurementReport Measure(const MeasurementSpec& spec, const std::vector<Located
   for (const CmmValue& cmm : cmm_values) {
     if (cmm.measurement != spec.name) continue;
     m.cmm_mm = cmm.value_mm;
+    m.cmm_sigma_mm = cmm.sigma_mm;
     if (!m.value_mm) continue;
     m.deviation_mm = *m.value_mm - cmm.value_mm;
     if (!m.sigma_mm || !(*m.sigma_mm > 0.0)) continue;
     m.deviation_sigma = *m.deviation_mm / *m.sigma_mm;
-    const bool beyond = std::abs(*m.deviation_sigma) > kFlagSigmas;
+    if (cmm.sigma_mm)
+      m.deviation_combined_sigma = *m.deviation_mm / std::hypot(*m.sigma_mm, *cmm.sigma_mm);
+    const double judged = *JudgedDeviationSigma(m);
+    const bool beyond = std::abs(judged) > kFlagSigmas;
     m.extra.emplace_back("beyond_3_sigma", beyond);
     if (beyond) {
       *flagged = true;
-      spdlog::warn("measure: {} deviates from the CMM by {:.4f} mm ({:.1f} sigma)", m.name,
-                   *m.deviation_mm, *m.deviation_sigma);
+      spdlog::warn("measure: {} deviates from the CMM by {:.4f} mm ({:.1f} sigma{})", m.name,
+                   *m.deviation_mm, judged, cmm.sigma_mm ? ", the CMM's included" : "");
     }
   }
   return m;

@@ -40,7 +40,7 @@ constexpr int kHeightPx = 1200;
 constexpr double kWorkingDistanceMm = 390.0;
 constexpr double kPlateSizeMm = 120.0;  // the plate, white around its board (SimulatedBoard)
 constexpr double kMosaicGsdMm = 0.15;
-constexpr double kCmmSigmaMm = 0.001;
+constexpr double kCmmSigmaMm = 0.001;  // the CMM's noise, stated in cmm.csv
 
 const std::vector<PresetSpec>& Presets() {
   static const std::vector<PresetSpec> presets = [] {
@@ -840,7 +840,7 @@ SimulationPlan PlanSimulation(const SimulationOptions& options) {
   SimRandom cmm_random(options.seed, kCmmStream);
   for (const MeasurementTruth& m : truth.measurements) {
     project.cmm.push_back(
-        {m.name, RoundDecimals(m.value_mm + cmm_random.Normal(0.0, kCmmSigmaMm), 4)});
+        {m.name, RoundDecimals(m.value_mm + cmm_random.Normal(0.0, kCmmSigmaMm), 4), kCmmSigmaMm});
   }
   return plan;
 }

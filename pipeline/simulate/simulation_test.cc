@@ -403,6 +403,27 @@ TEST(PlanSimulation, TableErrorsHaveTheStatedSigma) {
   EXPECT_NEAR(std::sqrt(sum2 / n) / 0.02, 1.0, 0.12);
 }
 
+// cmm.csv states each value's sigma, and it is the CMM's scatter about the
+// truth (its 4 decimals round by 0.03 um rms more).
+TEST(PlanSimulation, CmmValuesScatterByTheirStatedSigma) {
+  double sum_z2 = 0.0;
+  int n = 0;
+  for (std::uint64_t seed = 1; seed <= 25; ++seed) {
+    const SimulationPlan plan = Plan("demo", seed);
+    ASSERT_EQ(plan.project.cmm.size(), plan.truth.measurements.size());
+    for (size_t i = 0; i < plan.project.cmm.size(); ++i) {
+      const CmmValue& cmm = plan.project.cmm[i];
+      ASSERT_TRUE(cmm.sigma_mm.has_value()) << cmm.measurement;
+      const double z = (cmm.value_mm - plan.truth.measurements[i].value_mm) / *cmm.sigma_mm;
+      sum_z2 += z * z;
+      ++n;
+    }
+  }
+  // ~11 values a project: the sample sigma's relative sigma is ~4 %.
+  EXPECT_GE(n, 250);
+  EXPECT_NEAR(std::sqrt(sum_z2 / n), 1.0, 0.12);
+}
+
 TEST(PlanSimulation, HolesAreWhereTheFeaturesSay) {
   for (const std::string& preset : SimulationPresets()) {
     const SimulationPlan plan = Plan(preset, 2);
