@@ -12,10 +12,13 @@
 // directly, with marks the locator cannot misread.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <regex>
+#include <string>
+#include <vector>
 
 #include "adapters/mrcal/cameramodel_io.h"
 #include "adapters/opencv/image_io.h"
@@ -73,6 +76,26 @@ class MosaicStageTest : public ::testing::Test {
     testing::CopyProject(sim_->project_dir, dir);
     fs::create_directories(dir / "out");
     WriteCameraModel(dir / "out" / "camera.cameramodel", camera);
+    return dir;
+  }
+  // CopyWithCamera with the true camera and only the tiles `keep` says,
+  // without features, measurements and cmm.csv (they name the other tiles).
+  template <typename Keep>
+  static fs::path CopyWithTiles(const std::string& name, Keep keep) {
+    const fs::path dir = CopyWithCamera(name, Truth().camera.model);
+    std::string table = "image,x_mm,y_mm\n";
+    for (const TileTruth& tile : Truth().tiles) {
+      if (!keep(tile)) {
+        fs::remove(dir / "tiles" / tile.image);
+        continue;
+      }
+      table += tile.image + "," + std::to_string(tile.commanded_mm.x()) + "," +
+               std::to_string(tile.commanded_mm.y()) + "\n";
+    }
+    testing::WriteTextFile(dir / "table.csv", table);
+    const std::string yaml = testing::ReadTextFile(dir / "project.yaml");
+    testing::WriteTextFile(dir / "project.yaml", yaml.substr(0, yaml.find("\nfeatures:") + 1));
+    fs::remove(dir / "cmm.csv");
     return dir;
   }
   static fs::path Out() { return ProjectDir() / "out"; }
@@ -193,9 +216,14 @@ TEST_F(MosaicStageTest, ReportHasTheContractFields) {
   }
   const auto& tiles = std::get<ReportValue::Array>(Member(mosaic.extra, "tiles")->data());
   EXPECT_EQ(tiles.size(), Truth().tiles.size());
-  // Demo tiles all overlap their neighbours: none is held by its prior.
+  // Demo tiles all overlap their neighbours: none is held by its prior, and
+  // the features tie them all together.
   EXPECT_TRUE(
       std::get<ReportValue::Array>(Member(mosaic.extra, "tiles_held_by_prior")->data()).empty());
+  const ReportValue::Array* groups = AsArray(Member(mosaic.extra, "tile_groups"));
+  ASSERT_NE(groups, nullptr);
+  ASSERT_EQ(groups->size(), 1u);
+  EXPECT_EQ(AsArray(&groups->front())->size(), Truth().tiles.size());
   // Every feature's hole is drawn from one tile (orthorectify.h): the demo's
   // holes are all seen whole by a tile.
   const ReportObject* ortho = AsObject(Member(mosaic.extra, "ortho"));
@@ -348,24 +376,40 @@ InputError MosaicStageInputError(const fs::path& dir) {
 // Two tiles that do not overlap (opposite corners of the 3 x 3 grid): the
 // stage fails on the data, says why, and out/ gets nothing.
 TEST_F(MosaicStageTest, TilesThatDoNotOverlapFailTheStage) {
-  const fs::path dir = CopyWithCamera("apart", Truth().camera.model);
-  std::string table = "image,x_mm,y_mm\n";
-  for (const TileTruth& tile : Truth().tiles) {
-    const bool corner =
-        (tile.grid_row == 0 && tile.grid_col == 0) || (tile.grid_row == 2 && tile.grid_col == 2);
-    if (!corner) {
-      fs::remove(dir / "tiles" / tile.image);
-      continue;
-    }
-    table += tile.image + "," + std::to_string(tile.commanded_mm.x()) + "," +
-             std::to_string(tile.commanded_mm.y()) + "\n";
-  }
-  testing::WriteTextFile(dir / "table.csv", table);
-  // The features and measurements name the removed tiles: drop them.
-  const std::string yaml = testing::ReadTextFile(dir / "project.yaml");
-  testing::WriteTextFile(dir / "project.yaml", yaml.substr(0, yaml.find("\nfeatures:") + 1));
-  fs::remove(dir / "cmm.csv");
+  const fs::path dir = CopyWithTiles("apart", [](const TileTruth& tile) {
+    return (tile.grid_row == 0 && tile.grid_col == 0) || (tile.grid_row == 2 && tile.grid_col == 2);
+  });
   EXPECT_FALSE(MosaicStageFailure(dir).empty());
+}
+
+// The middle column left out: the tiles of the outer columns overlap only
+// within their column, so the stage registers two groups that nothing seen
+// ties together, placed against each other by table.csv alone; the report
+// says which.
+TEST_F(MosaicStageTest, TileGroupsThatNothingTiesAreReported) {
+  const fs::path dir =
+      CopyWithTiles("columns", [](const TileTruth& tile) { return tile.grid_col != 1; });
+  std::vector<std::vector<std::string>> columns(2);
+  for (const TileTruth& tile : Truth().tiles) {
+    if (tile.grid_col != 1) columns[tile.grid_col / 2].push_back(tile.image);
+  }
+  RunOptions options;
+  options.stages = {Stage::kMosaic};
+  RunProject(LoadProject(dir), options);
+  const Report report = ReadReportJson(dir / "out" / "report.json");
+  ASSERT_TRUE(report.mosaic.has_value());
+  const ReportValue::Array* groups = AsArray(Member(report.mosaic->extra, "tile_groups"));
+  ASSERT_NE(groups, nullptr);
+  std::vector<std::vector<std::string>> found;
+  for (const ReportValue& group : *groups) {
+    found.emplace_back();
+    for (const ReportValue& image : *AsArray(&group)) found.back().push_back(*AsString(&image));
+    std::sort(found.back().begin(), found.back().end());
+  }
+  for (std::vector<std::string>& column : columns) std::sort(column.begin(), column.end());
+  std::sort(found.begin(), found.end());
+  std::sort(columns.begin(), columns.end());
+  EXPECT_EQ(found, columns);
 }
 
 // A tile that is a constant frame (a failed capture) is refused by name, as

@@ -407,6 +407,20 @@ TEST(ReportHtml, ATableScatteringFarLessThanStatedIsSaid) {
   }
 }
 
+// Tiles that nothing seen ties into one group: the groups are listed; one
+// group is nothing to say.
+TEST(ReportHtml, TileGroupsThatNothingTiesAreListed) {
+  Report report = FullReport();
+  using Array = ReportValue::Array;
+  report.mosaic->extra.emplace_back("tile_groups",
+                                    Array{Array{"t1.png", "t2.png"}, Array{"t<3>.png"}});
+  EXPECT_THAT(ReportHtml(report, FullInputs()),
+              HasSubstr("<tr><th>tile groups</th><td><b>2 groups that nothing seen in two of them "
+                        "ties together</b>: t1.png, t2.png; t&lt;3&gt;.png. table.csv alone"));
+  report.mosaic->extra.back().second = Array{Array{"t1.png", "t2.png", "t<3>.png"}};
+  EXPECT_THAT(ReportHtml(report, FullInputs()), Not(HasSubstr("tile groups")));
+}
+
 TEST(ReportHtml, OnlyCalibrationRan) {
   Report report = FullReport();
   report.mosaic.reset();

@@ -587,6 +587,23 @@ std::string MosaicFacts(const MosaicReport& m) {
                   NumberOf(*distance, "calibration_max_mm", 0) + " mm" +
                   (consistent ? "" : ": <b>far from it: are table.csv's positions in mm?</b>"));
   }
+  if (const ReportValue::Array* groups = AsArray(Member(extra, "tile_groups"));
+      groups && groups->size() > 1) {
+    std::string listed;
+    for (const ReportValue& group : *groups) {
+      std::string names;
+      if (const ReportValue::Array* images = AsArray(&group)) {
+        for (const ReportValue& image : *images)
+          names += (names.empty() ? "" : ", ") + Text(&image);
+      }
+      listed += (listed.empty() ? "" : "; ") + names;
+    }
+    facts.Add("tile groups",
+              fmt::format("<b>{} groups that nothing seen in two of them ties together</b>: {}. "
+                          "table.csv alone places them against each other: every measurement "
+                          "between two of them carries its sigma (the table part).",
+                          groups->size(), listed));
+  }
   if (const ReportObject* exposure = AsObject(Member(extra, "exposure")))
     facts.Add("exposure", Text(Member(*exposure, "brief")));
   return facts.Html();

@@ -44,6 +44,7 @@
 #include "pipeline/mosaic/register_tiles.h"
 #include "pipeline/mosaic/table_prior_check.h"
 #include "pipeline/mosaic/tile_features.h"
+#include "pipeline/mosaic/tile_groups.h"
 #include "pipeline/mosaic/working_distance.h"
 #include "pipeline/orchestration/stage.h"
 
@@ -778,6 +779,35 @@ ReportValue::Array PriorsLeftOut(const Project& project, const TileRegistration&
   return rows;
 }
 
+// report.mosaic.tile_groups: the groups of tiles that what the final
+// adjustment saw ties (TiedTileGroups), by image; warned about where there
+// are two or more.
+ReportValue::Array TileGroupsReport(const Project& project, const PlaneBundleInput& input) {
+  const std::vector<std::vector<int>> groups =
+      TiedTileGroups(input, static_cast<int>(project.tiles.size()));
+  ReportValue::Array rows;
+  std::string listed;
+  for (const std::vector<int>& group : groups) {
+    ReportValue::Array images;
+    std::string names;
+    for (const int tile : group) {
+      images.emplace_back(project.tiles[tile].image);
+      names += (names.empty() ? "" : " ") + project.tiles[tile].image;
+    }
+    rows.emplace_back(std::move(images));
+    listed += (listed.empty() ? "[" : " [") + names + "]";
+  }
+  if (groups.size() > 1) {
+    spdlog::warn(
+        "mosaic: the tiles fall into {} groups that no match, hole or plate seen in two of them "
+        "ties together: {}; table.csv alone places the groups against each other, and every "
+        "measurement between two of them carries its sigma (the table part): tiles that overlap "
+        "by 30-50 %, with texture, holes or markers there, would tie them",
+        groups.size(), listed);
+  }
+  return rows;
+}
+
 ReportValue::Array HeldTilesReport(const Project& project, const TileRegistration& registration) {
   ReportValue::Array held;
   for (int tile : registration.tiles_held_by_prior) {
@@ -1096,6 +1126,7 @@ void RunMosaicStage(StageContext& context) {
       {"pairs", PairsReport(project, registration, pair_scatter)},
       {"tiles", TilesReport(project, registration, ortho.summary, saturated_fraction)},
       {"tiles_held_by_prior", HeldTilesReport(project, registration)},
+      {"tile_groups", TileGroupsReport(project, adjusted.input)},
       {"table_priors_left_out", std::move(priors_left_out)},
       {"table_sigma_check", std::move(table_sigma_check)},
       {"working_distance_check", working_distance},
