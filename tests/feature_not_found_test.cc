@@ -1,7 +1,8 @@
 // `omm run` with a feature that is not where project.yaml says (issue 5: it
 // gets no value and an error saying why; the other measurements still come
 // out). Here a user gave hole_01's place with a third of its diameter: the
-// 20 mm circle looked for inside a 60 mm hole's dark opening.
+// 20 mm circle looked for inside a 60 mm hole's dark opening; and with 400
+// mm, wider than a tile sees: its error asks about diameter_mm.
 #include <string>
 
 #include <gtest/gtest.h>
@@ -28,6 +29,11 @@ TEST(FeatureNotFound, ItsMeasurementsSayWhyAndTheOthersComeOut) {
                          "    image: tile_r0c2.png\n"
                          "    near_px: [963, 434.4]\n"
                          "    diameter_mm: 20\n"
+                         "  - name: giant\n"
+                         "    type: circle\n"
+                         "    image: tile_r0c2.png\n"
+                         "    near_px: [963, 434.4]\n"
+                         "    diameter_mm: 400\n"
                          "measurements:\n"
                          "  - name: dist_ghost_hole_02\n"
                          "    type: distance\n"
@@ -35,16 +41,24 @@ TEST(FeatureNotFound, ItsMeasurementsSayWhyAndTheOthersComeOut) {
   RunProject(LoadProject(project_dir), RunOptions{});
   const Report report = ReadReportJson(project_dir / "out" / "report.json");
   ASSERT_TRUE(report.features && report.measurements);
-  ASSERT_EQ(report.features->size(), sim.truth.holes.size() + 1);
+  ASSERT_EQ(report.features->size(), sim.truth.holes.size() + 2);
   ASSERT_EQ(report.measurements->size(), sim.truth.measurements.size() + 1);
 
+  const std::string ask = "no tile can see a circle of 400 mm whole (a tile sees ";
   for (const FeatureReport& f : *report.features) {
+    if (f.name == "giant") {
+      EXPECT_FALSE(f.centre_mm);
+      EXPECT_NE(f.error.find(ask), std::string::npos) << f.error;
+      EXPECT_NE(f.error.find("is its diameter_mm in project.yaml right?"), std::string::npos);
+      continue;
+    }
     if (f.name != "ghost") {
       EXPECT_TRUE(f.centre_mm) << f.name << ": " << f.error;
       continue;
     }
     EXPECT_FALSE(f.centre_mm || f.diameter_mm);
     EXPECT_FALSE(f.error.empty());
+    EXPECT_EQ(f.error.find("diameter_mm"), std::string::npos) << f.error;  // a tile sees 20 mm
     // Looked for in the tiles that see it whole, then in the mosaic.
     const std::string* views = AsString(Member(f.extra, "views"));
     ASSERT_TRUE(views);

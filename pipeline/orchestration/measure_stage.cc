@@ -194,6 +194,29 @@ void AddTileViewNotes(const HoleViews& views, const CombinedCircle& combined,
   report->extra.emplace_back("tile_fits", std::move(tile_fits));
 }
 
+// Where a nominal circle is wider than a tile's view of the part (`tile`'s
+// extent along its rows and columns through its centre), no tile can see it
+// whole, and its fit fails "cut by the mosaic border" or "not found": the
+// likelier cause is project.yaml's diameter_mm. That, to append to the
+// error; else empty.
+std::string NoTileCouldSeeIt(const FeatureSpec& spec, const HoleViewInputs& in,
+                             const PlaneScene& scene, int tile) {
+  const double w = in.camera.width_px, h = in.camera.height_px;
+  const auto extent_mm = [&](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    const auto pa = PartPointOfTilePixel(in.lens, scene, tile, a);
+    const auto pb = PartPointOfTilePixel(in.lens, scene, tile, b);
+    return pa && pb ? (*pa - *pb).norm() : 0.0;
+  };
+  const double across_mm = extent_mm({0.0, 0.5 * h}, {w, 0.5 * h});
+  const double down_mm = extent_mm({0.5 * w, 0.0}, {0.5 * w, h});
+  if (!(across_mm > 0.0 && down_mm > 0.0) || spec.diameter_mm <= std::min(across_mm, down_mm))
+    return "";
+  return fmt::format(
+      "; no tile can see a circle of {:g} mm whole (a tile sees {:.0f} x {:.0f} mm of the "
+      "part): is its diameter_mm in project.yaml right?",
+      spec.diameter_mm, across_mm, down_mm);
+}
+
 // Pure in its inputs: features are located concurrently.
 //
 // A hole that some tiles see whole (with the fit's reach) is measured in
@@ -243,7 +266,7 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
                                                outcome, num_seeing, num_seeing > 1 ? "s" : "",
                                                FailedViewsNote(views_found.failed, saved)));
     if (!fit.circle.ok) {
-      report.error = fit.circle.error;  // the failed fit's only brief
+      report.error = fit.circle.error + NoTileCouldSeeIt(spec, in, saved.scene, tile);
       return located;
     }
     report.extra.emplace_back("fit", fit.circle.Brief());
