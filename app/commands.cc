@@ -441,14 +441,14 @@ int ReportCommand(const fs::path& project_dir, bool json) {
     }
     if (report.measurements) {
       // The CMM's sigma and the deviation against both, where cmm.csv states it.
-      const std::vector<MeasurementReport>& made = *report.measurements;
+      const std::vector<MeasurementReport>& listed = *report.measurements;
       const bool with_cmm_sigma =
-          std::any_of(made.begin(), made.end(),
+          std::any_of(listed.begin(), listed.end(),
                       [](const MeasurementReport& m) { return m.cmm_sigma_mm.has_value(); });
       fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}{}\n", "measurement", "type",
                  "value_mm", "sigma_mm", "cmm_mm", "dev_mm", "dev/sigma",
                  with_cmm_sigma ? fmt::format(" {:>9} {:>9}", "cmm_sigma", "dev/both") : "");
-      for (const MeasurementReport& m : made) {
+      for (const MeasurementReport& m : listed) {
         fmt::print("{:<20} {:<9} {:>12} {:>9} {:>12} {:>10} {:>9}{}{}\n", m.name,
                    MeasurementTypeName(m.type), Optional(m.value_mm), Optional(m.sigma_mm),
                    Optional(m.cmm_mm), Optional(m.deviation_mm),
