@@ -421,7 +421,8 @@ ReportValue OverlapTiesReport(const Project& project, const std::vector<OverlapT
     rows.emplace_back(std::move(row));
   }
   *brief = ties.empty()
-               ? "no tile held by its table prior alone or tied to one neighbour only"
+               ? "no overlap of a tile held by its table prior alone, or tied to one "
+                 "neighbour only, with another tile to align"
                : fmt::format("{} of {} overlaps of held or weakly tied tiles aligned directly",
                              num_used, ties.size());
   return ReportObject{{"brief", *brief}, {"ties", std::move(rows)}};
