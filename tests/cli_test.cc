@@ -1,6 +1,7 @@
 // The `omm` program as a user meets it: help, exit codes, error messages and
 // what is (not) left in out/.
 #include <algorithm>
+#include <cmath>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -205,6 +206,20 @@ TEST_F(CliTest, ReportPrintsTheMeasurements) {
   EXPECT_EQ(text.exit_code, 0);
   EXPECT_THAT(text.output, HasSubstr("A_to_B"));
   EXPECT_THAT(text.output, HasSubstr("202.6021"));
+  EXPECT_THAT(text.output, Not(HasSubstr("dev/both")));
+  // Where cmm.csv stated the CMM's sigma: its column and the deviation
+  // against both sigmas.
+  m.cmm_mm = 202.6033;
+  m.cmm_sigma_mm = 0.0012;
+  m.deviation_mm = 202.6021 - 202.6033;
+  m.deviation_sigma = *m.deviation_mm / 0.0031;
+  m.deviation_combined_sigma = *m.deviation_mm / std::hypot(0.0031, 0.0012);
+  report.measurements = std::vector<MeasurementReport>{m};
+  WriteReportJson(project_.OutDir() / "report.json", report);
+  const auto with_cmm = testing::RunOmm("report " + Quoted(project_.dir));
+  EXPECT_EQ(with_cmm.exit_code, 0);
+  EXPECT_THAT(with_cmm.output, HasSubstr("dev/sigma cmm_sigma  dev/both"));
+  EXPECT_THAT(with_cmm.output, HasSubstr("   -0.39    0.0012     -0.36"));
   const auto json = testing::RunOmm("report --json " + Quoted(project_.dir));
   EXPECT_THAT(json.output, HasSubstr("\"format\": \"omm-report/1\""));
 }

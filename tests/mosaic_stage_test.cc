@@ -410,6 +410,13 @@ TEST_F(MosaicStageTest, TileGroupsThatNothingTiesAreReported) {
   std::sort(found.begin(), found.end());
   std::sort(columns.begin(), columns.end());
   EXPECT_EQ(found, columns);
+  // Each column's end tiles are tied to one neighbour only, but their only
+  // overlap is that neighbour's: nothing to align, and the brief says so.
+  const ReportObject* overlap_ties = AsObject(Member(report.mosaic->extra, "overlap_ties"));
+  ASSERT_NE(overlap_ties, nullptr);
+  EXPECT_EQ(*AsString(Member(*overlap_ties, "brief")),
+            "no overlap of a tile held by its table prior alone, or tied to one neighbour only, "
+            "with another tile to align");
 }
 
 // A tile that is a constant frame (a failed capture) is refused by name, as
