@@ -184,12 +184,12 @@ class Batch {
     return to_run;
   }
 
-  // Each project of `to_run` as its own `omm run -q` on `child_threads`, up
-  // to `jobs` at a time; their logs go to a scratch folder, and their
+  // Each project of `to_run` as its own `omm run -q` on `child_threads`
+  // (with --force if `force`), up to `jobs` at a time; their logs go to a scratch folder, and their
   // warnings and errors are relayed. SIGINT or SIGTERM stops the batch: the
   // children running are killed, the others not started, and the rows say
   // which. True if stopped.
-  bool Run(const std::vector<size_t>& to_run, int jobs, int child_threads) {
+  bool Run(const std::vector<size_t>& to_run, int jobs, int child_threads, bool force) {
     if (to_run.empty()) return false;
     const fs::path program = OwnExecutable();
     ScratchDir logs("omm-batch-");
@@ -216,10 +216,11 @@ class Batch {
         ProcessOptions options;
         options.log_path = logs.path() / fmt::format("{}.log", i);
         try {
-          const pid_t pid =
-              StartProcess({program.string(), "-q", "--threads", std::to_string(child_threads),
-                            "run", projects_[i].string()},
-                           options);
+          std::vector<std::string> arguments = {program.string(), "-q", "--threads",
+                                                std::to_string(child_threads), "run"};
+          if (force) arguments.push_back("--force");
+          arguments.push_back(projects_[i].string());
+          const pid_t pid = StartProcess(arguments, options);
           running.emplace(pid, Running{i, options.log_path, std::chrono::steady_clock::now()});
           spdlog::info("started {} on {} thread{}", rows_[i].project, child_threads,
                        child_threads == 1 ? "" : "s");
@@ -324,7 +325,8 @@ class Batch {
 }  // namespace
 
 int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
-               bool calibration_study, FeatureSource mosaic_features, int num_threads) {
+               bool calibration_study, FeatureSource mosaic_features, int num_threads,
+               bool reuse_current_stages) {
   return Finish(Guarded([&] {
     // Ctrl-C or SIGTERM: the run stops at its next progress report (within
     // a second or so: the longest stretch without one is a calibration's
@@ -342,6 +344,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     options.calibration_study = calibration_study;
     options.mosaic_features = mosaic_features;
     options.num_threads = num_threads;
+    options.reuse_current_stages = reuse_current_stages;
     options.progress = [report = progress.Callback()](int done, int total,
                                                       const std::string& what) {
       if (g_stop_signal != 0) throw StopRequested{g_stop_signal};
@@ -366,7 +369,7 @@ int BatchCommand(const std::vector<fs::path>& dirs, bool force, const std::optio
   Batch batch(std::move(projects));
   const std::vector<size_t> to_run = batch.ProjectsToRun(force, num_threads);
   bool stopped = false;
-  if (const Outcome ran = Guarded([&] { stopped = batch.Run(to_run, jobs, child_threads); });
+  if (const Outcome ran = Guarded([&] { stopped = batch.Run(to_run, jobs, child_threads, force); });
       ran.exit_code != kExitOk) {
     return Finish(ran);
   }

@@ -15,11 +15,12 @@ namespace omm {
 
 // `omm run` (all stages) and `omm calibrate|mosaic|measure` (one stage);
 // `calibration_study`: `omm calibrate --study`; `mosaic_features`: `--features`;
-// `num_threads`: `--threads` (>= 1).
+// `num_threads`: `--threads` (>= 1); `reuse_current_stages`: `omm run`
+// without --force (RunOptions').
 int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage>& stages,
                bool calibration_study = false,
                FeatureSource mosaic_features = FeatureSource::kHarris,
-               int num_threads = HardwareThreads());
+               int num_threads = HardwareThreads(), bool reuse_current_stages = false);
 
 // `omm batch`: each argument is a project directory or a directory whose
 // subdirectories are projects. Projects whose report is current are skipped

@@ -91,11 +91,13 @@ CLI::App* AddBatchCommand(CLI::App& app, BatchArgs& args) {
       "batch",
       "Run many projects, each as its own `omm run`, several at once, and print a summary table.\n"
       "Each DIR is a project directory or a directory of project directories.\n"
-      "Projects whose out/report.json is current (same inputs, same omm) are skipped.\n"
+      "Projects whose out/report.json is current (same inputs, same omm) are skipped, and\n"
+      "of the others only the stages whose inputs changed are rerun.\n"
       "Writes each project's out/ as `omm run` does; a failing project does not stop the batch;\n"
       "with --csv, one table of every measurement of every project.");
   batch->add_option("DIR", args.dirs, "project directories or folders of projects")->required();
-  batch->add_flag("--force", args.force, "rerun projects whose report is current");
+  batch->add_flag("--force", args.force,
+                  "rerun projects whose report is current, every stage (`omm run --force`)");
   batch
       ->add_option("-j,--jobs", args.jobs,
                    "projects run at once (default: half the CPUs this process may use)")
@@ -217,8 +219,13 @@ int main(int argc, char** argv) {
       "run",
       "Run every stage on a project: calibrate, mosaic, measure.\n"
       "Reads PROJECT/project.yaml, calib/, tiles/, table.csv, cmm.csv.\n"
-      "Writes PROJECT/out/: report.json, camera.cameramodel, the mosaic, ... (all or nothing).");
+      "Writes PROJECT/out/: report.json, camera.cameramodel, the mosaic, ... (all or nothing).\n"
+      "Keeps the stages whose inputs are unchanged since out/ was written (--force reruns them).");
   run->add_option("PROJECT", project, "project directory")->required();
+  bool force = false;
+  run->add_flag("--force", force,
+                "rerun every stage (by default the stages whose inputs are unchanged since out/\n"
+                "was written are kept: a new cmm.csv reruns only measure)");
 
   bool study = false;
   CLI::App* calibrate = AddStageCommand(
@@ -275,7 +282,7 @@ int main(int argc, char** argv) {
 
   const omm::FeatureSource mosaic_features = feature_sources.at(features);
   if (run->parsed())
-    return omm::RunCommand(project, omm::AllStages(), false, mosaic_features, threads);
+    return omm::RunCommand(project, omm::AllStages(), false, mosaic_features, threads, !force);
   if (stage) return omm::RunCommand(project, {*stage}, study, mosaic_features, threads);
   if (batch->parsed()) {
     return omm::BatchCommand(batch_args.dirs, batch_args.force, batch_args.csv, batch_args.jobs,

@@ -157,5 +157,84 @@ TEST(RunHandoff, MeasureAloneRefusesAMosaicItsSceneDidNotMake) {
   EXPECT_NE(error.find("rerun `omm mosaic`"), std::string::npos) << error;
 }
 
+// `omm run` after the CMM's values arrived (cmm.csv added to a measured
+// project) reruns the measure stage alone, on the calibration and mosaic in
+// out/, and reports the same values as the first run, now with their
+// deviations. A stage run alone does not take an earlier stage's outputs
+// whose inputs changed since: `omm mosaic` after a calibration image was
+// removed refuses out/camera.cameramodel and leaves out/ as it was.
+TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "demo";
+  testing::CopyProject(sim.project_dir, project_dir);
+  const std::string cmm = testing::ReadTextFile(project_dir / "cmm.csv");
+  fs::remove(project_dir / "cmm.csv");
+  RunOptions run;
+  run.reuse_current_stages = true;
+  const RunSummary first = RunProject(LoadProject(project_dir), run);
+  ASSERT_EQ(first.stages_run.size(), 3u);
+
+  testing::WriteTextFile(project_dir / "cmm.csv", cmm);
+  const RunSummary second = RunProject(LoadProject(project_dir), run);
+  EXPECT_EQ(second.stages_run, std::vector<Stage>{Stage::kMeasure});
+  ASSERT_TRUE(first.report.measurements && second.report.measurements);
+  ASSERT_EQ(first.report.measurements->size(), second.report.measurements->size());
+  for (size_t i = 0; i < first.report.measurements->size(); ++i) {
+    const MeasurementReport& a = (*first.report.measurements)[i];
+    const MeasurementReport& b = (*second.report.measurements)[i];
+    ASSERT_TRUE(a.value_mm.has_value()) << a.name;
+    EXPECT_EQ(a.value_mm, b.value_mm) << a.name;
+    EXPECT_EQ(a.sigma_mm, b.sigma_mm) << a.name;
+    EXPECT_FALSE(a.cmm_mm.has_value()) << a.name;
+    EXPECT_TRUE(b.cmm_mm.has_value() && b.deviation_sigma.has_value()) << b.name;
+  }
+
+  const fs::path report_path = project_dir / "out" / "report.json";
+  const std::string report_before = testing::ReadTextFile(report_path);
+  fs::remove(project_dir / "calib" / "calib_01.png");
+  RunOptions mosaic_only;
+  mosaic_only.stages = {Stage::kMosaic};
+  try {
+    RunProject(LoadProject(project_dir), mosaic_only);
+    ADD_FAILURE() << "the mosaic took a camera calibrated from other images";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("camera.cameramodel: calibrated from other calib/"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_EQ(testing::ReadTextFile(report_path), report_before);
+}
+
+// The command line: `omm run` again on an unchanged project keeps every
+// stage, and `omm batch --force` reruns them all (its child runs `omm run
+// --force`: the mosaic's timings are new).
+TEST(RunHandoff, OmmRunKeepsCurrentStagesAndBatchForceRerunsThem) {
+  const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "demo";
+  testing::CopyProject(sim.project_dir, project_dir);
+  const fs::path report_path = project_dir / "out" / "report.json";
+  const auto mosaic_seconds = [&] {
+    const Report report = ReadReportJson(report_path);
+    const auto* timings = AsObject(Member(report.mosaic->extra, "timings_s"));
+    return timings ? AsNumber(Member(*timings, "total")) : std::nullopt;
+  };
+  ASSERT_EQ(testing::RunOmm("run " + project_dir.string()).exit_code, 0);
+  const std::optional<double> first = mosaic_seconds();
+  ASSERT_TRUE(first.has_value());
+
+  const testing::CommandResult again = testing::RunOmm("run " + project_dir.string());
+  EXPECT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_NE(again.output.find("nothing to run: calibrate, mosaic, measure current"),
+            std::string::npos)
+      << again.output;
+  EXPECT_EQ(mosaic_seconds(), first);
+
+  const testing::CommandResult batch = testing::RunOmm("batch --force " + project_dir.string());
+  EXPECT_EQ(batch.exit_code, 0) << batch.output;
+  EXPECT_NE(mosaic_seconds(), first) << "the mosaic stage was not rerun";
+}
+
 }  // namespace
 }  // namespace omm

@@ -52,15 +52,16 @@ TEST(BatchStop, SigintStopsTheBatch) { ExpectStopped("INT"); }
 
 TEST(BatchStop, SigtermStopsTheBatch) { ExpectStopped("TERM"); }
 
-// `omm run` on `project` on one thread (3 s for the demo), given `signal`
-// `delay_s` after its staging directory appears.
+// `omm run --force` (every stage, even where out/ is current) on `project`
+// on one thread (3 s for the demo), given `signal` `delay_s` after its
+// staging directory appears.
 testing::CommandResult RunAndSignal(const fs::path& project, const std::string& signal,
                                     double delay_s) {
   return testing::RunCommand(
-      kForeground + testing::OmmProgram().string() + " --threads 1 run " + project.string() +
-      " 2>&1 & pid=$!; while kill -0 $pid && [ -z \"$(ls -a " + (project / "out").string() +
-      " 2>/dev/null | grep staging)\" ]; do sleep 0.02; done; sleep " + std::to_string(delay_s) +
-      "; kill -" + signal + " $pid; wait $pid");
+      kForeground + testing::OmmProgram().string() + " --threads 1 run --force " +
+      project.string() + " 2>&1 & pid=$!; while kill -0 $pid && [ -z \"$(ls -a " +
+      (project / "out").string() + " 2>/dev/null | grep staging)\" ]; do sleep 0.02; done; sleep " +
+      std::to_string(delay_s) + "; kill -" + signal + " $pid; wait $pid");
 }
 
 // The files under `dir` with their contents, by relative path.

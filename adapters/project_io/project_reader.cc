@@ -394,9 +394,12 @@ void ReadProjectYaml(const fs::path& dir, Project& project, bool& has_table_keys
   }
   if (!root.IsMap())
     throw InputError(file.string(), "expected a YAML map (format: ..., name: ...)");
-  yaml.CheckKeys(root, "",
-                 {"format", "name", "camera", "calibration", "board", "table", "mosaic", "features",
-                  "measurements"});
+  yaml.CheckKeys(root, "", ProjectYamlKeys());
+  for (const auto& item : root) {
+    YAML::Emitter emitted;
+    emitted << item.second;
+    project.yaml_sections[item.first.Scalar()] = emitted.c_str();
+  }
 
   const YAML::Node format = yaml.Required(root, "", "format");
   if (yaml.String(format, "format") != kProjectFormat) {
@@ -780,6 +783,13 @@ void CheckFeaturesInTiles(const fs::path& yaml_file, const Project& project) {
 }
 
 }  // namespace
+
+const std::vector<std::string>& ProjectYamlKeys() {
+  static const std::vector<std::string> keys = {"format",      "name",     "camera",
+                                                "calibration", "board",    "table",
+                                                "mosaic",      "features", "measurements"};
+  return keys;
+}
 
 Project LoadProject(const fs::path& dir_in, int num_threads) {
   std::error_code ec;

@@ -2,6 +2,8 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
+#include <vector>
 
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/project.h"
@@ -15,5 +17,8 @@ namespace omm {
 // result keeps them in Project::images for the stages. Throws InputError
 // naming the file, the line or key, and what was expected.
 Project LoadProject(const std::filesystem::path& dir, int num_threads = HardwareThreads());
+
+// The top-level keys project.yaml may have.
+const std::vector<std::string>& ProjectYamlKeys();
 
 }  // namespace omm

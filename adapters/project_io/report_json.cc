@@ -239,6 +239,7 @@ std::string ReportToJson(const Report& report) {
   json["project"] = report.project;
   json["software_version"] = report.software_version;
   json["inputs_sha256"] = report.inputs_sha256;
+  if (!report.stage_inputs_sha256.empty()) json["stage_inputs_sha256"] = report.stage_inputs_sha256;
   if (report.calibration) {
     const CalibrationReport& c = *report.calibration;
     Json section = {{"lens_model", c.lens_model},
@@ -316,6 +317,12 @@ Report ReportFromJson(const std::string& text, const std::string& where) {
   report.project = root.String("project", /*required=*/false);
   report.software_version = root.String("software_version", /*required=*/false);
   report.inputs_sha256 = root.String("inputs_sha256", /*required=*/false);
+  if (const Json* stages = root.Find("stage_inputs_sha256")) {
+    Section section(*stages, "stage_inputs_sha256", where);
+    for (const auto& [stage, hash] : stages->items()) {
+      report.stage_inputs_sha256[stage] = section.String(stage);
+    }
+  }
   if (const Json* calibration = root.Find("calibration")) {
     report.calibration = ReadCalibration(*calibration, where);
   }

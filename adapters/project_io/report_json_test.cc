@@ -19,6 +19,8 @@ Report FullReport() {
   report.project = "die-casting-450";
   report.software_version = "0.1.0";
   report.inputs_sha256 = std::string(64, 'a');
+  report.stage_inputs_sha256 = {{"calibrate", std::string(64, 'b')},
+                                {"mosaic", std::string(64, 'c')}};
   CalibrationReport calibration;
   calibration.lens_model = "LENSMODEL_OPENCV8";
   calibration.rms_px = 0.0612345678901234;
@@ -89,6 +91,7 @@ TEST(ReportJson, RoundTripIsExact) {
   EXPECT_EQ(read.project, report.project);
   EXPECT_EQ(read.software_version, report.software_version);
   EXPECT_EQ(read.inputs_sha256, report.inputs_sha256);
+  EXPECT_EQ(read.stage_inputs_sha256, report.stage_inputs_sha256);
   ASSERT_TRUE(read.calibration.has_value());
   EXPECT_EQ(read.calibration->lens_model, "LENSMODEL_OPENCV8");
   EXPECT_EQ(read.calibration->rms_px, report.calibration->rms_px);  // bit-identical
@@ -153,6 +156,7 @@ TEST(ReportJson, SectionsAreOptional) {
   EXPECT_FALSE(read.mosaic.has_value());
   EXPECT_FALSE(read.measurements.has_value());
   EXPECT_THAT(ReportToJson(report), ::testing::Not(HasSubstr("mosaic")));
+  EXPECT_THAT(ReportToJson(report), ::testing::Not(HasSubstr("stage_inputs_sha256")));
 }
 
 TEST(ReportJson, ErrorsNameTheMember) {
@@ -164,6 +168,9 @@ TEST(ReportJson, ErrorsNameTheMember) {
     EXPECT_THAT(e.what(), HasSubstr("mosaic.file"));
   }
   EXPECT_THROW(ReportFromJson(R"({"format": "omm-report/9"})", "r"), InputError);
+  EXPECT_THROW(
+      ReportFromJson(R"({"format": "omm-report/1", "stage_inputs_sha256": {"mosaic": 1}})", "r"),
+      InputError);
   EXPECT_THROW(ReportFromJson("{", "r"), InputError);
   EXPECT_THROW(ReadReportJson("/nonexistent/report.json"), InputError);
 }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -98,6 +99,11 @@ struct Project {
   std::vector<std::filesystem::path> calib_images;  // absolute, file-name order
   std::vector<TilePosition> tiles;                  // file-name order of tiles/
   std::vector<CmmValue> cmm;                        // empty without cmm.csv
+  // project.yaml's top-level sections by key, each re-emitted from its
+  // parsed form (comments and layout dropped): what the stages' input
+  // hashes see of project.yaml (input_hash.h). Empty for a project not read
+  // from a file.
+  std::map<std::string, std::string> yaml_sections;
 
   // Size shared by all images (calib/ and tiles/), px.
   int image_width_px = 0;

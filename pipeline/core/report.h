@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -160,6 +161,9 @@ struct Report {
   std::string project;           // project name
   std::string software_version;  // omm's version that wrote it
   std::string inputs_sha256;     // hash of the project's input files (see orchestration)
+  // Per stage whose section is present ("calibrate", "mosaic", "measure"):
+  // the hash of the inputs it ran on (orchestration's HashStageInputs).
+  std::map<std::string, std::string> stage_inputs_sha256;
   std::optional<CalibrationReport> calibration;
   std::optional<MosaicReport> mosaic;
   std::optional<std::vector<FeatureReport>> features;

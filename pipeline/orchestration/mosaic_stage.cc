@@ -102,11 +102,12 @@ OrthoGeometry MosaicGeometry(const Project& project, const CameraModel& camera,
 
 ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.y()}; }
 
-// The calibrated camera: this run's or an earlier one's out/camera.cameramodel,
-// else the one calibration.from names.
+// The calibrated camera: this run's or an earlier one's out/camera.cameramodel
+// while the report's calibration is current, else the one calibration.from
+// names.
 fs::path CameraModelPath(const StageContext& context) {
   fs::path staged = context.Input(kCameraModelName);
-  if (!staged.empty()) return staged;
+  if (!staged.empty() && context.report.calibration) return staged;
   const Project& project = context.project;
   if (project.calibration_from) {
     const CalibrationSource& source = *project.calibration_from;
@@ -116,8 +117,11 @@ fs::path CameraModelPath(const StageContext& context) {
     if (fs::exists(from)) return from;
   }
   throw InputError((context.out_dir / kCameraModelName).string(),
-                   "no calibrated camera: run `omm calibrate` (or `omm run`) first, or set "
-                   "calibration.from in project.yaml");
+                   std::string(staged.empty() ? "no calibrated camera"
+                                              : "calibrated from other calib/ images or settings "
+                                                "(changed since)") +
+                       ": run `omm calibrate` (or `omm run`) first, or set calibration.from in "
+                       "project.yaml");
 }
 
 // Where the calibration measured a splined lens: the convex hull of its inlier
@@ -152,7 +156,7 @@ std::future<TimedPrior> Ready(IntrinsicsPrior prior) {
 }
 
 // The calibration's intrinsics prior: from the calibrate stage's solve record
-// (this run's, out/'s, or calibration.from's project), if it belongs to
+// (this run's, out/'s while current, or calibration.from's project), if it belongs to
 // *camera; then *camera takes the record's exact intrinsics (mrcal writes the
 // .cameramodel with 6 decimals), and *rt_cam_from_plates the record's plate
 // poses. The covariance is computed on another thread (0.06 s on
@@ -161,7 +165,7 @@ std::future<TimedPrior> CalibrationPrior(const StageContext& context, CameraMode
                                          std::vector<Vector6d>* rt_cam_from_plates) {
   const Project& project = context.project;
   IntrinsicsPrior prior;
-  fs::path record_path = context.Input(kSolveRecordName);
+  fs::path record_path = context.report.calibration ? context.Input(kSolveRecordName) : fs::path();
   if (record_path.empty() && project.calibration_from &&
       project.calibration_from->kind == CalibrationSource::Kind::kProject) {
     record_path = project.calibration_from->path / "out" / kSolveRecordName;

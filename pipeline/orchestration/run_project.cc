@@ -28,40 +28,72 @@ constexpr const char* kStagingPrefix = ".staging-";
 constexpr const char* kReportName = "report.json";
 constexpr const char* kReportHtmlName = "report.html";
 
-// The report to start from: the earlier one if it belongs to these inputs.
-Report StartingReport(const Project& project, const std::string& inputs_sha256) {
-  Report report;
-  const fs::path path = project.OutDir() / kReportName;
-  std::error_code ec;
-  if (fs::is_regular_file(path, ec)) {
-    try {
-      Report earlier = ReadReportJson(path);
-      if (earlier.inputs_sha256 == inputs_sha256 && earlier.software_version == SoftwareVersion()) {
-        report = std::move(earlier);
-      } else {
-        spdlog::info("{} is from other inputs or another omm version; starting afresh",
-                     path.string());
-      }
-    } catch (const InputError& e) {
-      spdlog::warn("ignoring unreadable earlier report: {}", e.what());
-    }
+// Whether `report` has `stage`'s section.
+bool HasSection(const Report& report, Stage stage) {
+  switch (stage) {
+    case Stage::kCalibrate: return report.calibration.has_value();
+    case Stage::kMosaic: return report.mosaic.has_value();
+    case Stage::kMeasure: return report.measurements.has_value();
   }
-  report.format = kReportFormat;
-  report.project = project.name;
-  report.software_version = SoftwareVersion();
-  report.inputs_sha256 = inputs_sha256;
-  return report;
+  return false;
 }
 
 // A rerun stage invalidates its own section and those of later stages.
 void DropSectionsFrom(Stage first, Report& report) {
+  const std::vector<Stage> all = AllStages();
+  for (auto stage = std::find(all.begin(), all.end(), first); stage != all.end(); ++stage) {
+    report.stage_inputs_sha256.erase(StageName(*stage));
+  }
   switch (first) {
     case Stage::kCalibrate: report.calibration.reset(); [[fallthrough]];
     case Stage::kMosaic: report.mosaic.reset(); [[fallthrough]];
     case Stage::kMeasure:
       report.features.reset();
       report.measurements.reset();
+      report.extra.erase(
+          std::remove_if(report.extra.begin(), report.extra.end(),
+                         [](const auto& member) { return member.first == "measure"; }),
+          report.extra.end());
   }
+}
+
+// The report to start from: the earlier one's sections of the stages whose
+// inputs it ran on are this run's (`stages`), in run order up to the first
+// whose are not.
+Report StartingReport(const Project& project, const std::string& inputs_sha256,
+                      const StageInputHashes& stages) {
+  Report report;
+  const fs::path path = project.OutDir() / kReportName;
+  std::error_code ec;
+  if (fs::is_regular_file(path, ec)) {
+    try {
+      Report earlier = ReadReportJson(path);
+      if (earlier.software_version == SoftwareVersion()) {
+        report = std::move(earlier);
+      } else {
+        spdlog::info("{} is from another omm version ({}); starting afresh", path.string(),
+                     earlier.software_version);
+      }
+    } catch (const InputError& e) {
+      spdlog::warn("ignoring unreadable earlier report: {}", e.what());
+    }
+  }
+  for (const Stage stage : AllStages()) {
+    const auto ran_on = report.stage_inputs_sha256.find(StageName(stage));
+    if (HasSection(report, stage) && ran_on != report.stage_inputs_sha256.end() &&
+        ran_on->second == stages.Of(stage))
+      continue;
+    if (HasSection(report, stage)) {
+      spdlog::info("{}: its inputs changed since out/report.json was written", StageName(stage));
+    }
+    DropSectionsFrom(stage, report);
+    break;
+  }
+  report.format = kReportFormat;
+  report.project = project.name;
+  report.software_version = SoftwareVersion();
+  report.inputs_sha256 = inputs_sha256;
+  return report;
 }
 
 // report.json and report.html into the staging directory; the page draws on
@@ -131,10 +163,20 @@ std::string RunOptions::Check() const {
 }
 
 std::string RunSummary::Brief() const {
-  std::string names;
-  for (const Stage stage : stages_run)
-    names += (names.empty() ? "" : ", ") + std::string(StageName(stage));
-  return fmt::format("{} done in {:.1f} s: {}", names, seconds, report_path.string());
+  const auto names = [](const std::vector<Stage>& stages) {
+    std::string joined;
+    for (const Stage stage : stages)
+      joined += (joined.empty() ? "" : ", ") + std::string(StageName(stage));
+    return joined;
+  };
+  const std::string kept =
+      stages_kept.empty() ? "" : fmt::format(" ({} current, kept)", names(stages_kept));
+  if (stages_run.empty()) {
+    return fmt::format("nothing to run: {} current (`--force` reruns): {}", names(stages_kept),
+                       report_path.string());
+  }
+  return fmt::format("{} done in {:.1f} s{}: {}", names(stages_run), seconds, kept,
+                     report_path.string());
 }
 
 RunSummary RunProject(const Project& project, const RunOptions& options) {
@@ -164,8 +206,16 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
                        : fmt::format("whose samples stay below 2^{}", project.sample_bits),
                    project.sample_bits, (1 << project.sample_bits) - 1);
     }
-    Report report = StartingReport(project, HashProjectInputs(project));
-    DropSectionsFrom(options.stages.front(), report);
+    const StageInputHashes stage_inputs = HashStageInputs(project, options.mosaic_features);
+    Report report = StartingReport(project, HashProjectInputs(project), stage_inputs);
+    std::vector<Stage> to_run = options.stages;
+    while (options.reuse_current_stages && !to_run.empty() && HasSection(report, to_run.front())) {
+      spdlog::info("{}: current (its inputs unchanged since out/ was written), kept",
+                   StageName(to_run.front()));
+      summary.stages_kept.push_back(to_run.front());
+      to_run.erase(to_run.begin());
+    }
+    if (!to_run.empty()) DropSectionsFrom(to_run.front(), report);
     StageContext context{project,
                          staging_dir,
                          out_dir,
@@ -174,11 +224,12 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
                          options.calibration_study,
                          options.mosaic_features,
                          options.num_threads > 0 ? options.num_threads : HardwareThreads()};
-    context.mosaic_follows = std::find(options.stages.begin(), options.stages.end(),
-                                       Stage::kMosaic) != options.stages.end();
-    for (const Stage stage : options.stages) {
+    context.mosaic_follows =
+        std::find(to_run.begin(), to_run.end(), Stage::kMosaic) != to_run.end();
+    for (const Stage stage : to_run) {
       spdlog::info("{}: starting", StageName(stage));
       options.runner(stage, context);
+      report.stage_inputs_sha256[StageName(stage)] = stage_inputs.Of(stage);
       spdlog::info("{}: done", StageName(stage));
       summary.stages_run.push_back(stage);
     }

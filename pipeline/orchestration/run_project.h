@@ -7,9 +7,14 @@
 // absent; never half-written. Stale staging directories of processes that no
 // longer run are removed at the next run.
 //
-// Single-stage runs (`omm mosaic`) start from out/report.json when it is from
-// the same inputs and software version, and drop the sections of the stages
-// after the one rerun (their results would be stale).
+// A run starts from out/report.json when the same software version wrote
+// it, keeping the sections of the stages whose inputs are unchanged
+// (HashStageInputs: a new cmm.csv leaves the calibration and the mosaic
+// current), and drops the sections of the stages it reruns and of those
+// after them (their results would be stale). A single-stage run (`omm
+// measure`) thus builds on the earlier stages' results in out/ while they
+// are current; `omm run` also keeps, without rerunning them, the stages in
+// front that are (RunOptions::reuse_current_stages).
 #pragma once
 
 #include <filesystem>
@@ -50,6 +55,11 @@ struct RunOptions {
   // Threads for the stages' parallel work; 0: HardwareThreads(). The results
   // do not depend on it.
   int num_threads = 0;
+  // Keep the results in out/ of the first stages of `stages` whose inputs
+  // are unchanged instead of running them again (`omm run` without
+  // --force): a stage's results depend on its inputs and the software
+  // version alone.
+  bool reuse_current_stages = false;
 
   // Empty if valid, else what is wrong.
   std::string Check() const;
@@ -59,9 +69,11 @@ struct RunSummary {
   std::filesystem::path report_path;  // out/report.json
   Report report;                      // as written
   std::vector<Stage> stages_run;
+  std::vector<Stage> stages_kept;  // current in out/, not run (reuse_current_stages)
   double seconds = 0.0;  // wall time of the run
 
-  // One line, e.g. "calibrate, mosaic, measure done in 42.1 s: out/report.json".
+  // One line, e.g. "calibrate, mosaic, measure done in 42.1 s: out/report.json"
+  // or "measure done in 0.4 s (calibrate, mosaic current, kept): ...".
   std::string Brief() const;
 };
 
