@@ -39,8 +39,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kCameraModelName = "camera.cameramodel";
-constexpr const char* kSolveRecordName = "calibration/solve.json";
 constexpr const char* kResidualsPlotName = "calibration/residuals.svg";
 constexpr const char* kStudyPlotName = "calibration/study.svg";
 constexpr const char* kUncertaintyPlotName = "calibration/uncertainty.svg";

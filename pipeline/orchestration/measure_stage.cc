@@ -46,7 +46,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kSceneName = "mosaic/scene.json";
 // A deviation from the CMM beyond this many sigmas (of both values where the
 // CMM's is stated: JudgedDeviationSigma) is flagged.
 constexpr double kFlagSigmas = 3.0;

@@ -53,8 +53,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kCameraModelName = "camera.cameramodel";
-
 // The median of every 7th pixel of a tile, [0, 1].
 double MedianOfImage(const ImageF& image) {
   std::vector<double> values;
@@ -63,9 +61,7 @@ double MedianOfImage(const ImageF& image) {
   return Median(std::move(values));
 }
 constexpr const char* kMosaicName = "mosaic.png";
-constexpr const char* kSceneName = "mosaic/scene.json";
 constexpr const char* kColmapDirName = "colmap";
-constexpr const char* kSolveRecordName = "calibration/solve.json";
 constexpr int kMosaicBitDepth = 16;
 // Bytes a mosaic pixel takes while the mosaic is made, written and measured
 // (its float samples, their 16-bit copy, the file's encoding): ~9 at the

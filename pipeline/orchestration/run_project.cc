@@ -38,6 +38,19 @@ bool HasSection(const Report& report, Stage stage) {
   return false;
 }
 
+// Whether out/ holds the files of `stage`'s results that later stages read;
+// logs the first missing.
+bool OutputsPresent(Stage stage, const Report& report, const fs::path& out_dir) {
+  for (const std::string& file : StageOutputFiles(stage, report)) {
+    std::error_code ec;
+    if (!fs::is_regular_file(out_dir / file, ec)) {
+      spdlog::info("{}: {} is missing: rerun", StageName(stage), (out_dir / file).string());
+      return false;
+    }
+  }
+  return true;
+}
+
 // A rerun stage invalidates its own section and those of later stages.
 void DropSectionsFrom(Stage first, Report& report) {
   const std::vector<Stage> all = AllStages();
@@ -209,7 +222,8 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
     const StageInputHashes stage_inputs = HashStageInputs(project, options.mosaic_features);
     Report report = StartingReport(project, HashProjectInputs(project), stage_inputs);
     std::vector<Stage> to_run = options.stages;
-    while (options.reuse_current_stages && !to_run.empty() && HasSection(report, to_run.front())) {
+    while (options.reuse_current_stages && !to_run.empty() && HasSection(report, to_run.front()) &&
+           OutputsPresent(to_run.front(), report, out_dir)) {
       spdlog::info("{}: current (its inputs unchanged since out/ was written), kept",
                    StageName(to_run.front()));
       summary.stages_kept.push_back(to_run.front());

@@ -60,6 +60,7 @@ void FakeStage(Stage stage, StageContext& context, const std::string& content) {
       // The calibration is read through Input(): this run's or out/'s.
       EXPECT_FALSE(context.Input("camera.cameramodel").empty());
       testing::WriteTextFile(context.staging_dir / "mosaic.png", content);
+      testing::WriteTextFile(context.staging_dir / kSceneName, content);
       context.report.mosaic = MosaicReport{};
       context.report.mosaic->file = "mosaic.png";
       break;
@@ -262,6 +263,14 @@ TEST_F(RunProjectTest, ReuseKeepsTheCurrentStagesAndRerunsTheRest) {
 
   // Without reuse (`omm run --force`) every stage runs.
   options.reuse_current_stages = false;
+  EXPECT_EQ(RunProject(LoadProject(project_.dir), options).stages_run.size(), 3u);
+
+  // A file of a current stage's results deleted from out/: that stage reruns.
+  options.reuse_current_stages = true;
+  fs::remove(Out("mosaic/scene.json"));
+  summary = RunProject(LoadProject(project_.dir), options);
+  EXPECT_EQ(summary.stages_run, (std::vector<Stage>{Stage::kMosaic, Stage::kMeasure}));
+  fs::remove(Out("camera.cameramodel"));
   EXPECT_EQ(RunProject(LoadProject(project_.dir), options).stages_run.size(), 3u);
 }
 

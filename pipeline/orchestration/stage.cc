@@ -23,6 +23,17 @@ const char* StageName(Stage stage) {
 
 std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stage::kMeasure}; }
 
+std::vector<std::string> StageOutputFiles(Stage stage, const Report& report) {
+  switch (stage) {
+    case Stage::kCalibrate: return {kCameraModelName};
+    case Stage::kMosaic:
+      if (!report.mosaic) return {kSceneName};
+      return {kSceneName, report.mosaic->file};
+    case Stage::kMeasure: return {};
+  }
+  return {};
+}
+
 GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
                            const std::filesystem::path& path) {
   GrayImage image = decoded ? ToGrayImage(*decoded) : ReadGrayImage(path);

@@ -32,6 +32,16 @@ const char* StageName(Stage stage);
 // In run order.
 std::vector<Stage> AllStages();
 
+// Files in out/ that a stage writes and a later stage reads.
+inline constexpr const char* kCameraModelName = "camera.cameramodel";
+inline constexpr const char* kSolveRecordName = "calibration/solve.json";
+inline constexpr const char* kSceneName = "mosaic/scene.json";
+
+// The files of `stage`'s results in out/ that later stages read, as `report`
+// names them: a run keeps a current stage only while they are there
+// (RunOptions::reuse_current_stages).
+std::vector<std::string> StageOutputFiles(Stage stage, const Report& report);
+
 // A data failure that leaves a stage without a usable result (no plate found
 // in any calibration image, tiles that do not overlap, ...): the run stops
 // and out/ is left as it was. Failures of single items (one image, one
