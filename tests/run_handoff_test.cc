@@ -161,8 +161,9 @@ TEST(RunHandoff, MeasureAloneRefusesAMosaicItsSceneDidNotMake) {
 // project) reruns the measure stage alone, on the calibration and mosaic in
 // out/, and reports the same values as the first run, now with their
 // deviations. A stage run alone does not take an earlier stage's outputs
-// whose inputs changed since: `omm mosaic` after a calibration image was
-// removed refuses out/camera.cameramodel and leaves out/ as it was.
+// whose inputs changed since: after a calibration image was removed, `omm
+// mosaic` refuses out/camera.cameramodel and `omm measure` the mosaic, and
+// out/ stays as it was.
 TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
   const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
   testing::TempDir dir;
@@ -201,6 +202,17 @@ TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("camera.cameramodel: calibrated from other calib/"),
               std::string::npos)
+        << e.what();
+  }
+  EXPECT_EQ(testing::ReadTextFile(report_path), report_before);
+  // Nor does the measure stage take the mosaic made with that camera.
+  RunOptions measure_only;
+  measure_only.stages = {Stage::kMeasure};
+  try {
+    RunProject(LoadProject(project_dir), measure_only);
+    ADD_FAILURE() << "measured on a mosaic of other inputs";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("its mosaic is from other inputs"), std::string::npos)
         << e.what();
   }
   EXPECT_EQ(testing::ReadTextFile(report_path), report_before);

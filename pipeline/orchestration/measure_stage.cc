@@ -339,8 +339,13 @@ struct MosaicResults {
 MosaicResults ReadMosaicResults(const StageContext& context) {
   const Project& project = context.project;
   if (!context.report.mosaic) {
+    const bool stale = !context.Input(kSceneName).empty();
     throw InputError((context.out_dir / "report.json").string(),
-                     "no mosaic for these inputs: run `omm mosaic` (or `omm run`) first");
+                     std::string(stale ? "its mosaic is from other inputs (tiles/, table.csv, "
+                                         "project.yaml's table, mosaic or features, or the "
+                                         "calibration changed since)"
+                                       : "no mosaic") +
+                         ": run `omm mosaic` (or `omm run`) first");
   }
   const MosaicReport& mosaic_report = *context.report.mosaic;
   const fs::path scene_path = context.Input(kSceneName);
