@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "adapters/project_io/measurements_csv.h"
+#include "adapters/project_io/report_csv.h"
 #include "pipeline/core/report.h"
 
 namespace omm {

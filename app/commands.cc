@@ -15,8 +15,8 @@
 #include <spdlog/spdlog.h>
 
 #include "adapters/process/process.h"
-#include "adapters/project_io/measurements_csv.h"
 #include "adapters/project_io/project_reader.h"
+#include "adapters/project_io/report_csv.h"
 #include "adapters/project_io/report_json.h"
 #include "adapters/project_io/text_file.h"
 #include "adapters/report_html/report_html.h"
@@ -421,9 +421,11 @@ int ReportCommand(const fs::path& project_dir, bool json) {
       spdlog::warn("report.html without distance lines: {}", e.what());
     }
     WriteReportJson(path, report);
+    WriteReportTables(project_dir / "out", report);
     const fs::path html_path = project_dir / "out" / "report.html";
     WriteReportHtml(html_path, report, {project_dir / "out"}, measurements);
-    spdlog::info("wrote {} and {}", path.string(), html_path.string());
+    spdlog::info("wrote {}, its tables (measurements.csv, features.csv) and {}", path.string(),
+                 html_path.string());
     if (json) {
       fmt::print("{}", ReportToJson(report));
       return;

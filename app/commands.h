@@ -28,7 +28,7 @@ int RunCommand(const std::filesystem::path& project_dir, const std::vector<Stage
 // `jobs` at once (child_process.h), each on num_threads / jobs threads (at
 // least one). Prints a summary table
 // and how the measurements agree with the CMM values over all projects; with
-// `csv`, also writes every measurement to that file (measurements_csv.h).
+// `csv`, also writes every measurement to that file (report_csv.h).
 // Exits kExitFailed if any project failed.
 int BatchCommand(const std::vector<std::filesystem::path>& dirs, bool force,
                  const std::optional<std::filesystem::path>& csv = std::nullopt, int jobs = 1,

@@ -231,7 +231,10 @@ BoreEvidence BoreEvidenceOf(const std::vector<HoleFit>& fits) {
     if (circle.bottom_rim_scale > 0.0 && !circle.bore_prior_used)
       evidence.bottom_rim_scales.push_back(circle.bottom_rim_scale);
     if (circle.wall_contrast > 0.0) evidence.wall_contrasts.push_back(circle.wall_contrast);
-    evidence.unresolved |= fit.nadir_tile.has_value() && !circle.bottom_rim_modelled;
+    // A wall narrower than min_wall_blurs on most of the rim (by the view's
+    // own k) is not resolved either: a BorePrior ties it (MeasureCircle).
+    const bool narrow = 2 * circle.num_narrow_wall > circle.num_wedges;
+    evidence.unresolved |= fit.nadir_tile.has_value() && (!circle.bottom_rim_modelled || narrow);
   }
   return evidence;
 }

@@ -112,7 +112,8 @@ HoleFit FitHoleInMosaic(const HoleViewInputs& in, const Eigen::Vector2d& centre_
 
 // What one hole's fits say of the bore: the bottom rim's scale k and the
 // wall's level where a view resolved them, and whether a view near a nadir
-// resolved no wall (such a view is fitted again with a BorePrior).
+// resolved no wall, or one narrower than min_wall_blurs on most of its rim
+// (such a view is fitted again with a BorePrior).
 struct BoreEvidence {
   std::vector<double> bottom_rim_scales, wall_contrasts;
   bool unresolved = false;

@@ -102,8 +102,9 @@ std::string BoreNote(const HoleFit& fit, const SavedScene& saved) {
   const CircleMeasurement& circle = fit.circle;
   if (circle.bore_prior_used) {
     return fmt::format(
-        "no bore wall resolved; bottom rim scaled by the project's {:.4f} about {}'s nadir; wall "
-        "too narrow on {} of {} wedges, tied to the rim at the project's level",
+        "{}; bottom rim scaled by the project's {:.4f} about {}'s nadir; wall too narrow on {} of "
+        "{} wedges, tied to the rim at the project's level",
+        circle.bottom_rim_modelled ? "bore wall too narrow to resolve" : "no bore wall resolved",
         circle.bottom_rim_scale, saved.tile_images[*fit.nadir_tile], circle.num_narrow_wall,
         circle.num_wedges);
   }
@@ -151,14 +152,17 @@ void AddTileViewNotes(const HoleViews& views, const CombinedCircle& combined,
     if (fit.circle.num_uncovered > 0 && fit.circle.num_wedges > 0)
       uncovered = fmt::format("{:.0f} % of the rim not covered, ",
                               100.0 * fit.circle.num_uncovered / fit.circle.num_wedges);
-    views_note += fmt::format(
-        "{} {} ({}{})", i > 0 ? "," : "", name, uncovered,
-        fit.circle.bore_prior_used
-            ? fmt::format("no bore wall resolved, project's k {:.4f}", fit.circle.bottom_rim_scale)
-        : fit.circle.bottom_rim_scale > 0.0
-            ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
-            : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
-                                                         : "no bore wall resolved"));
+    views_note +=
+        fmt::format("{} {} ({}{})", i > 0 ? "," : "", name, uncovered,
+                    fit.circle.bore_prior_used
+                        ? fmt::format("{}, project's k {:.4f}",
+                                      fit.circle.bottom_rim_modelled ? "bore wall too narrow"
+                                                                     : "no bore wall resolved",
+                                      fit.circle.bottom_rim_scale)
+                    : fit.circle.bottom_rim_scale > 0.0
+                        ? fmt::format("bottom rim k {:.4f}", fit.circle.bottom_rim_scale)
+                        : std::string(fit.circle.bottom_rim_modelled ? "bottom rim free"
+                                                                     : "no bore wall resolved"));
     bore_note += (i > 0 ? "; " : "") + name + ": " + BoreNote(fit, saved);
     tile_fits.emplace_back(name, fit.circle.Brief());
   }

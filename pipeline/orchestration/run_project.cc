@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "adapters/project_io/report_csv.h"
 #include "adapters/project_io/report_json.h"
 #include "adapters/report_html/report_html.h"
 #include "pipeline/core/error.h"
@@ -109,10 +110,12 @@ Report StartingReport(const Project& project, const std::string& inputs_sha256,
   return report;
 }
 
-// report.json and report.html into the staging directory; the page draws on
-// this run's mosaic in memory and files, else on those earlier runs left in out/.
+// report.json, its tables (measurements.csv, features.csv) and report.html
+// into the staging directory; the page draws on this run's mosaic in memory
+// and files, else on those earlier runs left in out/.
 void WriteReports(const Project& project, const StageContext& context) {
   WriteReportJson(context.staging_dir / kReportName, context.report);
+  WriteReportTables(context.staging_dir, context.report);
   WriteReportHtml(context.staging_dir / kReportHtmlName, context.report,
                   {context.staging_dir, context.out_dir}, project.measurements, {},
                   context.mosaic.get());

@@ -1,4 +1,4 @@
-#include "adapters/project_io/measurements_csv.h"
+#include "adapters/project_io/report_csv.h"
 
 #include <gtest/gtest.h>
 
