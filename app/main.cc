@@ -181,7 +181,8 @@ CLI::App* AddReportCommand(CLI::App& app, std::string& project, bool& json) {
       "Regenerate the reports from the saved results (no stage is rerun) and print a summary\n"
       "(calibration, mosaic, measurements vs CMM).\n"
       "Reads PROJECT/out/ (report.json, the mosaic, the plots) and project.yaml.\n"
-      "Writes PROJECT/out/report.html and out/report.json (normalised).");
+      "Writes PROJECT/out/report.html, out/report.json (normalised) and its tables\n"
+      "(out/measurements.csv, out/features.csv).");
   report->add_option("PROJECT", project, "project directory")->required();
   report->add_flag("--json", json, "print the report's JSON instead of the summary");
   return report;

@@ -207,6 +207,10 @@ TEST_F(CliTest, ReportPrintsTheMeasurements) {
   EXPECT_THAT(text.output, HasSubstr("A_to_B"));
   EXPECT_THAT(text.output, HasSubstr("202.6021"));
   EXPECT_THAT(text.output, Not(HasSubstr("dev/both")));
+  // It writes the report's tables too.
+  EXPECT_THAT(testing::ReadTextFile(project_.OutDir() / "measurements.csv"),
+              HasSubstr("\ntiny,A_to_B,distance,202.6021,0.0031,"));
+  EXPECT_TRUE(fs::exists(project_.OutDir() / "features.csv"));
   // Where cmm.csv stated the CMM's sigma: its column and the deviation
   // against both sigmas.
   m.cmm_mm = 202.6033;

@@ -65,7 +65,13 @@ void FakeStage(Stage stage, StageContext& context, const std::string& content) {
       context.report.mosaic->file = "mosaic.png";
       break;
     }
-    case Stage::kMeasure: context.report.measurements = std::vector<MeasurementReport>{}; break;
+    case Stage::kMeasure: {
+      MeasurementReport made;
+      made.name = "A_to_B";
+      made.value_mm = 202.6;
+      context.report.measurements = std::vector<MeasurementReport>{made};
+      break;
+    }
   }
 }
 
@@ -120,6 +126,9 @@ TEST_F(RunProjectTest, SuccessfulRunCommitsOutputsAndReport) {
   EXPECT_EQ(summary.stages_run.size(), 3u);
   EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
   EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v1");
+  EXPECT_NE(testing::ReadTextFile(Out("measurements.csv")).find("\ntiny,A_to_B,"),
+            std::string::npos);
+  EXPECT_TRUE(fs::exists(Out("features.csv")));
   const Report report = ReadReportJson(Out("report.json"));
   EXPECT_EQ(report.project, "tiny");
   EXPECT_EQ(report.software_version, SoftwareVersion());
@@ -220,6 +229,8 @@ TEST_F(RunProjectTest, SingleStageRunKeepsEarlierSectionsAndDropsLaterOnes) {
   EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v2");
   EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
   EXPECT_FALSE(ReportIsCurrent(project_));  // measure has not run on it
+  // The report's tables say so too: no measurement row is left from the first run.
+  EXPECT_EQ(testing::ReadTextFile(Out("measurements.csv")).find("A_to_B"), std::string::npos);
 }
 
 // `omm run` keeps the stages whose inputs are unchanged: a new CMM value
