@@ -395,7 +395,15 @@ TEST_F(MosaicStageTest, TileGroupsThatNothingTiesAreReported) {
   }
   RunOptions options;
   options.stages = {Stage::kMosaic};
+  const testing::LogCapture log;
   RunProject(LoadProject(dir), options);
+  // The run warns, naming the groups.
+  EXPECT_NE(log.Text().find("mosaic: the tiles fall into 2 groups that no match, hole or plate "
+                            "seen in two of them ties together: ["),
+            std::string::npos)
+      << log.Text();
+  EXPECT_NE(log.Text().find("table.csv alone places the groups against each other"),
+            std::string::npos);
   const Report report = ReadReportJson(dir / "out" / "report.json");
   ASSERT_TRUE(report.mosaic.has_value());
   const ReportValue::Array* groups = AsArray(Member(report.mosaic->extra, "tile_groups"));

@@ -5,6 +5,7 @@
 // measurement bit for bit (slow: needs a render). An out/ whose scene is not
 // the mosaic's is refused.
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -160,8 +161,8 @@ TEST(RunHandoff, MeasureAloneRefusesAMosaicItsSceneDidNotMake) {
 // `omm run` after the CMM's values arrived (cmm.csv added to a measured
 // project) reruns the measure stage alone, on the calibration and mosaic in
 // out/, and reports the same values as the first run, now with their
-// deviations. A stage run alone does not take an earlier stage's outputs
-// whose inputs changed since: after a calibration image was removed, `omm
+// deviations; the one the CMM got 0.1 mm wrong is flagged. A stage run alone does not take an
+// earlier stage's outputs whose inputs changed since: after a calibration image was removed, `omm
 // mosaic` refuses out/camera.cameramodel and `omm measure` the mosaic, and
 // out/ stays as it was.
 TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
@@ -176,7 +177,11 @@ TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
   const RunSummary first = RunProject(LoadProject(project_dir), run);
   ASSERT_EQ(first.stages_run.size(), 3u);
 
+  // One value 0.1 mm off (a typo in the CMM's report): flagged.
+  ASSERT_EQ(cmm.rfind("name,value_mm,sigma_mm\ndist_hole_01_hole_14,390.0178,", 0), 0u);
   testing::WriteTextFile(project_dir / "cmm.csv", cmm);
+  testing::ReplaceInFile(project_dir / "cmm.csv", ",390.0178,", ",390.1178,");
+  const testing::LogCapture log;
   const RunSummary second = RunProject(LoadProject(project_dir), run);
   EXPECT_EQ(second.stages_run, std::vector<Stage>{Stage::kMeasure});
   ASSERT_TRUE(first.report.measurements && second.report.measurements);
@@ -188,8 +193,18 @@ TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
     EXPECT_EQ(a.value_mm, b.value_mm) << a.name;
     EXPECT_EQ(a.sigma_mm, b.sigma_mm) << a.name;
     EXPECT_FALSE(a.cmm_mm.has_value()) << a.name;
-    EXPECT_TRUE(b.cmm_mm.has_value() && b.deviation_sigma.has_value()) << b.name;
+    ASSERT_TRUE(b.cmm_mm.has_value() && b.deviation_mm && b.deviation_combined_sigma) << b.name;
+    const bool typo = b.name == "dist_hole_01_hole_14";
+    EXPECT_EQ(AsBool(Member(b.extra, "beyond_3_sigma")), std::optional<bool>(typo)) << b.name;
+    if (typo) {
+      EXPECT_NEAR(*b.deviation_mm, -0.1, 0.01);
+    }
   }
+  // The run's warning judges it against both sigmas.
+  EXPECT_NE(log.Text().find("measure: dist_hole_01_hole_14 deviates from the CMM by -0.09"),
+            std::string::npos)
+      << log.Text();
+  EXPECT_NE(log.Text().find("sigma, the CMM's included)"), std::string::npos);
 
   const fs::path report_path = project_dir / "out" / "report.json";
   const std::string report_before = testing::ReadTextFile(report_path);

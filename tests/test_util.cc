@@ -11,6 +11,8 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
 
@@ -78,6 +80,26 @@ void ReplaceInFile(const fs::path& path, const std::string& from, const std::str
   ASSERT_NE(at, std::string::npos) << "'" << from << "' is not in " << path << ":\n" << text;
   text.replace(at, from.size(), to);
   WriteTextFile(path, text);
+}
+
+struct LogCapture::State {
+  std::ostringstream text;
+  std::shared_ptr<spdlog::sinks::ostream_sink_mt> sink =
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(text);
+};
+
+LogCapture::LogCapture() : state_(std::make_unique<State>()) {
+  spdlog::default_logger()->sinks().push_back(state_->sink);
+}
+
+LogCapture::~LogCapture() {
+  std::vector<spdlog::sink_ptr>& sinks = spdlog::default_logger()->sinks();
+  sinks.erase(std::remove(sinks.begin(), sinks.end(), state_->sink), sinks.end());
+}
+
+std::string LogCapture::Text() const {
+  state_->sink->flush();
+  return state_->text.str();
 }
 
 CommandResult RunCommand(const std::string& command) {

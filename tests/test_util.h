@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -40,6 +41,22 @@ void ReplaceInFile(const std::filesystem::path& path, const std::string& from,
                    const std::string& to);
 void WriteTextFile(const std::filesystem::path& path, const std::string& text);
 std::string ReadTextFile(const std::filesystem::path& path);
+
+// What spdlog's default logger says while this object lives: its lines as
+// the logger's pattern formats them (the stages' warnings, for a test of
+// their wording).
+class LogCapture {
+ public:
+  LogCapture();
+  ~LogCapture();
+  LogCapture(const LogCapture&) = delete;
+  LogCapture& operator=(const LogCapture&) = delete;
+  std::string Text() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
 
 struct CommandResult {
   int exit_code = -1;

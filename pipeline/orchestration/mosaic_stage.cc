@@ -98,12 +98,20 @@ OrthoGeometry MosaicGeometry(const Project& project, const CameraModel& camera,
 
 ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.y()}; }
 
-// The calibrated camera: this run's or an earlier one's out/camera.cameramodel
-// while the report's calibration is current, else the one calibration.from
+// Whether out/'s calibration is from other inputs than this run's (and this
+// run has none of its own).
+bool StaleCalibration(const StageContext& context) {
+  const std::vector<Stage>& stale = context.stale_in_out;
+  return !context.report.calibration &&
+         std::find(stale.begin(), stale.end(), Stage::kCalibrate) != stale.end();
+}
+
+// The calibrated camera: this run's or an earlier one's
+// out/camera.cameramodel unless that is stale, else the one calibration.from
 // names.
 fs::path CameraModelPath(const StageContext& context) {
   fs::path staged = context.Input(kCameraModelName);
-  if (!staged.empty() && context.report.calibration) return staged;
+  if (!staged.empty() && !StaleCalibration(context)) return staged;
   const Project& project = context.project;
   if (project.calibration_from) {
     const CalibrationSource& source = *project.calibration_from;
@@ -152,7 +160,7 @@ std::future<TimedPrior> Ready(IntrinsicsPrior prior) {
 }
 
 // The calibration's intrinsics prior: from the calibrate stage's solve record
-// (this run's, out/'s while current, or calibration.from's project), if it belongs to
+// (this run's, out/'s unless stale, or calibration.from's project), if it belongs to
 // *camera; then *camera takes the record's exact intrinsics (mrcal writes the
 // .cameramodel with 6 decimals), and *rt_cam_from_plates the record's plate
 // poses. The covariance is computed on another thread (0.06 s on
@@ -161,7 +169,7 @@ std::future<TimedPrior> CalibrationPrior(const StageContext& context, CameraMode
                                          std::vector<Vector6d>* rt_cam_from_plates) {
   const Project& project = context.project;
   IntrinsicsPrior prior;
-  fs::path record_path = context.report.calibration ? context.Input(kSolveRecordName) : fs::path();
+  fs::path record_path = StaleCalibration(context) ? fs::path() : context.Input(kSolveRecordName);
   if (record_path.empty() && project.calibration_from &&
       project.calibration_from->kind == CalibrationSource::Kind::kProject) {
     record_path = project.calibration_from->path / "out" / kSolveRecordName;

@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <iterator>
 #include <system_error>
 
 #include <fmt/format.h>
@@ -73,9 +74,10 @@ void DropSectionsFrom(Stage first, Report& report) {
 
 // The report to start from: the earlier one's sections of the stages whose
 // inputs it ran on are this run's (`stages`), in run order up to the first
-// whose are not.
+// whose are not. *stale: the stages of the sections dropped so (their
+// results in out/ are from other inputs).
 Report StartingReport(const Project& project, const std::string& inputs_sha256,
-                      const StageInputHashes& stages) {
+                      const StageInputHashes& stages, std::vector<Stage>* stale) {
   Report report;
   const fs::path path = project.OutDir() / kReportName;
   std::error_code ec;
@@ -92,15 +94,18 @@ Report StartingReport(const Project& project, const std::string& inputs_sha256,
       spdlog::warn("ignoring unreadable earlier report: {}", e.what());
     }
   }
-  for (const Stage stage : AllStages()) {
-    const auto ran_on = report.stage_inputs_sha256.find(StageName(stage));
-    if (HasSection(report, stage) && ran_on != report.stage_inputs_sha256.end() &&
-        ran_on->second == stages.Of(stage))
+  const std::vector<Stage> all = AllStages();
+  for (auto stage = all.begin(); stage != all.end(); ++stage) {
+    const auto ran_on = report.stage_inputs_sha256.find(StageName(*stage));
+    if (HasSection(report, *stage) && ran_on != report.stage_inputs_sha256.end() &&
+        ran_on->second == stages.Of(*stage))
       continue;
-    if (HasSection(report, stage)) {
-      spdlog::info("{}: its inputs changed since out/report.json was written", StageName(stage));
+    if (HasSection(report, *stage)) {
+      spdlog::info("{}: its inputs changed since out/report.json was written", StageName(*stage));
     }
-    DropSectionsFrom(stage, report);
+    std::copy_if(stage, all.end(), std::back_inserter(*stale),
+                 [&report](Stage later) { return HasSection(report, later); });
+    DropSectionsFrom(*stage, report);
     break;
   }
   report.format = kReportFormat;
@@ -223,7 +228,8 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
                    project.sample_bits, (1 << project.sample_bits) - 1);
     }
     const StageInputHashes stage_inputs = HashStageInputs(project, options.mosaic_features);
-    Report report = StartingReport(project, HashProjectInputs(project), stage_inputs);
+    std::vector<Stage> stale;
+    Report report = StartingReport(project, HashProjectInputs(project), stage_inputs, &stale);
     std::vector<Stage> to_run = options.stages;
     while (options.reuse_current_stages && !to_run.empty() && HasSection(report, to_run.front()) &&
            OutputsPresent(to_run.front(), report, out_dir)) {
@@ -243,6 +249,7 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
                          options.num_threads > 0 ? options.num_threads : HardwareThreads()};
     context.mosaic_follows =
         std::find(to_run.begin(), to_run.end(), Stage::kMosaic) != to_run.end();
+    context.stale_in_out = stale;
     for (const Stage stage : to_run) {
       spdlog::info("{}: starting", StageName(stage));
       options.runner(stage, context);

@@ -287,21 +287,25 @@ TEST_F(RunProjectTest, ReuseKeepsTheCurrentStagesAndRerunsTheRest) {
 
 // A stage run alone builds on the earlier stages' sections only while their
 // inputs are unchanged: after a calibration image changed, the mosaic stage
-// finds no calibration in the report (the real one then refuses
-// out/camera.cameramodel), and its report has none.
+// finds no calibration in the report and every stage's results in out/
+// named stale (the real one then refuses out/camera.cameramodel), and its
+// report has no calibration.
 TEST_F(RunProjectTest, AStageRunAloneSeesNoEarlierSectionWhoseInputsChanged) {
   RunOptions options;
   options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
   RunProject(project_, options);
   WriteGrayImage(project_.calib_images[0], ImageF::Constant(24, 32, 0.25f), 8);
   bool calibration_seen = true;
+  std::vector<Stage> stale;
   options.stages = {Stage::kMosaic};
   options.runner = [&](Stage stage, StageContext& context) {
     calibration_seen = context.report.calibration.has_value();
+    stale = context.stale_in_out;
     FakeStage(stage, context, "v2");
   };
   const RunSummary summary = RunProject(LoadProject(project_.dir), options);
   EXPECT_FALSE(calibration_seen);
+  EXPECT_EQ(stale, (std::vector<Stage>{Stage::kCalibrate, Stage::kMosaic, Stage::kMeasure}));
   EXPECT_FALSE(summary.report.calibration.has_value());
   EXPECT_EQ(summary.report.stage_inputs_sha256.count("calibrate"), 0u);
   EXPECT_EQ(summary.report.stage_inputs_sha256.count("mosaic"), 1u);

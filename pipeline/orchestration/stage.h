@@ -90,6 +90,10 @@ struct StageContext {
   std::shared_ptr<const std::vector<ImageF>> tiles;
   // The mosaic stage runs later in this run (set by RunProject).
   bool mosaic_follows = false;
+  // The stages whose results in out/ are from other inputs than this run's,
+  // as out/report.json (by this omm) says: a stage run alone must not take
+  // their files (set by RunProject).
+  std::vector<Stage> stale_in_out;
   // The mosaic's tiles, prepared on other threads while the camera is
   // calibrated (started by the calibrate stage when the mosaic follows;
   // invalid otherwise): the mosaic stage takes them from here.
