@@ -13,8 +13,10 @@
 // current), and drops the sections of the stages it reruns and of those
 // after them (their results would be stale). A single-stage run (`omm
 // measure`) thus builds on the earlier stages' results in out/ while they
-// are current; `omm run` also keeps, without rerunning them, the stages in
-// front that are (RunOptions::reuse_current_stages).
+// are current, and refuses those the report names stale
+// (StageContext::stale_in_out); `omm run` also keeps, without rerunning
+// them, the stages in front that are current
+// (RunOptions::reuse_current_stages).
 #pragma once
 
 #include <filesystem>
