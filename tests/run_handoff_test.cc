@@ -32,6 +32,18 @@ fs::path RunDemo(const testing::TempDir& dir) {
   return project_dir;
 }
 
+// What `stage` run alone on project_dir throws as InputError, or "no error".
+std::string ErrorOfStageAlone(const fs::path& project_dir, Stage stage) {
+  RunOptions alone;
+  alone.stages = {stage};
+  try {
+    RunProject(LoadProject(project_dir), alone);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
 TEST(RunHandoff, MeasureAloneReproducesTheRunExactly) {
   testing::TempDir dir;
   const fs::path project_dir = RunDemo(dir);
@@ -120,16 +132,7 @@ TEST(RunHandoff, MeasureAloneRefusesAMosaicItsSceneDidNotMake) {
   testing::TempDir dir;
   const fs::path project_dir = RunDemo(dir);
   const fs::path report_path = project_dir / "out" / "report.json";
-  RunOptions measure_only;
-  measure_only.stages = {Stage::kMeasure};
-  const auto measure_error = [&] {
-    try {
-      RunProject(LoadProject(project_dir), measure_only);
-    } catch (const InputError& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  const auto measure_error = [&] { return ErrorOfStageAlone(project_dir, Stage::kMeasure); };
 
   // report.json's mosaic moved by ten pixels (a hand edit, or a mix of runs).
   const Report original = ReadReportJson(report_path);
@@ -209,27 +212,15 @@ TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
   const fs::path report_path = project_dir / "out" / "report.json";
   const std::string report_before = testing::ReadTextFile(report_path);
   fs::remove(project_dir / "calib" / "calib_01.png");
-  RunOptions mosaic_only;
-  mosaic_only.stages = {Stage::kMosaic};
-  try {
-    RunProject(LoadProject(project_dir), mosaic_only);
-    ADD_FAILURE() << "the mosaic took a camera calibrated from other images";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("camera.cameramodel: calibrated from other calib/"),
-              std::string::npos)
-        << e.what();
-  }
+  const std::string mosaic_error = ErrorOfStageAlone(project_dir, Stage::kMosaic);
+  EXPECT_NE(mosaic_error.find("camera.cameramodel: calibrated from other calib/"),
+            std::string::npos)
+      << mosaic_error;
   EXPECT_EQ(testing::ReadTextFile(report_path), report_before);
   // Nor does the measure stage take the mosaic made with that camera.
-  RunOptions measure_only;
-  measure_only.stages = {Stage::kMeasure};
-  try {
-    RunProject(LoadProject(project_dir), measure_only);
-    ADD_FAILURE() << "measured on a mosaic of other inputs";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("its mosaic is from other inputs"), std::string::npos)
-        << e.what();
-  }
+  const std::string measure_error = ErrorOfStageAlone(project_dir, Stage::kMeasure);
+  EXPECT_NE(measure_error.find("its mosaic is from other inputs"), std::string::npos)
+      << measure_error;
   EXPECT_EQ(testing::ReadTextFile(report_path), report_before);
 }
 

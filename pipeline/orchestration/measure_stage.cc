@@ -343,12 +343,12 @@ struct MosaicResults {
 MosaicResults ReadMosaicResults(const StageContext& context) {
   const Project& project = context.project;
   if (!context.report.mosaic) {
-    const bool stale = !context.Input(kSceneName).empty();
     throw InputError((context.out_dir / "report.json").string(),
-                     std::string(stale ? "its mosaic is from other inputs (tiles/, table.csv, "
-                                         "project.yaml's table, mosaic or features, or the "
-                                         "calibration changed since)"
-                                       : "no mosaic") +
+                     std::string(context.StaleInOut(Stage::kMosaic)
+                                     ? "its mosaic is from other inputs (tiles/, table.csv, "
+                                       "project.yaml's table, mosaic or features, or the "
+                                       "calibration changed since)"
+                                     : "no mosaic") +
                          ": run `omm mosaic` (or `omm run`) first");
   }
   const MosaicReport& mosaic_report = *context.report.mosaic;

@@ -101,9 +101,7 @@ ReportValue Pair(const Eigen::Vector2d& v) { return ReportValue::Array{v.x(), v.
 // Whether out/'s calibration is from other inputs than this run's (and this
 // run has none of its own).
 bool StaleCalibration(const StageContext& context) {
-  const std::vector<Stage>& stale = context.stale_in_out;
-  return !context.report.calibration &&
-         std::find(stale.begin(), stale.end(), Stage::kCalibrate) != stale.end();
+  return !context.report.calibration && context.StaleInOut(Stage::kCalibrate);
 }
 
 // The calibrated camera: this run's or an earlier one's

@@ -1,5 +1,6 @@
 #include "pipeline/orchestration/stage.h"
 
+#include <algorithm>
 #include <optional>
 
 #include <fmt/format.h>
@@ -87,6 +88,10 @@ std::filesystem::path StageContext::Published(const std::filesystem::path& path)
   const std::filesystem::path relative = path.lexically_relative(staging_dir);
   if (relative.empty() || *relative.begin() == "..") return path;
   return out_dir / relative;
+}
+
+bool StageContext::StaleInOut(Stage stage) const {
+  return std::find(stale_in_out.begin(), stale_in_out.end(), stage) != stale_in_out.end();
 }
 
 std::filesystem::path StageContext::Input(const std::string& name) const {

@@ -94,6 +94,7 @@ struct StageContext {
   // as out/report.json (by this omm) says: a stage run alone must not take
   // their files (set by RunProject).
   std::vector<Stage> stale_in_out;
+  bool StaleInOut(Stage stage) const;
   // The mosaic's tiles, prepared on other threads while the camera is
   // calibrated (started by the calibrate stage when the mosaic follows;
   // invalid otherwise): the mosaic stage takes them from here.
