@@ -103,6 +103,7 @@ std::vector<fs::path> FindProjects(const std::vector<fs::path>& dirs) {
 struct BatchRow {
   std::string project, result = "ok", measurements = "-";
   double seconds = 0.0;
+  std::vector<Stage> kept;  // the stages its `omm run` keeps from out/ (current)
 };
 
 // The signal that asked `omm run` or `omm batch` to stop (SIGINT, SIGTERM);
@@ -173,6 +174,7 @@ class Batch {
       const Outcome loaded = Guarded([&] {
         const Project project = LoadProject(projects_[i], num_threads);
         current = !force && ReportIsCurrent(project);
+        if (!force && !current) rows_[i].kept = StagesRunWouldKeep(project, FeatureSource::kHarris);
       });
       if (loaded.exit_code != kExitOk || current) {
         rows_[i].result = current ? "current (skipped)" : "";
@@ -264,6 +266,13 @@ class Batch {
     BatchRow& row = rows_[i];
     ProjectMeasurements& made = measurements_[i];
     Outcome outcome = run;
+    if (outcome.exit_code == kExitOk && !row.kept.empty()) {
+      std::vector<Stage> rerun = AllStages();
+      rerun.erase(rerun.begin(), rerun.begin() + static_cast<std::ptrdiff_t>(row.kept.size()));
+      row.result = rerun.empty() ? "ok (all stages current, none rerun)"
+                                 : fmt::format("ok (reran {}; {} current)", StageNames(rerun),
+                                               StageNames(row.kept));
+    }
     if (outcome.exit_code == kExitOk) {
       outcome = Guarded([&] {
         const Report report = ReadReportJson(projects_[i] / "out" / "report.json");

@@ -225,9 +225,11 @@ TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
 }
 
 // The command line: `omm run` again on an unchanged project keeps every
-// stage, and `omm batch --force` reruns them all (its child runs `omm run
-// --force`: the mosaic's timings are new).
-TEST(RunHandoff, OmmRunKeepsCurrentStagesAndBatchForceRerunsThem) {
+// stage and `omm run --force` reruns them all (the mosaic's timings are
+// new); `omm batch` says which stages of a project it reran after a CMM
+// value was dropped, and `omm batch --force` reruns them all (its child
+// runs `omm run --force`).
+TEST(RunHandoff, OmmRunKeepsCurrentStagesAndForceRerunsThem) {
   const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
   testing::TempDir dir;
   const fs::path project_dir = dir.path() / "demo";
@@ -249,9 +251,29 @@ TEST(RunHandoff, OmmRunKeepsCurrentStagesAndBatchForceRerunsThem) {
       << again.output;
   EXPECT_EQ(mosaic_seconds(), first);
 
-  const testing::CommandResult batch = testing::RunOmm("batch --force " + project_dir.string());
+  const testing::CommandResult forced = testing::RunOmm("run --force " + project_dir.string());
+  EXPECT_EQ(forced.exit_code, 0) << forced.output;
+  EXPECT_NE(forced.output.find("calibrate, mosaic, measure done in"), std::string::npos)
+      << forced.output;
+  const std::optional<double> second = mosaic_seconds();
+  EXPECT_NE(second, first) << "the mosaic stage was not rerun";
+
+  // One CMM value fewer: the batch's child reruns the measure stage alone.
+  const std::string cmm = testing::ReadTextFile(project_dir / "cmm.csv");
+  const size_t last_line = cmm.rfind('\n', cmm.size() - 2);
+  ASSERT_NE(last_line, std::string::npos);
+  testing::WriteTextFile(project_dir / "cmm.csv", cmm.substr(0, last_line + 1));
+  const testing::CommandResult batch = testing::RunOmm("batch " + project_dir.string());
   EXPECT_EQ(batch.exit_code, 0) << batch.output;
-  EXPECT_NE(mosaic_seconds(), first) << "the mosaic stage was not rerun";
+  EXPECT_NE(batch.output.find("ok (reran measure; calibrate, mosaic current)"), std::string::npos)
+      << batch.output;
+  EXPECT_EQ(mosaic_seconds(), second);
+
+  const testing::CommandResult batch_forced =
+      testing::RunOmm("batch --force " + project_dir.string());
+  EXPECT_EQ(batch_forced.exit_code, 0) << batch_forced.output;
+  EXPECT_NE(batch_forced.output.find(" ok\n"), std::string::npos) << batch_forced.output;
+  EXPECT_NE(mosaic_seconds(), second) << "the mosaic stage was not rerun";
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstring>
 #include <iterator>
+#include <optional>
 #include <system_error>
 
 #include <fmt/format.h>
@@ -40,17 +41,31 @@ bool HasSection(const Report& report, Stage stage) {
   return false;
 }
 
-// Whether out/ holds the files of `stage`'s results that later stages read;
-// logs the first missing.
-bool OutputsPresent(Stage stage, const Report& report, const fs::path& out_dir) {
+// The first of the files of `stage`'s results that later stages read
+// which out/ lacks; "" if none.
+std::string MissingOutput(Stage stage, const Report& report, const fs::path& out_dir) {
   for (const std::string& file : StageOutputFiles(stage, report)) {
     std::error_code ec;
-    if (!fs::is_regular_file(out_dir / file, ec)) {
-      spdlog::info("{}: {} is missing: rerun", StageName(stage), (out_dir / file).string());
-      return false;
-    }
+    if (!fs::is_regular_file(out_dir / file, ec)) return (out_dir / file).string();
   }
-  return true;
+  return "";
+}
+
+// The leading stages of `stages` (run order) whose sections `report` has
+// (StartingReport kept them: current) and whose files are in out/: those
+// `omm run` keeps instead of running them again.
+std::vector<Stage> StagesToKeep(const Report& report, const std::vector<Stage>& stages,
+                                const fs::path& out_dir, bool log_missing) {
+  std::vector<Stage> kept;
+  for (const Stage stage : stages) {
+    if (!HasSection(report, stage)) break;
+    if (const std::string missing = MissingOutput(stage, report, out_dir); !missing.empty()) {
+      if (log_missing) spdlog::info("{}: {} is missing: rerun", StageName(stage), missing);
+      break;
+    }
+    kept.push_back(stage);
+  }
+  return kept;
 }
 
 // A rerun stage invalidates its own section and those of later stages.
@@ -72,6 +87,29 @@ void DropSectionsFrom(Stage first, Report& report) {
   }
 }
 
+// out/report.json if there is one (ReadReportJson's InputError if it is
+// unreadable), whichever omm version wrote it.
+std::optional<Report> EarlierReport(const Project& project) {
+  const fs::path path = project.OutDir() / kReportName;
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return std::nullopt;
+  return ReadReportJson(path);
+}
+
+// How many of the stages, in run order, have a section in `report` that
+// ran on the inputs `stages` hashes.
+size_t NumCurrentSections(const Report& report, const StageInputHashes& stages) {
+  const std::vector<Stage> all = AllStages();
+  size_t n = 0;
+  for (; n < all.size(); ++n) {
+    const auto ran_on = report.stage_inputs_sha256.find(StageName(all[n]));
+    if (!HasSection(report, all[n]) || ran_on == report.stage_inputs_sha256.end() ||
+        ran_on->second != stages.Of(all[n]))
+      break;
+  }
+  return n;
+}
+
 // The report to start from: the earlier one's sections of the stages whose
 // inputs it ran on are this run's (`stages`), in run order up to the first
 // whose are not. *stale: the stages of the sections dropped so (their
@@ -79,34 +117,29 @@ void DropSectionsFrom(Stage first, Report& report) {
 Report StartingReport(const Project& project, const std::string& inputs_sha256,
                       const StageInputHashes& stages, std::vector<Stage>* stale) {
   Report report;
-  const fs::path path = project.OutDir() / kReportName;
-  std::error_code ec;
-  if (fs::is_regular_file(path, ec)) {
-    try {
-      Report earlier = ReadReportJson(path);
-      if (earlier.software_version == SoftwareVersion()) {
-        report = std::move(earlier);
+  try {
+    if (std::optional<Report> earlier = EarlierReport(project)) {
+      if (earlier->software_version == SoftwareVersion()) {
+        report = std::move(*earlier);
       } else {
-        spdlog::info("{} is from another omm version ({}); starting afresh", path.string(),
-                     earlier.software_version);
+        spdlog::info("{} is from another omm version ({}); starting afresh",
+                     (project.OutDir() / kReportName).string(), earlier->software_version);
       }
-    } catch (const InputError& e) {
-      spdlog::warn("ignoring unreadable earlier report: {}", e.what());
     }
+  } catch (const InputError& e) {
+    spdlog::warn("ignoring unreadable earlier report: {}", e.what());
   }
   const std::vector<Stage> all = AllStages();
-  for (auto stage = all.begin(); stage != all.end(); ++stage) {
-    const auto ran_on = report.stage_inputs_sha256.find(StageName(*stage));
-    if (HasSection(report, *stage) && ran_on != report.stage_inputs_sha256.end() &&
-        ran_on->second == stages.Of(*stage))
-      continue;
-    if (HasSection(report, *stage)) {
-      spdlog::info("{}: its inputs changed since out/report.json was written", StageName(*stage));
+  const size_t current = NumCurrentSections(report, stages);
+  if (current < all.size()) {
+    if (HasSection(report, all[current])) {
+      spdlog::info("{}: its inputs changed since out/report.json was written",
+                   StageName(all[current]));
     }
-    std::copy_if(stage, all.end(), std::back_inserter(*stale),
+    std::copy_if(all.begin() + static_cast<std::ptrdiff_t>(current), all.end(),
+                 std::back_inserter(*stale),
                  [&report](Stage later) { return HasSection(report, later); });
-    DropSectionsFrom(*stage, report);
-    break;
+    DropSectionsFrom(all[current], report);
   }
   report.format = kReportFormat;
   report.project = project.name;
@@ -184,19 +217,13 @@ std::string RunOptions::Check() const {
 }
 
 std::string RunSummary::Brief() const {
-  const auto names = [](const std::vector<Stage>& stages) {
-    std::string joined;
-    for (const Stage stage : stages)
-      joined += (joined.empty() ? "" : ", ") + std::string(StageName(stage));
-    return joined;
-  };
   const std::string kept =
-      stages_kept.empty() ? "" : fmt::format(" ({} current, kept)", names(stages_kept));
+      stages_kept.empty() ? "" : fmt::format(" ({} current, kept)", StageNames(stages_kept));
   if (stages_run.empty()) {
-    return fmt::format("nothing to run: {} current (`--force` reruns): {}", names(stages_kept),
+    return fmt::format("nothing to run: {} current (`--force` reruns): {}", StageNames(stages_kept),
                        report_path.string());
   }
-  return fmt::format("{} done in {:.1f} s{}: {}", names(stages_run), seconds, kept,
+  return fmt::format("{} done in {:.1f} s{}: {}", StageNames(stages_run), seconds, kept,
                      report_path.string());
 }
 
@@ -231,12 +258,14 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
     std::vector<Stage> stale;
     Report report = StartingReport(project, HashProjectInputs(project), stage_inputs, &stale);
     std::vector<Stage> to_run = options.stages;
-    while (options.reuse_current_stages && !to_run.empty() && HasSection(report, to_run.front()) &&
-           OutputsPresent(to_run.front(), report, out_dir)) {
-      spdlog::info("{}: current (its inputs unchanged since out/ was written), kept",
-                   StageName(to_run.front()));
-      summary.stages_kept.push_back(to_run.front());
-      to_run.erase(to_run.begin());
+    if (options.reuse_current_stages) {
+      summary.stages_kept = StagesToKeep(report, options.stages, out_dir, true);
+      for (const Stage stage : summary.stages_kept) {
+        spdlog::info("{}: current (its inputs unchanged since out/ was written), kept",
+                     StageName(stage));
+      }
+      to_run.erase(to_run.begin(),
+                   to_run.begin() + static_cast<std::ptrdiff_t>(summary.stages_kept.size()));
     }
     if (!to_run.empty()) DropSectionsFrom(to_run.front(), report);
     StageContext context{project,
@@ -281,10 +310,27 @@ bool ReportIsCurrent(const Project& project) {
   if (!fs::is_regular_file(path, ec)) return false;
   try {
     const Report report = ReadReportJson(path);
+    const std::vector<Stage> all = AllStages();
     return report.software_version == SoftwareVersion() && report.calibration && report.mosaic &&
-           report.measurements && report.inputs_sha256 == HashProjectInputs(project);
+           report.measurements && report.inputs_sha256 == HashProjectInputs(project) &&
+           std::all_of(all.begin(), all.end(), [&](Stage stage) {
+             return MissingOutput(stage, report, project.OutDir()).empty();
+           });
   } catch (const InputError&) {
     return false;
+  }
+}
+
+std::vector<Stage> StagesRunWouldKeep(const Project& project, FeatureSource mosaic_features) {
+  try {
+    const std::optional<Report> earlier = EarlierReport(project);
+    if (!earlier || earlier->software_version != SoftwareVersion()) return {};
+    const std::vector<Stage> all = AllStages();
+    const size_t current = NumCurrentSections(*earlier, HashStageInputs(project, mosaic_features));
+    return StagesToKeep(*earlier, {all.begin(), all.begin() + static_cast<std::ptrdiff_t>(current)},
+                        project.OutDir(), false);
+  } catch (const InputError&) {
+    return {};
   }
 }
 

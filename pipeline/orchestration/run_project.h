@@ -85,7 +85,14 @@ struct RunSummary {
 RunSummary RunProject(const Project& project, const RunOptions& options);
 
 // True if out/report.json exists, was written by this software version from
-// the project's current inputs, and has every stage's section.
+// the project's current inputs, and has every stage's section, and out/
+// holds the files later stages read (StageOutputFiles).
 bool ReportIsCurrent(const Project& project);
+
+// The stages, in run order, that `omm run` (RunOptions::reuse_current_stages,
+// the mosaic from `mosaic_features`) would keep from out/ rather than run:
+// those in front whose inputs are unchanged since this omm version wrote
+// out/report.json, while their files are there. `omm batch` tells so.
+std::vector<Stage> StagesRunWouldKeep(const Project& project, FeatureSource mosaic_features);
 
 }  // namespace omm

@@ -238,12 +238,20 @@ TEST_F(RunProjectTest, SingleStageRunKeepsEarlierSectionsAndDropsLaterOnes) {
 TEST_F(RunProjectTest, ReuseKeepsTheCurrentStagesAndRerunsTheRest) {
   RunOptions options;
   options.reuse_current_stages = true;
+  // Each run keeps what StagesRunWouldKeep (`omm batch`'s note) says beforehand.
+  const auto run = [&] {
+    const Project project = LoadProject(project_.dir);
+    const std::vector<Stage> foreseen = StagesRunWouldKeep(project, options.mosaic_features);
+    RunSummary summary = RunProject(project, options);
+    EXPECT_EQ(foreseen, options.reuse_current_stages ? summary.stages_kept : foreseen);
+    return summary;
+  };
   options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v1"); };
-  EXPECT_EQ(RunProject(project_, options).stages_run.size(), 3u);  // nothing in out/ yet
+  EXPECT_EQ(run().stages_run.size(), 3u);  // nothing in out/ yet
 
   testing::ReplaceInFile(project_.dir / "cmm.csv", "202.6033", "202.6034");
   options.runner = [](Stage stage, StageContext& context) { FakeStage(stage, context, "v2"); };
-  RunSummary summary = RunProject(LoadProject(project_.dir), options);
+  RunSummary summary = run();
   EXPECT_EQ(summary.stages_run, std::vector<Stage>{Stage::kMeasure});
   EXPECT_EQ(summary.stages_kept, (std::vector<Stage>{Stage::kCalibrate, Stage::kMosaic}));
   EXPECT_THAT(summary.Brief(), HasSubstr("measure done in"));
@@ -254,14 +262,14 @@ TEST_F(RunProjectTest, ReuseKeepsTheCurrentStagesAndRerunsTheRest) {
   EXPECT_TRUE(ReportIsCurrent(LoadProject(project_.dir)));
 
   // Nothing changed: nothing runs.
-  summary = RunProject(LoadProject(project_.dir), options);
+  summary = run();
   EXPECT_TRUE(summary.stages_run.empty());
   EXPECT_EQ(summary.stages_kept.size(), 3u);
   EXPECT_THAT(summary.Brief(), HasSubstr("nothing to run"));
 
   // A tile's table position changed: the mosaic and the measure rerun.
   testing::ReplaceInFile(project_.dir / "table.csv", "108.6", "108.7");
-  summary = RunProject(LoadProject(project_.dir), options);
+  summary = run();
   EXPECT_EQ(summary.stages_run, (std::vector<Stage>{Stage::kMosaic, Stage::kMeasure}));
   EXPECT_EQ(testing::ReadTextFile(Out("mosaic.png")), "v2");
   EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v1");
@@ -269,20 +277,22 @@ TEST_F(RunProjectTest, ReuseKeepsTheCurrentStagesAndRerunsTheRest) {
   // Another omm's results are not kept.
   const std::string version = SoftwareVersion();
   testing::ReplaceInFile(Out("report.json"), "\"" + version + "\"", "\"0.1.0+0123456789ab\"");
-  EXPECT_EQ(RunProject(LoadProject(project_.dir), options).stages_run.size(), 3u);
+  EXPECT_EQ(run().stages_run.size(), 3u);
   EXPECT_EQ(testing::ReadTextFile(Out("camera.cameramodel")), "v2");
 
   // Without reuse (`omm run --force`) every stage runs.
   options.reuse_current_stages = false;
-  EXPECT_EQ(RunProject(LoadProject(project_.dir), options).stages_run.size(), 3u);
+  EXPECT_EQ(run().stages_run.size(), 3u);
 
-  // A file of a current stage's results deleted from out/: that stage reruns.
+  // A file of a current stage's results deleted from out/: that stage
+  // reruns, and the report is no longer current (`omm batch` reruns it).
   options.reuse_current_stages = true;
   fs::remove(Out("mosaic/scene.json"));
-  summary = RunProject(LoadProject(project_.dir), options);
+  EXPECT_FALSE(ReportIsCurrent(LoadProject(project_.dir)));
+  summary = run();
   EXPECT_EQ(summary.stages_run, (std::vector<Stage>{Stage::kMosaic, Stage::kMeasure}));
   fs::remove(Out("camera.cameramodel"));
-  EXPECT_EQ(RunProject(LoadProject(project_.dir), options).stages_run.size(), 3u);
+  EXPECT_EQ(run().stages_run.size(), 3u);
 }
 
 // A stage run alone builds on the earlier stages' sections only while their

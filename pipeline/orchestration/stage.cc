@@ -22,6 +22,13 @@ const char* StageName(Stage stage) {
   return "?";
 }
 
+std::string StageNames(const std::vector<Stage>& stages) {
+  std::string joined;
+  for (const Stage stage : stages)
+    joined += (joined.empty() ? "" : ", ") + std::string(StageName(stage));
+  return joined;
+}
+
 std::vector<Stage> AllStages() { return {Stage::kCalibrate, Stage::kMosaic, Stage::kMeasure}; }
 
 std::vector<std::string> StageOutputFiles(Stage stage, const Report& report) {

@@ -29,6 +29,8 @@ enum class Stage { kCalibrate, kMosaic, kMeasure };
 
 // "calibrate", "mosaic", "measure".
 const char* StageName(Stage stage);
+// Their names joined by ", ".
+std::string StageNames(const std::vector<Stage>& stages);
 // In run order.
 std::vector<Stage> AllStages();
 
