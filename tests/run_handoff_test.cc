@@ -227,8 +227,8 @@ TEST(RunHandoff, StagesRerunOnlyWhenTheirInputsChanged) {
 // The command line: `omm run` again on an unchanged project keeps every
 // stage and `omm run --force` reruns them all (the mosaic's timings are
 // new); `omm batch` says which stages of a project it reran after a CMM
-// value was dropped, and `omm batch --force` reruns them all (its child
-// runs `omm run --force`).
+// value was dropped, and that it reran none after a comment was added, and
+// `omm batch --force` reruns them all (its child runs `omm run --force`).
 TEST(RunHandoff, OmmRunKeepsCurrentStagesAndForceRerunsThem) {
   const testing::CachedProject sim = testing::SimulatedProject("demo", 101, 14);
   testing::TempDir dir;
@@ -267,6 +267,16 @@ TEST(RunHandoff, OmmRunKeepsCurrentStagesAndForceRerunsThem) {
   EXPECT_EQ(batch.exit_code, 0) << batch.output;
   EXPECT_NE(batch.output.find("ok (reran measure; calibrate, mosaic current)"), std::string::npos)
       << batch.output;
+  EXPECT_EQ(mosaic_seconds(), second);
+
+  // A comment added to project.yaml changes the inputs' hash but no stage's:
+  // the child runs and keeps every stage.
+  testing::WriteTextFile(project_dir / "project.yaml",
+                         testing::ReadTextFile(project_dir / "project.yaml") + "# checked\n");
+  const testing::CommandResult commented = testing::RunOmm("batch " + project_dir.string());
+  EXPECT_EQ(commented.exit_code, 0) << commented.output;
+  EXPECT_NE(commented.output.find("ok (all stages current, none rerun)"), std::string::npos)
+      << commented.output;
   EXPECT_EQ(mosaic_seconds(), second);
 
   const testing::CommandResult batch_forced =
