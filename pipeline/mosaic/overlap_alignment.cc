@@ -183,8 +183,9 @@ SmoothedOverlap SmoothOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   overlap.smooth_b = GaussianBlur(b, sigma);
   // The blur clamps at the window's border: pixels within its reach are left out.
   const int margin = static_cast<int>(std::ceil(3.0 * sigma)) + 2;
-  for (int r = margin; r < a.rows() - margin; ++r) {
-    for (int c = margin; c < a.cols() - margin; ++c) {
+  const int stride = options.sample_stride_px;
+  for (int r = margin; r < a.rows() - margin; r += stride) {
+    for (int c = margin; c < a.cols() - margin; c += stride) {
       if (!(support_a(r, c) >= kFullSupport)) continue;
       overlap.pixels.emplace_back(c, r);
     }
@@ -284,6 +285,7 @@ std::array<ImageF, 2> ShiftInfluence(const Linearisation& lin, const GainBasis& 
 
 std::string OverlapAlignmentOptions::Check() const {
   if (!(smoothing_sigma_px > 0.0)) return "smoothing_sigma_px must be > 0";
+  if (sample_stride_px < 1) return "sample_stride_px must be at least 1";
   if (max_iterations < 1) return "max_iterations must be at least 1";
   if (!(shift_tolerance_px > 0.0)) return "shift_tolerance_px must be > 0";
   if (!(huber_sigmas > 0.0)) return "huber_sigmas must be > 0";
@@ -312,6 +314,8 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   const double sigma = options.smoothing_sigma_px;
   const SmoothedOverlap overlap = SmoothOverlap(a, b, mask, options);
   const GainBasis basis(rows, cols);
+  // The samples stand for stride^2 pixels each.
+  const int stride2 = options.sample_stride_px * options.sample_stride_px;
 
   // Gauss-Newton with Huber weights on the smoothed patches.
   Parameters theta = Parameters::Zero();
@@ -326,7 +330,7 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     result.num_iterations = iteration + 1;
     Linearise(overlap, basis, theta, &lin);
-    result.num_pixels = static_cast<int>(lin.residuals.size());
+    result.num_pixels = static_cast<int>(lin.residuals.size()) * stride2;
     if (result.num_pixels < options.min_pixels) {
       result.why = "too few pixels seen by both";
       return result;
@@ -347,7 +351,7 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   }
 
   const std::vector<double> raw_residuals = RawResiduals(a, b, overlap, lin, basis, theta);
-  if (raw_residuals.size() < static_cast<size_t>(options.min_pixels)) {
+  if (static_cast<int>(raw_residuals.size()) * stride2 < options.min_pixels) {
     result.why = "too few pixels seen by both";
     return result;
   }
@@ -355,9 +359,11 @@ OverlapAlignment AlignOverlap(const ImageF& a, const ImageF& b, const ImageF& ma
   // Cov(theta) = H^-1 J' W K W J H^-1 (header): its shift block is (e_i, K
   // e_j), two images whatever the number of gain terms.
   const std::array<ImageF, 2> e = ShiftInfluence(lin, basis, huber_threshold, normal, rows, cols);
-  // The noise: its smoothed residuals correlate as K = G * G.
-  Eigen::Matrix2d covariance = result.residual_sigma * result.residual_sigma *
-                               CorrelatedProducts(e, std::sqrt(2.0) * sigma, 1);
+  // The noise: its smoothed residuals correlate as K = G * G. e is nonzero
+  // on the samples' lattice only, one pixel of each stride x stride block.
+  Eigen::Matrix2d covariance =
+      result.residual_sigma * result.residual_sigma *
+      CorrelatedProducts(e, std::sqrt(2.0) * sigma, options.sample_stride_px);
   // The misfit: a smooth field of misfit_relative of the level.
   double level = 0.0;
   for (const Eigen::Vector2i& p : lin.used) level += overlap.smooth_a(p.y(), p.x());

@@ -54,6 +54,13 @@
 // 1 to 5 x 2), flat in the vignetting difference. A floor (min_sigma_px)
 // stays for what neither term holds (resampling).
 //
+// Samples. The smoothed patches vary over ~6 px, so the fit samples every
+// second row and column (sample_stride_px): the covariance below is that of
+// the estimator on these samples, and on 300 overlaps of 15 low-texture, 6
+// low-texture-exposure and 3 exposure projects, aligned on their true scene,
+// the shifts moved by 0.018 of their sigma rms (0.21 at most) against
+// every pixel's fit, the sigmas by 3 % at most, in 0.4 of the time.
+//
 // Covariance of s. Only its 2 x 2 block is needed: (e_i, K e_j) with e_i the
 // image of W J H^-1's column i, two blurred images for K, whatever the
 // number of gain terms.
@@ -75,6 +82,8 @@ namespace omm {
 struct OverlapAlignmentOptions {
   // Both patches are smoothed by a Gaussian of this sigma, grid px.
   double smoothing_sigma_px = 6.0;
+  // The fit samples every this-th row and column of the smoothed patches.
+  int sample_stride_px = 2;
   int max_iterations = 30;
   // Converged when the shift changes by less than this, grid px.
   double shift_tolerance_px = 1e-4;
@@ -103,7 +112,7 @@ struct OverlapAlignment {
   std::string why;                                           // if not usable
   Eigen::Vector2d shift_px = Eigen::Vector2d::Zero();        // s: b's content at x + s is a's at x
   Eigen::Matrix2d covariance_px2 = Eigen::Matrix2d::Zero();  // of s, floored
-  int num_pixels = 0;                                        // valid pixels used
+  int num_pixels = 0;           // valid pixels used: the samples, stride^2 pixels each
   double residual_sigma = 0.0;  // robust sigma of the raw residuals, intensity units
   double misfit_sigma = 0.0;    // of the smooth misfit (header), intensity units
   int num_iterations = 0;

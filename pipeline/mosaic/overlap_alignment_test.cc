@@ -117,6 +117,32 @@ TEST(OverlapAlignment, ShadingAloneFixesBothAxesLooselyButTruly) {
   EXPECT_LT(std::sqrt(aligned.covariance_px2.trace() / 2), 0.3);
 }
 
+TEST(OverlapAlignment, SamplingEverySecondPixelKeepsTheShiftAndItsSigma) {
+  // The smoothed patches vary over ~6 px: every second row and column hold
+  // what every pixel does. The sampled fit's shift is within a tenth of the
+  // full fit's sigma of it (0.05 at most here), its sigma per axis within
+  // 5 % (1.3 % here).
+  const Region region;
+  OverlapAlignmentOptions every_pixel = NoMisfit(), sampled = NoMisfit();
+  every_pixel.sample_stride_px = 1;
+  sampled.sample_stride_px = 2;
+  for (int seed = 20; seed < 24; ++seed) {
+    const Pair pair = Render(region, Eigen::Vector2d(-0.8, 0.3), kNoise, seed);
+    const OverlapAlignment full = AlignOverlap(pair.a, pair.b, ImageF(), every_pixel);
+    const OverlapAlignment half = AlignOverlap(pair.a, pair.b, ImageF(), sampled);
+    ASSERT_TRUE(full.usable && half.usable) << full.why << half.why;
+    const Eigen::Vector2d moved = half.shift_px - full.shift_px;
+    EXPECT_LT(std::sqrt(moved.dot(full.covariance_px2.ldlt().solve(moved))), 0.1) << seed;
+    for (int axis = 0; axis < 2; ++axis) {
+      EXPECT_NEAR(std::sqrt(half.covariance_px2(axis, axis) / full.covariance_px2(axis, axis)), 1.0,
+                  0.05)
+          << seed << " axis " << axis;
+    }
+    // The pixel count is the pixels' the samples stand for.
+    EXPECT_NEAR(half.num_pixels, full.num_pixels, 0.01 * full.num_pixels);
+  }
+}
+
 TEST(OverlapAlignment, MaskedPixelsDoNotCount) {
   // A stretch of the edge seen elsewhere in b alone (a bore's wall, seen
   // from the other side) biases the shift unless masked.
@@ -191,6 +217,9 @@ TEST(OverlapAlignment, OptionsAreChecked) {
   OverlapAlignmentOptions options;
   EXPECT_EQ(options.Check(), "");
   options.min_pixels = 3;
+  EXPECT_NE(options.Check(), "");
+  options = {};
+  options.sample_stride_px = 0;
   EXPECT_NE(options.Check(), "");
   EXPECT_THROW(AlignOverlap(ImageF(), ImageF(), ImageF(), options), InputError);
   EXPECT_THROW(AlignOverlap(ImageF(10, 10), ImageF(10, 11), ImageF(), {}), InputError);
