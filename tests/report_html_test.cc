@@ -264,6 +264,10 @@ TEST(ReportHtml, MeasurementsTableFlagsAndBreaksDown) {
   // Each made measurement's largest part of sigma, counted (the failed one
   // has none).
   EXPECT_THAT(html, HasSubstr(" Largest part: registration for 2.</p>"));
+  // A made measurement's error cell is empty; a failed one's says why.
+  EXPECT_EQ(Count(html, "<span class=\"error\"></span>"), 0);
+  EXPECT_THAT(html,
+              HasSubstr("<span class=\"error\">feature &#39;&lt;lost&gt;&#39; not found</span>"));
 }
 
 // Where cmm.csv states the CMM's sigma: its column and the deviation against

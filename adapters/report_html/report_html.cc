@@ -157,6 +157,11 @@ class Facts {
 
 std::string Missing(const std::string& text) { return "<p class=\"missing\">" + text + "</p>\n"; }
 
+// A table's error cell: empty for none.
+std::string ErrorCell(const std::string& error) {
+  return error.empty() ? "" : "<span class=\"error\">" + Escape(error) + "</span>";
+}
+
 // An SVG document for inlining: from "<svg" on (no XML prolog).
 std::string InlineSvg(const std::string& svg) {
   const size_t at = svg.find("<svg");
@@ -287,8 +292,7 @@ std::string MeasurementsSection(const Report& report) {
       cells.insert(cells.begin() + 5, Number(m.cmm_sigma_mm));
       cells.push_back(Number(m.deviation_combined_sigma, 2));
     }
-    cells.insert(cells.end(), {sources.empty() ? "&ndash;" : sources,
-                               "<span class=\"error\">" + Escape(m.error) + "</span>"});
+    cells.insert(cells.end(), {sources.empty() ? "&ndash;" : sources, ErrorCell(m.error)});
     table.Row(cells, css_class);
   }
   out += fmt::format(
@@ -318,7 +322,7 @@ std::string FeaturesSection(const Report& report) {
     table.Row({Escape(f.name), FeatureTypeName(f.type), Number(coordinate(f.centre_mm, 0)),
                Number(coordinate(f.centre_mm, 1)), Number(f.diameter_mm),
                Number(coordinate(f.centre_sigma_mm, 0)), Number(coordinate(f.centre_sigma_mm, 1)),
-               Number(f.diameter_sigma_mm), "<span class=\"error\">" + Escape(f.error) + "</span>"},
+               Number(f.diameter_sigma_mm), ErrorCell(f.error)},
               f.centre_mm ? "" : "failed");
   }
   return out + table.Html("features-table");
