@@ -332,21 +332,60 @@ TEST(ReportHtml, EverySectionWhenEveryStageRan) {
 }
 
 // Without a plate on the part the report says where the scale came from.
-// The report's other top-level members in the header: an object (the
-// measure stage's section) as a table of its members, nested ones likewise,
-// every text escaped.
+// The report's other top-level members in the header: an object as a table
+// of its members, nested ones likewise, every text escaped.
 TEST(ReportHtml, TopLevelObjectsAreTablesOfTheirMembers) {
   Report report = FullReport();
-  report.extra.emplace_back("measure",
-                            ReportObject{{"brief", "2/3 <features> found"},
-                                         {"bore_prior", ReportObject{{"bottom_rim_scale", 0.9772}}},
-                                         {"seconds", 0.25}});
+  report.extra.emplace_back("archive", ReportObject{{"job", "<die> 7"},
+                                                    {"cmm", ReportObject{{"probe_mm", 2.0}}},
+                                                    {"reprocessed", true}});
   EXPECT_THAT(ReportHtml(report, FullInputs()),
-              HasSubstr("<tr><th>measure</th><td><table class=\"facts\">\n"
-                        "<tr><th>brief</th><td>2/3 &lt;features&gt; found</td></tr>\n"
-                        "<tr><th>bore_prior</th><td><table class=\"facts\">\n"
-                        "<tr><th>bottom_rim_scale</th><td>0.9772</td></tr>\n</table>\n</td></tr>\n"
-                        "<tr><th>seconds</th><td>0.25</td></tr>\n</table>\n</td></tr>"));
+              HasSubstr("<tr><th>archive</th><td><table class=\"facts\">\n"
+                        "<tr><th>job</th><td>&lt;die&gt; 7</td></tr>\n"
+                        "<tr><th>cmm</th><td><table class=\"facts\">\n"
+                        "<tr><th>probe_mm</th><td>2</td></tr>\n</table>\n</td></tr>\n"
+                        "<tr><th>reprocessed</th><td>yes</td></tr>\n</table>\n</td></tr>"));
+}
+
+// The measure stage's own section (report.json's `measure`) is said in words
+// under the features, not dumped into the header; a member this version does
+// not know is shown as it is.
+TEST(ReportHtml, TheMeasureStagesFactsInWords) {
+  Report report = FullReport();
+  report.extra.emplace_back(
+      "measure", ReportObject{{"brief", "2/3 <features> found"},
+                              {"intrinsics_refined", true},
+                              {"bore_prior", ReportObject{{"views_with_k", 25},
+                                                          {"views_with_wall_level", 24},
+                                                          {"bottom_rim_scale", 0.97769},
+                                                          {"wall_contrast", 0.11994},
+                                                          {"wall_contrast_sigma", 0.00086}}},
+                              {"views_gsd_mm", 0.15},
+                              {"seconds", 0.5596},
+                              {"later_member", 3}});
+  const std::string html = ReportHtml(report, FullInputs());
+  const size_t section = html.find("<h3 id=\"measure-stage\">Measure stage</h3>");
+  ASSERT_NE(section, std::string::npos);
+  EXPECT_GT(section, html.find("<h3 id=\"features\">"));
+  EXPECT_EQ(html.find("<th>measure</th>"), std::string::npos);  // not in the header
+  EXPECT_EQ(html.find("bottom_rim_scale"), std::string::npos);
+  const std::string facts = html.substr(section);
+  EXPECT_THAT(facts, HasSubstr("<tr><th>summary</th><td>2/3 &lt;features&gt; found</td></tr>"));
+  EXPECT_THAT(facts, HasSubstr("<td>refined by the mosaic's adjustment, the calibration their "
+                               "prior</td>"));
+  EXPECT_THAT(facts, HasSubstr("<td>bottom rim at 0.9777 of the top rim's scale, wall contrast "
+                               "0.1199 &plusmn; 0.0009 (25 views gave the bottom rim's scale, 24 "
+                               "the wall's contrast)</td>"));
+  EXPECT_THAT(facts, HasSubstr("<td>0.15 mm/px</td>"));
+  EXPECT_THAT(facts, HasSubstr("<td>0.56 s</td>"));
+  EXPECT_THAT(facts, HasSubstr("<tr><th>later_member</th><td>3</td></tr>"));
+
+  // Too few views for a prior: how many there were.
+  report.extra.back().second =
+      ReportObject{{"bore_prior", ReportObject{{"views_with_k", 2}, {"views_with_wall_level", 1}}}};
+  EXPECT_THAT(ReportHtml(report, FullInputs()),
+              HasSubstr("<td>none: too few views (2 views gave the bottom rim's scale, 1 the "
+                        "wall's contrast)</td>"));
 }
 
 TEST(ReportHtml, ScaleFromTheTableAloneIsSaid) {

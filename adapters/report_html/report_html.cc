@@ -196,6 +196,9 @@ std::string FactHtml(const ReportValue& value) {
   return facts.Html();
 }
 
+// The report's member that the measure stage writes beside the contract's.
+constexpr const char* kMeasureKey = "measure";
+
 std::string HeaderSection(const Report& report) {
   std::string out = "<h1>omm report: " + Escape(report.project) + "</h1>\n";
   Facts facts;
@@ -203,7 +206,9 @@ std::string HeaderSection(const Report& report) {
   facts.Add("report format", Escape(report.format));
   facts.Add("omm version", Escape(report.software_version));
   facts.Add("inputs SHA-256", "<code>" + Escape(report.inputs_sha256) + "</code>");
-  for (const auto& [key, value] : report.extra) facts.Add(Escape(key), FactHtml(value));
+  // The measure stage's section has its own place (MeasureStageSection).
+  for (const auto& [key, value] : report.extra)
+    if (key != kMeasureKey) facts.Add(Escape(key), FactHtml(value));
   return out + facts.Html();
 }
 
@@ -305,6 +310,44 @@ std::string MeasurementsSection(const Report& report) {
                      : "");
   out += LargestSourcesSentence(report, largest_counts);
   return out + "</p>\n" + table.Html("measurements-table");
+}
+
+// The measure stage's own facts (report.json's `measure`), its known members
+// in words, any other as FactHtml.
+std::string MeasureStageSection(const Report& report) {
+  const ReportObject* measure = AsObject(Member(report.extra, kMeasureKey));
+  if (measure == nullptr) return "";
+  Facts facts;
+  for (const auto& [key, value] : *measure) {
+    if (key == "brief") {
+      facts.Add("summary", Text(value));
+    } else if (key == "intrinsics_refined" && AsBool(&value)) {
+      facts.Add("intrinsics",
+                *AsBool(&value) ? "refined by the mosaic's adjustment, the calibration their prior"
+                                : "as calibrated");
+    } else if (const ReportObject* bore = AsObject(&value); key == "bore_prior" && bore) {
+      // Small holes near the camera's axis borrow their bore's shape from
+      // the others (pipeline/measure/README.md).
+      const std::string views = fmt::format(
+          "{} views gave the bottom rim's scale, {} the wall's contrast",
+          Text(Member(*bore, "views_with_k")), Text(Member(*bore, "views_with_wall_level")));
+      facts.Add(
+          "bore prior (small holes near the axis)",
+          Member(*bore, "bottom_rim_scale")
+              ? fmt::format("bottom rim at {} of the top rim's scale, wall contrast {} &plusmn; "
+                            "{} ({})",
+                            NumberOf(*bore, "bottom_rim_scale"), NumberOf(*bore, "wall_contrast"),
+                            NumberOf(*bore, "wall_contrast_sigma"), views)
+              : "none: too few views (" + views + ")");
+    } else if (key == "views_gsd_mm" && AsNumber(&value)) {
+      facts.Add("grid of the holes' fits", Text(value) + " mm/px");
+    } else if (key == "seconds" && AsNumber(&value)) {
+      facts.Add("run time", NumberOf(*measure, key, 2) + " s");
+    } else {
+      facts.Add(Escape(key), FactHtml(value));
+    }
+  }
+  return "<h3 id=\"measure-stage\">Measure stage</h3>\n" + facts.Html();
 }
 
 std::string FeaturesSection(const Report& report) {
@@ -839,6 +882,7 @@ std::string ReportHtml(const Report& report, const ReportHtmlInputs& inputs) {
   html += HeaderSection(report);
   html += MeasurementsSection(report);
   html += FeaturesSection(report);
+  html += MeasureStageSection(report);
   html += MosaicFigure(report, inputs);
   html += CalibrationSection(report, inputs);
   html += MosaicSection(report);
