@@ -40,6 +40,7 @@ std::string FinalAdjustmentOptions::Check() const {
   if (!(plate_outlier_sigmas > 0)) return "plate_outlier_sigmas must be > 0";
   if (!(extrapolation_px_per_px >= 0)) return "extrapolation_px_per_px must be >= 0";
   if (!(min_corner_sigma_px > 0)) return "min_corner_sigma_px must be > 0";
+  if (!(min_dot_sigma_px > 0)) return "min_dot_sigma_px must be > 0";
   return {};
 }
 
@@ -624,13 +625,12 @@ std::string DropPlateOutliers(const LensProjection& lens, const PlaneBundleConfi
   return {};
 }
 
-// The plate corners' scatter about the solve in *result, px: inside the
+// The plate marks' scatter about the solve in *result, px: inside the
 // calibration's measured region, over its degrees of freedom, 2 per mark
 // less the plate's free parameters (the scene's are shared with the tracks
 // and neglected). 0 where there are none.
-double CornerScatterPx(const FinalAdjustment& result, const PlateOnPart& plate,
-                       const PlaneBundleConfig& config,
-                       const Eigen::Matrix2Xd& measured_region_px) {
+double MarkScatterPx(const FinalAdjustment& result, const PlateOnPart& plate,
+                     const PlaneBundleConfig& config, const Eigen::Matrix2Xd& measured_region_px) {
   const int num_plate_parameters =
       3 + (plate.marks.height_mm.has_value() ? 0 : 1) + (config.refine_plate_scale ? 1 : 0);
   const InsideResiduals inside = ResidualsInsideRegion(
@@ -708,17 +708,20 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
   std::string why_not_used;
   if (plate.found && result.summary.usable)
     why_not_used = DropPlateOutliers(lens, config, options, initial, &result);
-  if (plate.found && plate.sigma_assumed && why_not_used.empty() && result.summary.usable) {
-    // The corners weighed by their scatter about this solve, solved again
-    // from it, and screened again at that sigma. With the detector's assumed
-    // 0.1 px, rendered corners that scatter by ~0.02 px counted 1/25 of what
-    // they are worth, and the plate's scale was stated ~28 ppm where its
-    // errors spread by ~14 (14 demo projects with a chessboard on the part).
-    const double scatter_px = CornerScatterPx(result, plate, config, prior.measured_region_px);
+  if (plate.found && why_not_used.empty() && result.summary.usable) {
+    // The marks weighed by their scatter about this solve, solved again from
+    // it, and screened again at that sigma. With the detector's assumed 0.1
+    // px, rendered corners that scatter by ~0.02 px counted 1/25 of what they
+    // are worth, and the plate's scale was stated ~28 ppm where its errors
+    // spread by ~14 (14 demo projects with a chessboard on the part); dots
+    // at their floor of 0.01 px, which scatter by ~0.005, stated 5-6 ppm
+    // where the errors spread by 3.5 (13 demo and plate-on-part projects).
+    const double scatter_px = MarkScatterPx(result, plate, config, prior.measured_region_px);
     if (scatter_px > 0) {
-      result.corner_sigma_px = std::max(scatter_px, options.min_corner_sigma_px);
+      result.mark_sigma_px = std::max(
+          scatter_px, plate.sigma_assumed ? options.min_corner_sigma_px : options.min_dot_sigma_px);
       WeighPlateMarks(prior.measured_region_px, options.extrapolation_px_per_px,
-                      result.input.observation_sigma_px, result.corner_sigma_px,
+                      result.input.observation_sigma_px, result.mark_sigma_px,
                       &result.input.plate_observations);
       result.summary = SolvePlaneBundle(lens, result.input, config, options.bundle, &result.scene);
       if (result.summary.usable)

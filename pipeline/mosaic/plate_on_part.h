@@ -193,9 +193,12 @@ struct FinalAdjustmentOptions {
   // lens-mismatch-203 showed (0.004-0.009 px/px, header above). Marks just
   // outside keep most of their weight, marks 100 px out are worth ~1 %.
   double extrapolation_px_per_px = 0.01;
-  // Floor of the sigma a plate's corners get from their scatter (PlateOnPart::
-  // sigma_assumed), px: the scatter leaves out the model's systematic misfit.
+  // Floors of the sigma a plate's marks get from their scatter, px: a
+  // chessboard's corners (PlateOnPart::sigma_assumed), whose scatter leaves
+  // out the model's systematic misfit, and dots, whose ellipse fits say
+  // ~0.002 px on clean renders (their errors: 0.0045-0.0063 px).
   double min_corner_sigma_px = 0.01;
+  double min_dot_sigma_px = 0.002;
 
   std::string Check() const;
 };
@@ -226,10 +229,9 @@ struct FinalAdjustment {
   // Plate observations outside the calibration's measured region
   // (IntrinsicsPrior::measured_region_px), their sigma widened.
   int plate_outside_region = 0;
-  // The sigma a plate's corners were weighed by, from their scatter about
-  // the solve (PlateOnPart::sigma_assumed), px; 0 when the marks kept their
-  // own (dots: their ellipse fits') or none could be estimated.
-  double corner_sigma_px = 0.0;
+  // The sigma a plate's marks were weighed by, from their scatter about the
+  // solve, px; 0 when none could be estimated (the marks kept their own).
+  double mark_sigma_px = 0.0;
   PlateScaleCheck scale_check;
   // Set when a found plate was left out (its solve unusable, or most of its
   // marks outliers: not the plate it seemed): the scene is the one without it.
@@ -241,11 +243,12 @@ struct FinalAdjustment {
 
 // Adjusts the registered scene once more with the plate (if plate.found) and
 // the intrinsics prior (if prior.information is set), warm-started from
-// `registered_scene`, whose intrinsics must be the calibration's. A plate
-// whose marks' sigma is assumed (a chessboard's corners) is solved with it
-// first; the corners are then weighed by their scatter about that solve
-// (dof-corrected, floored by min_corner_sigma_px) and the scene solved again,
-// as the calibration stage weighs them. Data failures come back in summary
+// `registered_scene`, whose intrinsics must be the calibration's. A plate is
+// solved with its marks' own sigma first (dots: their ellipse fits', floored
+// by PlateOnPartOptions::min_mark_sigma_px; corners: assumed); the marks are
+// then weighed by their scatter about that solve (dof-corrected, floored by
+// min_corner_sigma_px or min_dot_sigma_px) and the scene solved again, as
+// the calibration stage weighs them. Data failures come back in summary
 // (usable, brief); throws InputError for invalid options or sizes.
 FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
                                         const PlaneBundleInput& registered_input,

@@ -156,6 +156,14 @@ TEST_F(PlateOnPartSim, MarksAgreeWithTheTruth) {
     // seeds; an uncorrected perspective bias alone would add up to 0.011 px.
     EXPECT_LT(rms, 0.01);
     EXPECT_LT(max_px, 0.03);
+    // The final adjustment weighs the dots by their scatter: the sigma per
+    // axis their errors show (rms over two axes), within what the scene's
+    // own errors and the estimate's few % add (their floor, 0.01 px, was
+    // twice that, and the plate's scale sigma ~1.6 times its errors' spread).
+    ASSERT_TRUE(c.with_plate.summary.usable) << c.with_plate.summary.brief;
+    std::printf("seed %d: dots weighed by their scatter: sigma %.4f px, truth %.4f px\n", c.seed,
+                c.with_plate.mark_sigma_px, rms / std::sqrt(2.0));
+    EXPECT_NEAR(c.with_plate.mark_sigma_px, rms / std::sqrt(2.0), 0.25 * rms / std::sqrt(2.0));
   }
 }
 
@@ -301,8 +309,8 @@ TEST(PlateOnPartChessboard, CornersFollowedWhereTilesCutItSetTheScale) {
   // what the scene's own errors and the estimate's ~5 % add.
   const double truth_sigma_px = rms / std::sqrt(2.0);
   std::printf("corners weighed by their scatter: sigma %.4f px, truth %.4f px\n",
-              c.with_plate.corner_sigma_px, truth_sigma_px);
-  EXPECT_NEAR(c.with_plate.corner_sigma_px, truth_sigma_px, 0.25 * truth_sigma_px);
+              c.with_plate.mark_sigma_px, truth_sigma_px);
+  EXPECT_NEAR(c.with_plate.mark_sigma_px, truth_sigma_px, 0.25 * truth_sigma_px);
   std::vector<Eigen::Vector2d> actual;
   for (const TileTruth& tile : c.truth.tiles) actual.push_back(tile.actual_mm);
   const double with = ScaleErrorPpm(c.with_plate.scene.table_pos_mm, actual);

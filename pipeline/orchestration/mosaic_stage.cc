@@ -362,9 +362,9 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
         "lens is extrapolated there)",
         adjusted.plate_outside_region);
   }
-  if (adjusted.corner_sigma_px > 0) {
-    brief += fmt::format("; corners weighed by their scatter, sigma {:.4f} px",
-                         adjusted.corner_sigma_px);
+  if (adjusted.mark_sigma_px > 0) {
+    brief +=
+        fmt::format("; marks weighed by their scatter, sigma {:.4f} px", adjusted.mark_sigma_px);
   }
   ReportObject report{{"brief", brief},
                       {"scale_reference", plate.scale_reference},
@@ -378,8 +378,7 @@ ReportValue PlateReport(const Project& project, const PlateOnPart& plate,
                       {"height", plate.height_source},
                       {"height_mm", adjusted.plate_height_mm},
                       {"height_sigma_mm", adjusted.plate_height_sigma_mm}};
-  if (adjusted.corner_sigma_px > 0)
-    report.emplace_back("corner_sigma_px", adjusted.corner_sigma_px);
+  if (adjusted.mark_sigma_px > 0) report.emplace_back("mark_sigma_px", adjusted.mark_sigma_px);
   if (adjusted.scale_check.ok) {
     report.emplace_back("scale_minus_1_ppm", adjusted.scale_check.scale_minus_1_ppm);
     report.emplace_back("sigma_ppm", adjusted.scale_check.sigma_ppm);
