@@ -196,7 +196,7 @@ struct FinalAdjustmentOptions {
   // Floors of the sigma a plate's marks get from their scatter, px: a
   // chessboard's corners (PlateOnPart::sigma_assumed), whose scatter leaves
   // out the model's systematic misfit, and dots, whose ellipse fits say
-  // ~0.002 px on clean renders (their errors: 0.0045-0.0063 px).
+  // ~0.002 px on clean renders (their errors: 0.0032-0.0045 px per axis).
   double min_corner_sigma_px = 0.01;
   double min_dot_sigma_px = 0.002;
 
