@@ -380,12 +380,14 @@ TEST(ReportHtml, TheMeasureStagesFactsInWords) {
   EXPECT_THAT(facts, HasSubstr("<td>0.56 s</td>"));
   EXPECT_THAT(facts, HasSubstr("<tr><th>later_member</th><td>3</td></tr>"));
 
-  // Too few views for a prior: how many there were.
+  // Intrinsics held, and too few views for a prior: how many there were.
   report.extra.back().second =
-      ReportObject{{"bore_prior", ReportObject{{"views_with_k", 2}, {"views_with_wall_level", 1}}}};
-  EXPECT_THAT(ReportHtml(report, FullInputs()),
-              HasSubstr("<td>none: too few views (2 views gave the bottom rim's scale, 1 the "
-                        "wall's contrast)</td>"));
+      ReportObject{{"intrinsics_refined", false},
+                   {"bore_prior", ReportObject{{"views_with_k", 2}, {"views_with_wall_level", 1}}}};
+  const std::string held = ReportHtml(report, FullInputs());
+  EXPECT_THAT(held, HasSubstr("<tr><th>intrinsics</th><td>as calibrated</td></tr>"));
+  EXPECT_THAT(held, HasSubstr("<td>none: too few views (2 views gave the bottom rim's scale, 1 "
+                              "the wall's contrast)</td>"));
 }
 
 TEST(ReportHtml, ScaleFromTheTableAloneIsSaid) {
