@@ -3,6 +3,8 @@
 #include <cmath>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "adapters/mrcal/mrcal_c.h"
 
 namespace omm {
@@ -100,6 +102,33 @@ std::optional<Eigen::Vector2d> FirstUnmappedPixel(const CameraModel& camera,
       return q_px.col(i);
   }
   return std::nullopt;
+}
+
+std::vector<bool> FoldedIntoTheImage(const CameraModel& camera, const Eigen::Matrix3Xd& p_cam,
+                                     const Eigen::Matrix2Xd& q_px, double near_px) {
+  // 1e-4 rad is 0.27 px at a 2670 px focal length and far above the
+  // unprojection's error; a folded point's ray is degrees away.
+  constexpr double kMaxRayAngleRad = 1e-4;
+  std::vector<bool> folded(static_cast<size_t>(p_cam.cols()), false);
+  std::vector<Eigen::Index> near;
+  for (Eigen::Index i = 0; i < p_cam.cols(); ++i) {
+    if (p_cam(2, i) > 0 && q_px.col(i).allFinite() && q_px(0, i) > -near_px &&
+        q_px(1, i) > -near_px && q_px(0, i) < camera.width_px - 1 + near_px &&
+        q_px(1, i) < camera.height_px - 1 + near_px) {
+      near.push_back(i);
+    }
+  }
+  Eigen::Matrix2Xd q_near(2, near.size());
+  for (size_t k = 0; k < near.size(); ++k) q_near.col(k) = q_px.col(near[k]);
+  Eigen::Matrix3Xd rays;
+  if (near.empty() || !UnprojectPixels(camera, q_near, &rays)) return folded;
+  for (size_t k = 0; k < near.size(); ++k) {
+    const Eigen::Vector3d ray = rays.col(k);
+    const Eigen::Vector3d point = p_cam.col(near[k]);
+    folded[static_cast<size_t>(near[k])] =
+        !ray.allFinite() || std::atan2(ray.cross(point).norm(), ray.dot(point)) > kMaxRayAngleRad;
+  }
+  return folded;
 }
 
 }  // namespace omm

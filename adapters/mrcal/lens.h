@@ -8,6 +8,7 @@
 
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -42,5 +43,16 @@ bool UnprojectPixels(const CameraModel& camera, const Eigen::Matrix2Xd& q_px,
 std::optional<Eigen::Vector2d> FirstUnmappedPixel(const CameraModel& camera,
                                                   const Eigen::Matrix2Xd& q_px,
                                                   double tolerance_px);
+
+// Which of the camera-frame points p_cam (3 x N) the lens folds into the
+// image: their pixels q_px (2 x N, ProjectPoints') lie within near_px of the
+// image, but each pixel's ray (UnprojectPixels) points more than 1e-4 rad
+// away from its point. Beyond the fold of a strong radial polynomial the
+// lens maps points far outside its field back into the image (OPENCV8 takes
+// a point 57 deg off the axis of a 16-deg-wide lens to a pixel whose ray
+// points elsewhere). False for points behind the camera, pixels farther out,
+// and every point if the lens model is invalid.
+std::vector<bool> FoldedIntoTheImage(const CameraModel& camera, const Eigen::Matrix3Xd& p_cam,
+                                     const Eigen::Matrix2Xd& q_px, double near_px);
 
 }  // namespace omm

@@ -22,6 +22,19 @@ CameraModel TwelveMillimetreCamera() {
   return camera;
 }
 
+// r_d = r (1 + k1 r^2) with k1 = -2 reaches at most 0.27 (at r = 1 /
+// sqrt 6): 272 px from the centre at f = 1000 px. No ray reaches a pixel
+// farther out, and the rays beyond r = 1 / sqrt 6 fold back inwards.
+CameraModel FoldingCamera() {
+  CameraModel camera;
+  camera.lens_model = "LENSMODEL_OPENCV4";
+  camera.intrinsics.resize(8);
+  camera.intrinsics << 1000.0, 1000.0, 800.0, 600.0, -2.0, 0.0, 0.0, 0.0;
+  camera.width_px = 1600;
+  camera.height_px = 1200;
+  return camera;
+}
+
 TEST(Lens, ParameterCounts) {
   EXPECT_EQ(LensModelNumParams("LENSMODEL_OPENCV4"), 8);
   EXPECT_EQ(LensModelNumParams("LENSMODEL_OPENCV8"), 12);
@@ -40,16 +53,9 @@ TEST(Lens, ProjectUnprojectRoundTrip) {
   EXPECT_LT((q_back - q).cwiseAbs().maxCoeff(), 1e-6);
 }
 
-// r_d = r (1 + k1 r^2) with k1 = -2 reaches at most 0.27 (at r = 1 /
-// sqrt 6): 272 px from the centre at f = 1000 px. No ray reaches a pixel
-// farther out.
+// FoldingCamera: no ray reaches a pixel more than 272 px from the centre.
 TEST(Lens, PixelsBeyondTheFoldOfARadialPolynomialAreUnmapped) {
-  CameraModel camera;
-  camera.lens_model = "LENSMODEL_OPENCV4";
-  camera.intrinsics.resize(8);
-  camera.intrinsics << 1000.0, 1000.0, 800.0, 600.0, -2.0, 0.0, 0.0, 0.0;
-  camera.width_px = 1600;
-  camera.height_px = 1200;
+  const CameraModel camera = FoldingCamera();
   Eigen::Matrix2Xd inside(2, 3);
   inside << 800.0, 1000.0, 650.0, 600.0, 700.0, 450.0;  // 0, 224 and 212 px from the centre
   EXPECT_FALSE(FirstUnmappedPixel(camera, inside, 1e-3).has_value());
@@ -61,6 +67,40 @@ TEST(Lens, PixelsBeyondTheFoldOfARadialPolynomialAreUnmapped) {
   ASSERT_TRUE(unmapped.has_value());
   EXPECT_EQ(*unmapped, Eigen::Vector2d(1599.0, 1199.0));
   EXPECT_FALSE(FirstUnmappedPixel(TwelveMillimetreCamera(), border, 1e-3).has_value());
+}
+
+// FoldingCamera: a point at r = 0.5 (26.6 deg off the axis) projects to
+// r_d = 0.25, 250 px from the centre, where the pixel's ray is the inner
+// branch's r = 0.3 (16.7 deg). At r = 2 it projects 14 000 px out, on the
+// far side; behind the camera nothing is folded.
+TEST(Lens, PointsBeyondTheFoldOfARadialPolynomialAreFoldedIntoTheImage) {
+  CameraModel camera = FoldingCamera();
+  Eigen::Matrix3Xd p(3, 5);
+  p.col(0) << 0.2, 0.0, 1.0;   // 200 px * (1 - 0.08): its own pixel
+  p.col(1) << 0.0, -0.5, 1.0;  // folded to (800, 350)
+  p.col(2) << 0.3, 0.4, 1.0;   // r = 0.5 too, folded
+  p.col(3) << 2.0, 0.0, 1.0;   // far outside
+  p.col(4) << 0.0, 0.1, -1.0;  // behind
+  Eigen::Matrix2Xd q;
+  ASSERT_TRUE(ProjectPoints(camera, p, &q));
+  EXPECT_NEAR(q(1, 1), 350.0, 1e-9);
+  EXPECT_LT(q(0, 3), -10000.0);
+  EXPECT_EQ(FoldedIntoTheImage(camera, p, q, 0.0),
+            (std::vector<bool>{false, true, true, false, false}));
+  // With the centre at y = 150, the folded pixel of r = 0.5 straight up is
+  // 100 px above the image: checked only within near_px of it.
+  camera.intrinsics(3) = 150.0;
+  const Eigen::Matrix3Xd up = p.col(1);
+  ASSERT_TRUE(ProjectPoints(camera, up, &q));
+  EXPECT_NEAR(q(1, 0), -100.0, 1e-9);
+  EXPECT_EQ(FoldedIntoTheImage(camera, up, q, 0.0), std::vector<bool>{false});
+  EXPECT_EQ(FoldedIntoTheImage(camera, up, q, 150.0), std::vector<bool>{true});
+  // A lens without a fold in its field folds nothing there.
+  Eigen::Matrix3Xd field(3, 3);
+  field << 0.0, 0.3, -0.29, 0.0, 0.22, -0.21, 1.0, 1.0, 1.0;
+  ASSERT_TRUE(ProjectPoints(TwelveMillimetreCamera(), field, &q));
+  EXPECT_EQ(FoldedIntoTheImage(TwelveMillimetreCamera(), field, q, 100.0),
+            (std::vector<bool>{false, false, false}));
 }
 
 TEST(Lens, AnalyticGradientsMatchFiniteDifferences) {

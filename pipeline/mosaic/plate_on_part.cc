@@ -238,6 +238,8 @@ void LocateMarksOfACutPlate(const ImageF& tile, const BoardSpec& board, const Ca
   Eigen::Matrix2Xd predicted;
   Eigen::MatrixXd dq_dp, dq_dintrinsics;
   if (!ProjectPoints(camera, p_cam, &predicted, &dq_dp, &dq_dintrinsics)) return;
+  // Marks the lens folds into a far tile's image are not in it.
+  const std::vector<bool> folded = FoldedIntoTheImage(camera, p_cam, predicted, 0.0);
   if (!dots) {
     // The corners' spacing: the image of one pitch along the plate's x.
     const double spacing_px =
@@ -247,13 +249,14 @@ void LocateMarksOfACutPlate(const ImageF& tile, const BoardSpec& board, const Ca
     RefineChessboardCorners(tile, predicted, spacing_px, options.border_margin_px,
                             options.max_offset_px, &refined, &found);
     for (int m = 0; m < num_marks; ++m) {
-      if (!found[static_cast<size_t>(m)]) continue;
+      if (!found[static_cast<size_t>(m)] || folded[static_cast<size_t>(m)]) continue;
       q_px->col(m) = refined.col(m);
       (*sigma_px)(m) = std::max(options.detection.chessboard_sigma_px, options.min_mark_sigma_px);
     }
     return;
   }
   for (int m = 0; m < num_marks; ++m) {
+    if (folded[static_cast<size_t>(m)]) continue;
     // The dot's image: the circle through the local affine of the plane.
     const Eigen::Matrix2d j =
         dq_dp.block<2, 3>(2 * Eigen::Index{m}, 0) * rot.leftCols<2>() * radius_mm;

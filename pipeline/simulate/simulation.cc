@@ -154,9 +154,8 @@ CameraTruth DrawCamera(const PresetSpec& preset, SimRandom* random) {
 
 // Projects plane points (2 x N, z = 0 of the plane whose pose is
 // cam_from_plane); NaN for a point the camera does not see: behind it, or
-// beyond the lens's field where the distortion polynomial folds it back into
-// the image (OPENCV8 takes a point 57 deg off the axis of a 16-deg-wide lens
-// to a pixel whose ray points elsewhere; the renders trace the pixels' rays).
+// folded into the image by the lens (FoldedIntoTheImage: the renders trace
+// the pixels' rays, which point elsewhere).
 Eigen::Matrix2Xd ProjectPlanePoints(const CameraModel& camera,
                                     const Eigen::Isometry3d& cam_from_plane,
                                     const Eigen::Matrix2Xd& points) {
@@ -169,28 +168,9 @@ Eigen::Matrix2Xd ProjectPlanePoints(const CameraModel& camera,
   assert(ok);
   (void)ok;
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-  // Points in or near the image: their pixel's ray must point at them.
-  constexpr double kNearPx = 100.0, kMaxRayAngleRad = 1e-4;
-  std::vector<Eigen::Index> near;
+  const std::vector<bool> folded = FoldedIntoTheImage(camera, p, q, /*near_px=*/100.0);
   for (Eigen::Index i = 0; i < points.cols(); ++i) {
-    if (p(2, i) <= 0) {
-      q.col(i).setConstant(kNaN);
-    } else if (q.col(i).allFinite() && q(0, i) > -kNearPx && q(1, i) > -kNearPx &&
-               q(0, i) < camera.width_px - 1 + kNearPx &&
-               q(1, i) < camera.height_px - 1 + kNearPx) {
-      near.push_back(i);
-    }
-  }
-  Eigen::Matrix2Xd q_near(2, near.size());
-  for (size_t k = 0; k < near.size(); ++k) q_near.col(k) = q.col(near[k]);
-  Eigen::Matrix3Xd rays;
-  if (near.empty() || !UnprojectPixels(camera, q_near, &rays)) return q;
-  for (size_t k = 0; k < near.size(); ++k) {
-    const Eigen::Vector3d ray = rays.col(k);
-    const Eigen::Vector3d point = p.col(near[k]);
-    if (!ray.allFinite() || std::atan2(ray.cross(point).norm(), ray.dot(point)) > kMaxRayAngleRad) {
-      q.col(near[k]).setConstant(kNaN);
-    }
+    if (p(2, i) <= 0 || folded[static_cast<size_t>(i)]) q.col(i).setConstant(kNaN);
   }
   return q;
 }
