@@ -61,29 +61,37 @@ TEST(GridRun, OneColumnOfThreeTiles) { ExpectAGridRuns("markers", {1, 3}); }
 
 TEST(GridRun, FourByThreeTiles) { ExpectAGridRuns("sparse-texture", {4, 3}); }
 
-// Low texture on 4 x 3: some tiles are tied to one neighbour only (by
-// matches or a hole), and their other overlaps are aligned directly
-// (pipeline/measure/overlap_ties.h): the report lists those ties, used.
-TEST(GridRun, LowTextureFourByThreeAlignsTheWeaklyTiedTiles) {
+// Low texture on 4 x 3: the tiles whose borders cut a hole's rim see part of
+// it, and those cut views join the hole's tie (pipeline/measure/hole_ties.h).
+// Before them, some tiles were tied to one neighbour only and had their
+// other overlaps aligned directly (pipeline/measure/overlap_ties.h); now
+// every tile has two neighbours or more, no overlap needs aligning, and
+// nothing is held by the table prior alone.
+TEST(GridRun, LowTextureFourByThreeTiesTheTilesByCutViewsOfTheHoles) {
   Report report;
   ExpectAGridRuns("low-texture", {4, 3}, &report);
   ASSERT_TRUE(report.mosaic.has_value());
-  const ReportObject* overlap_ties = AsObject(Member(report.mosaic->extra, "overlap_ties"));
-  ASSERT_NE(overlap_ties, nullptr);
-  const ReportValue::Array* ties = AsArray(Member(*overlap_ties, "ties"));
-  ASSERT_NE(ties, nullptr);
   const ReportValue::Array* held = AsArray(Member(report.mosaic->extra, "tiles_held_by_prior"));
   ASSERT_NE(held, nullptr);
-  EXPECT_TRUE(held->empty());  // so every tie is a weakly tied tile's
-  int used = 0;
+  EXPECT_TRUE(held->empty());
+  const ReportObject* hole_ties = AsObject(Member(report.mosaic->extra, "hole_ties"));
+  ASSERT_NE(hole_ties, nullptr);
+  const ReportValue::Array* ties = AsArray(Member(*hole_ties, "ties"));
+  ASSERT_NE(ties, nullptr);
+  int num_cut = 0;
   for (const ReportValue& tie : *ties) {
-    const ReportObject* row = AsObject(&tie);
-    ASSERT_NE(row, nullptr);
-    used += AsBool(Member(*row, "used")).value_or(false) ? 1 : 0;
+    const ReportValue::Array* cut = AsArray(Member(*AsObject(&tie), "cut_in"));
+    ASSERT_NE(cut, nullptr);
+    num_cut += static_cast<int>(cut->size());
   }
-  if (const std::string* brief = AsString(Member(*overlap_ties, "brief")))
+  if (const std::string* brief = AsString(Member(*hole_ties, "brief")))
     std::printf("%s\n", brief->c_str());
-  EXPECT_GE(used, 1);
+  EXPECT_GE(num_cut, 1);
+  const ReportObject* overlap_ties = AsObject(Member(report.mosaic->extra, "overlap_ties"));
+  ASSERT_NE(overlap_ties, nullptr);
+  const ReportValue::Array* overlaps = AsArray(Member(*overlap_ties, "ties"));
+  ASSERT_NE(overlaps, nullptr);
+  EXPECT_TRUE(overlaps->empty());
 }
 
 }  // namespace

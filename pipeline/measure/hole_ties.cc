@@ -26,6 +26,8 @@ bool TileObservation(const HoleViewInputs& in, const HoleFit& fit, double min_si
 
 std::string HoleTieOptions::Check() const {
   if (min_views < 2) return "min_views must be at least 2";
+  if (!(max_cut_uncovered >= 0.0 && max_cut_uncovered < 1.0))
+    return "max_cut_uncovered must be in [0, 1)";
   if (!(min_sigma_px > 0.0)) return "min_sigma_px must be > 0";
   if (!(consistency_probability > 0.0 && consistency_probability < 1.0))
     return "consistency_probability must be in (0, 1)";
@@ -62,26 +64,39 @@ std::vector<HoleTie> FindHoleTies(const HoleViewInputs& in, const std::vector<Ti
                 [&](int j) { fit(unresolved[static_cast<size_t>(j)]); });
   }
 
+  // The tiles that see part of a hole's rim: views of the tie only.
+  std::vector<std::vector<HoleFit>> cut(num_holes);
+  ParallelFor(num_holes, options.num_threads, [&](int n) {
+    const int i = largest_first[n];
+    if (views[i].partial) return;
+    cut[i] = FitCutViews(tile_inputs, views[i], holes[i].radius_mm, options.max_cut_uncovered);
+  });
+
   std::vector<HoleTie> ties;
   if (located_mm) located_mm->assign(holes.size(), std::nullopt);
   for (int i = 0; i < num_holes; ++i) {
     HoleTie tie;
     tie.hole = i;
-    Eigen::Vector2d sum_mm = Eigen::Vector2d::Zero();
-    for (const HoleFit& view : views[i].fits) {
+    const auto add = [&](const HoleFit& view) {
       Eigen::Vector2d q;
       Eigen::Matrix2d covariance;
-      if (!TileObservation(tile_inputs, view, options.min_sigma_px, &q, &covariance)) continue;
+      if (!TileObservation(tile_inputs, view, options.min_sigma_px, &q, &covariance)) return false;
       tie.tiles.push_back(*view.tile);
       tie.q_px.push_back(q);
       tie.covariance_px2.push_back(covariance);
-      sum_mm += in.geometry.grid.PartFromMosaic(view.circle.centre_px);
+      return true;
+    };
+    Eigen::Vector2d sum_mm = Eigen::Vector2d::Zero();
+    for (const HoleFit& view : views[i].fits) {
+      if (add(view)) sum_mm += in.geometry.grid.PartFromMosaic(view.circle.centre_px);
     }
     if (tie.tiles.empty()) continue;
-    tie.centre_mm = sum_mm / static_cast<double>(tie.tiles.size());
+    tie.num_whole = static_cast<int>(tie.tiles.size());
+    tie.centre_mm = sum_mm / static_cast<double>(tie.num_whole);
     if (located_mm) (*located_mm)[static_cast<size_t>(i)] = tie.centre_mm;
-    // Partial views (each on its own arc of the rim) locate a hole, but tie
-    // nothing: no test shows their centres agree to a tie's sigma.
+    for (const HoleFit& view : cut[i]) add(view);
+    // Where every tile that sees the hole whole clipped its rim, the views
+    // are partial (FitHoleViews): they locate the hole but tie nothing.
     if (static_cast<int>(tie.tiles.size()) >= options.min_views && !views[i].partial)
       ties.push_back(std::move(tie));
   }

@@ -23,6 +23,7 @@ HoleTie Tie(int hole, std::vector<int> tiles, const Eigen::Matrix2d& covariance)
   tie.hole = hole;
   tie.centre_mm = Eigen::Vector2d(10.0 * hole, -5.0);
   tie.tiles = std::move(tiles);
+  tie.num_whole = static_cast<int>(tie.tiles.size());
   for (size_t v = 0; v < tie.tiles.size(); ++v) {
     tie.q_px.emplace_back(100.0 + v, 200.0 - v);
     tie.covariance_px2.push_back(covariance);
@@ -179,6 +180,9 @@ TEST(HoleTies, OptionsAreChecked) {
   EXPECT_NE(options.Check(), "");
   options = HoleTieOptions{};
   options.consistency_probability = 1.0;
+  EXPECT_NE(options.Check(), "");
+  options = HoleTieOptions{};
+  options.max_cut_uncovered = 1.0;
   EXPECT_NE(options.Check(), "");
 }
 

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <utility>
 
 #include "pipeline/core/statistics.h"
+#include "pipeline/core/tile_pixels.h"
 #include "pipeline/measure/bore_view.h"
 #include "pipeline/measure/ortho_patch.h"
 
@@ -203,6 +205,43 @@ HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_par
     (fit.circle.ok ? result.fits : result.failed).push_back(std::move(fit));
   }
   return result;
+}
+
+std::vector<HoleFit> FitCutViews(const HoleViewInputs& in, const HoleViews& views, double radius_mm,
+                                 double max_uncovered) {
+  std::vector<HoleFit> cut;
+  if (views.fits.empty()) return cut;
+  const OrthoGrid& grid = in.geometry.grid;
+  const CircleMeasurement& first = views.fits.front().circle;
+  const Eigen::Vector2d centre_mm = grid.PartFromMosaic(first.centre_px);
+  const double fitted_mm = first.radius_px * grid.gsd_mm;
+  std::vector<int> done;
+  for (const std::vector<HoleFit>* fits : {&views.fits, &views.failed}) {
+    for (const HoleFit& fit : *fits)
+      if (fit.tile) done.push_back(*fit.tile);
+  }
+  CircleMeasureOptions options = FitOptions(in);
+  options.max_uncovered_fraction = max_uncovered;
+  const double radius_px = radius_mm / grid.gsd_mm;
+  constexpr int kRimPoints = 32;
+  for (int t = 0; t < static_cast<int>(in.tiles.size()); ++t) {
+    if (std::find(done.begin(), done.end(), t) != done.end()) continue;
+    // Some of the rim in the image: a tile beside it fits nothing.
+    bool sees_rim = false;
+    for (int m = 0; m < kRimPoints && !sees_rim; ++m) {
+      const double angle = 2.0 * std::numbers::pi * m / kRimPoints;
+      const auto q = TilePixelOfPartPoint(
+          in.lens, in.scene, t,
+          centre_mm + fitted_mm * Eigen::Vector2d(std::cos(angle), std::sin(angle)));
+      sees_rim = q && TileBorderDistancePx(*q, in.camera.width_px, in.camera.height_px) >= 0.0;
+    }
+    if (!sees_rim) continue;
+    HoleFit fit = FitInTile(in, t, first.centre_px, radius_px, options, options.search_margin_px);
+    const CircleMeasurement& c = fit.circle;
+    if (c.ok && c.num_uncovered + c.num_saturated <= max_uncovered * c.num_wedges)
+      cut.push_back(std::move(fit));
+  }
+  return cut;
 }
 
 const HoleFit* HoleViews::SaturatedFit() const {

@@ -103,6 +103,15 @@ struct HoleViews {
 HoleViews FitHoleViews(const HoleViewInputs& in, const Eigen::Vector2d& near_part_mm,
                        double radius_mm);
 
+// The hole in the tiles that see part of its rim but not all of it (views
+// of `views`' tiles, fitted or failed, are not made again), each fitted about
+// the first fit of `views` on the wedges that tile covers, and kept where at
+// most max_uncovered of them are uncovered or saturated. Such views tie the
+// tiles (hole_ties.h); they measure nothing, since each sees its own arc of
+// the rim. None if `views` has no fit. Pure.
+std::vector<HoleFit> FitCutViews(const HoleViewInputs& in, const HoleViews& views, double radius_mm,
+                                 double max_uncovered);
+
 // The hole in the blended mosaic (in.mosaic, which must be set); its pixels
 // at full scale (clipped or clamped there) and those within 2 px of them are
 // taken for saturated, as a tile patch's are

@@ -582,16 +582,20 @@ ReportValue HoleTiesReport(const Project& project, const TiedAdjustment& tied,
                            std::string* brief) {
   ReportValue::Array rows;
   int index = tied.first_tie_observation;
+  size_t num_cut = 0;
+  for (const HoleTie& tie : tied.kept) num_cut += tie.tiles.size() - tie.num_whole;
   for (const HoleTie& tie : tied.kept) {
-    ReportValue::Array images;
+    ReportValue::Array images, cut;
     double sum_squares = 0.0;
-    for (const int tile : tie.tiles) {
-      images.emplace_back(project.tiles[tile].image);
+    for (size_t v = 0; v < tie.tiles.size(); ++v) {
+      images.emplace_back(project.tiles[tie.tiles[v]].image);
+      if (static_cast<int>(v) >= tie.num_whole) cut.emplace_back(project.tiles[tie.tiles[v]].image);
       sum_squares += residual_px.col(index++).squaredNorm();
     }
     rows.emplace_back(
         ReportObject{{"feature", names[tie.hole]},
                      {"images", std::move(images)},
+                     {"cut_in", std::move(cut)},
                      {"rms_px", std::sqrt(sum_squares / static_cast<double>(tie.tiles.size()))}});
   }
   ReportValue::Array dropped;
@@ -601,10 +605,11 @@ ReportValue HoleTiesReport(const Project& project, const TiedAdjustment& tied,
   } else if (no_holes) {
     *brief = "no feature to tie with";
   } else if (ties.empty()) {
-    *brief = "no hole seen whole by two tiles or more";
+    *brief = "no hole ties tiles: none is seen whole by one tile and by another too";
   } else {
-    *brief = fmt::format("{} hole{} seen whole by two tiles or more tie them", tied.kept.size(),
-                         tied.kept.size() == 1 ? "" : "s");
+    *brief = fmt::format(
+        "{} hole{} tie the tiles that see them (whole in one at least; {} cut view{})",
+        tied.kept.size(), tied.kept.size() == 1 ? "" : "s", num_cut, num_cut == 1 ? "" : "s");
   }
   if (!dropped.empty()) {
     *brief += fmt::format("; {} dropped: their views disagree beyond their sigma", dropped.size());
