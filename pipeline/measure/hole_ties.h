@@ -139,13 +139,15 @@ std::vector<int> InconsistentHoleTies(const std::vector<HoleTie>& ties, int firs
                                       const HoleTieOptions& options);
 
 // The final adjustment (AdjustWithPlateAndPrior) with the ties as tracks.
-// A tie InconsistentHoleTies flags is dropped and the solve run again, until
-// none is flagged; if the solve with ties is unusable, it is run without
-// them (ties_failed, why in `failure`).
+// A tie InconsistentHoleTies flags loses its cut views if its whole views
+// still tie, else is dropped, and the solve runs again, until none is
+// flagged; if the solve with ties is unusable, it is run without them
+// (ties_failed, why in `failure`).
 struct TiedAdjustment {
   FinalAdjustment adjusted;       // its input: registered_input plus the kept ties' tracks
-  std::vector<HoleTie> kept;      // in the given order
+  std::vector<HoleTie> kept;      // in the given order (a tie's cut views may be left out)
   std::vector<int> dropped;       // indices into the given ties
+  int num_cut_views_dropped = 0;  // of ties kept on their whole views
   int first_tie_observation = 0;  // of the kept ties' observations in adjusted.input
   bool ties_failed = false;
   std::string failure;

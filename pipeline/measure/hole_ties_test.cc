@@ -86,6 +86,36 @@ TEST(HoleTies, InconsistentBeyondTheChiSquareQuantile) {
   EXPECT_TRUE(InconsistentHoleTies(ties, first, residual_px, options).empty());
 }
 
+// Four ties of true points that the synthetic plane's tile `empty_tile`
+// sees, each seen by min_views tiles or more, their views 0.01 px noisy
+// (seeded); P's initial values 0.06 mm off.
+std::vector<HoleTie> TiesOfTheEmptyTile(const SyntheticPlane& s, int empty_tile, size_t min_views) {
+  constexpr double kSigmaPx = 0.01;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal(0.0, kSigmaPx);
+  std::vector<HoleTie> ties;
+  for (int k = 0; k < s.truth.track_xy_mm.cols() && ties.size() < 4; ++k) {
+    const Eigen::Vector3d p(s.truth.track_xy_mm(0, k), s.truth.track_xy_mm(1, k), 0.0);
+    HoleTie tie;
+    tie.hole = static_cast<int>(ties.size());
+    tie.centre_mm = p.head<2>() + Eigen::Vector2d(0.05, -0.03);
+    for (int i = 0; i < static_cast<int>(s.truth.table_pos_mm.size()); ++i) {
+      const Eigen::Vector2d q = ProjectPartPoint(s.camera, s.truth, p, s.truth.table_pos_mm[i]);
+      if ((q.array() < 50.0).any() || q.x() > s.camera.width_px - 50.0 ||
+          q.y() > s.camera.height_px - 50.0)
+        continue;
+      tie.tiles.push_back(i);
+      tie.q_px.push_back(q + Eigen::Vector2d(normal(rng), normal(rng)));
+      tie.covariance_px2.push_back(kSigmaPx * kSigmaPx * Eigen::Matrix2d::Identity());
+    }
+    tie.num_whole = static_cast<int>(tie.tiles.size());
+    const bool sees_the_empty_tile =
+        std::find(tie.tiles.begin(), tie.tiles.end(), empty_tile) != tie.tiles.end();
+    if (sees_the_empty_tile && tie.tiles.size() >= min_views) ties.push_back(std::move(tie));
+  }
+  return ties;
+}
+
 // AdjustWithHoleTies on a synthetic plane whose centre tile has no match
 // (held by its table prior, 0.02 mm per axis): four ties of 0.01 px views
 // between it and its neighbours, one with a view 0.5 px off (a misfitted
@@ -103,28 +133,7 @@ TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
       AdjustPlaneScene(s.camera, s.input, config, PlaneBundleOptions{});
   ASSERT_TRUE(registered.summary.usable) << registered.summary.brief;
 
-  constexpr double kSigmaPx = 0.01;
-  std::mt19937 rng(5);
-  std::normal_distribution<double> normal(0.0, kSigmaPx);
-  std::vector<HoleTie> ties;
-  for (int k = 0; k < s.truth.track_xy_mm.cols() && ties.size() < 4; ++k) {
-    const Eigen::Vector3d p(s.truth.track_xy_mm(0, k), s.truth.track_xy_mm(1, k), 0.0);
-    HoleTie tie;
-    tie.hole = static_cast<int>(ties.size());
-    tie.centre_mm = p.head<2>() + Eigen::Vector2d(0.05, -0.03);  // P's initial value, not exact
-    for (int i = 0; i < static_cast<int>(s.truth.table_pos_mm.size()); ++i) {
-      const Eigen::Vector2d q = ProjectPartPoint(s.camera, s.truth, p, s.truth.table_pos_mm[i]);
-      if ((q.array() < 50.0).any() || q.x() > s.camera.width_px - 50.0 ||
-          q.y() > s.camera.height_px - 50.0)
-        continue;
-      tie.tiles.push_back(i);
-      tie.q_px.push_back(q + Eigen::Vector2d(normal(rng), normal(rng)));
-      tie.covariance_px2.push_back(kSigmaPx * kSigmaPx * Eigen::Matrix2d::Identity());
-    }
-    const bool sees_the_empty_tile =
-        std::find(tie.tiles.begin(), tie.tiles.end(), options.empty_tile) != tie.tiles.end();
-    if (sees_the_empty_tile && tie.tiles.size() >= 2) ties.push_back(std::move(tie));
-  }
+  std::vector<HoleTie> ties = TiesOfTheEmptyTile(s, options.empty_tile, 2);
   ASSERT_EQ(ties.size(), 4u);
   ties[3].q_px[0] += Eigen::Vector2d(0.5, 0.0);
 
@@ -168,6 +177,36 @@ TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
               relative_error(registered.scene), relative_error(tied.adjusted.scene), sigma_mm);
   EXPECT_LT(relative_error(tied.adjusted.scene), 0.005);
   EXPECT_LT(sigma_mm, 0.003);
+}
+
+// A tie whose last view is a cut one (hole_views.h, FitCutViews) 0.5 px off:
+// the tie loses that view and keeps its whole ones, which still tie.
+TEST(HoleTies, ACutViewThatDisagreesIsLeftOutAndItsTieKept) {
+  SyntheticPlaneOptions options;
+  options.num_tracks = 600;
+  options.empty_tile = 4;
+  const SyntheticPlane s = MakeSyntheticPlane(options);
+  PlaneBundleConfig config;
+  config.compute_covariance = false;
+  const PlaneAdjustment registered =
+      AdjustPlaneScene(s.camera, s.input, config, PlaneBundleOptions{});
+  ASSERT_TRUE(registered.summary.usable) << registered.summary.brief;
+  std::vector<HoleTie> ties = TiesOfTheEmptyTile(s, options.empty_tile, 3);
+  ASSERT_EQ(ties.size(), 4u);
+  HoleTie& cut = ties[2];
+  cut.num_whole = static_cast<int>(cut.tiles.size()) - 1;
+  cut.q_px.back() += Eigen::Vector2d(0.5, 0.0);
+
+  const TiedAdjustment tied =
+      AdjustWithHoleTies(s.camera, s.input, registered.scene, PlateOnPart{}, IntrinsicsPrior{},
+                         FinalAdjustmentOptions{}, ties, HoleTieOptions{});
+  ASSERT_TRUE(tied.adjusted.summary.usable) << tied.adjusted.summary.brief;
+  EXPECT_TRUE(tied.dropped.empty());
+  EXPECT_EQ(tied.num_cut_views_dropped, 1);
+  ASSERT_EQ(tied.kept.size(), 4u);
+  EXPECT_EQ(tied.kept[2].tiles.size(), static_cast<size_t>(cut.num_whole));
+  EXPECT_EQ(tied.kept[2].q_px.size(), tied.kept[2].tiles.size());
+  EXPECT_EQ(tied.kept[3].tiles.size(), ties[3].tiles.size());
 }
 
 TEST(HoleTies, OptionsAreChecked) {

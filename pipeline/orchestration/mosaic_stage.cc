@@ -614,6 +614,11 @@ ReportValue HoleTiesReport(const Project& project, const TiedAdjustment& tied,
   if (!dropped.empty()) {
     *brief += fmt::format("; {} dropped: their views disagree beyond their sigma", dropped.size());
   }
+  if (tied.num_cut_views_dropped > 0) {
+    *brief += fmt::format("; {} cut view{} left out: {} disagreed with the whole views",
+                          tied.num_cut_views_dropped, tied.num_cut_views_dropped == 1 ? "" : "s",
+                          tied.num_cut_views_dropped == 1 ? "it" : "they");
+  }
   return ReportObject{
       {"brief", *brief}, {"ties", std::move(rows)}, {"dropped", std::move(dropped)}};
 }
