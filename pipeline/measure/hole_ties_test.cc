@@ -86,6 +86,22 @@ TEST(HoleTies, InconsistentBeyondTheChiSquareQuantile) {
   EXPECT_TRUE(InconsistentHoleTies(ties, first, residual_px, options).empty());
 }
 
+// A synthetic plane whose tile kEmptyTile has no match.
+constexpr int kEmptyTile = 4;
+SyntheticPlaneOptions EmptyTileOptions() {
+  SyntheticPlaneOptions options;
+  options.num_tracks = 600;
+  options.empty_tile = kEmptyTile;
+  return options;
+}
+
+// Its registration: the matches alone, no covariance.
+PlaneAdjustment Registered(const SyntheticPlane& s) {
+  PlaneBundleConfig config;
+  config.compute_covariance = false;
+  return AdjustPlaneScene(s.camera, s.input, config, PlaneBundleOptions{});
+}
+
 // Four ties of true points that the synthetic plane's tile `empty_tile`
 // sees, each seen by min_views tiles or more, their views 0.01 px noisy
 // (seeded); P's initial values 0.06 mm off.
@@ -123,17 +139,11 @@ std::vector<HoleTie> TiesOfTheEmptyTile(const SyntheticPlane& s, int empty_tile,
 // to its neighbours to ~1 um (0.01 px / sqrt(3) at ~0.15 mm/px): within 5 um
 // of the truth, its stated sigma below 3 um.
 TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
-  SyntheticPlaneOptions options;
-  options.num_tracks = 600;
-  options.empty_tile = 4;
-  const SyntheticPlane s = MakeSyntheticPlane(options);
-  PlaneBundleConfig config;
-  config.compute_covariance = false;
-  const PlaneAdjustment registered =
-      AdjustPlaneScene(s.camera, s.input, config, PlaneBundleOptions{});
+  const SyntheticPlane s = MakeSyntheticPlane(EmptyTileOptions());
+  const PlaneAdjustment registered = Registered(s);
   ASSERT_TRUE(registered.summary.usable) << registered.summary.brief;
 
-  std::vector<HoleTie> ties = TiesOfTheEmptyTile(s, options.empty_tile, 2);
+  std::vector<HoleTie> ties = TiesOfTheEmptyTile(s, kEmptyTile, 2);
   ASSERT_EQ(ties.size(), 4u);
   ties[3].q_px[0] += Eigen::Vector2d(0.5, 0.0);
 
@@ -147,7 +157,7 @@ TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
   EXPECT_EQ(tied.adjusted.input.num_tracks, s.input.num_tracks + 3);
   EXPECT_EQ(tied.first_tie_observation, static_cast<int>(s.input.observations.size()));
   // Held by its prior before, observed (through the ties) now.
-  EXPECT_EQ(registered.summary.tiles_without_observations, std::vector<int>{options.empty_tile});
+  EXPECT_EQ(registered.summary.tiles_without_observations, std::vector<int>{kEmptyTile});
   EXPECT_TRUE(tied.adjusted.summary.tiles_without_observations.empty());
 
   // The empty tile against its neighbours' mean (the gauge and the table's
@@ -155,12 +165,12 @@ TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
   const auto relative_error = [&](const PlaneScene& scene) {
     Eigen::Vector2d mean = Eigen::Vector2d::Zero(), truth_mean = Eigen::Vector2d::Zero();
     for (int i = 0; i < 9; ++i) {
-      if (i == options.empty_tile) continue;
+      if (i == kEmptyTile) continue;
       mean += scene.table_pos_mm[i] / 8.0;
       truth_mean += s.truth.table_pos_mm[i] / 8.0;
     }
-    return ((scene.table_pos_mm[options.empty_tile] - mean) -
-            (s.truth.table_pos_mm[options.empty_tile] - truth_mean))
+    return ((scene.table_pos_mm[kEmptyTile] - mean) -
+            (s.truth.table_pos_mm[kEmptyTile] - truth_mean))
         .norm();
   };
   // Its sigma, of the same difference, from the joint covariance (T_i at
@@ -170,7 +180,7 @@ TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
   double sigma_mm = 0.0;
   for (int axis = 0; axis < 2; ++axis) {
     Eigen::VectorXd g = Eigen::VectorXd::Zero(covariance.rows());
-    for (int i = 0; i < 9; ++i) g(6 + 2 * i + axis) = i == options.empty_tile ? 1.0 : -1.0 / 8.0;
+    for (int i = 0; i < 9; ++i) g(6 + 2 * i + axis) = i == kEmptyTile ? 1.0 : -1.0 / 8.0;
     sigma_mm = std::max(sigma_mm, std::sqrt(g.dot(covariance * g)));
   }
   std::printf("empty tile: by its prior %.4f mm from the truth, tied %.4f mm (sigma %.4f mm)\n",
@@ -182,16 +192,10 @@ TEST(HoleTies, TiesPlaceATileWithoutMatchesAndAWrongViewIsDropped) {
 // A tie whose last view is a cut one (hole_views.h, FitCutViews) 0.5 px off:
 // the tie loses that view and keeps its whole ones, which still tie.
 TEST(HoleTies, ACutViewThatDisagreesIsLeftOutAndItsTieKept) {
-  SyntheticPlaneOptions options;
-  options.num_tracks = 600;
-  options.empty_tile = 4;
-  const SyntheticPlane s = MakeSyntheticPlane(options);
-  PlaneBundleConfig config;
-  config.compute_covariance = false;
-  const PlaneAdjustment registered =
-      AdjustPlaneScene(s.camera, s.input, config, PlaneBundleOptions{});
+  const SyntheticPlane s = MakeSyntheticPlane(EmptyTileOptions());
+  const PlaneAdjustment registered = Registered(s);
   ASSERT_TRUE(registered.summary.usable) << registered.summary.brief;
-  std::vector<HoleTie> ties = TiesOfTheEmptyTile(s, options.empty_tile, 3);
+  std::vector<HoleTie> ties = TiesOfTheEmptyTile(s, kEmptyTile, 3);
   ASSERT_EQ(ties.size(), 4u);
   HoleTie& cut = ties[2];
   cut.num_whole = static_cast<int>(cut.tiles.size()) - 1;
