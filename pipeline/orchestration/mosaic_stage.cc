@@ -607,9 +607,10 @@ ReportValue HoleTiesReport(const Project& project, const TiedAdjustment& tied,
   } else if (ties.empty()) {
     *brief = "no hole ties tiles: none is seen whole by one tile and by another too";
   } else {
-    *brief = fmt::format(
-        "{} hole{} tie the tiles that see them (whole in one at least; {} cut view{})",
-        tied.kept.size(), tied.kept.size() == 1 ? "" : "s", num_cut, num_cut == 1 ? "" : "s");
+    const bool one = tied.kept.size() == 1;
+    *brief = fmt::format("{} {} the tiles that see {} (whole in one at least; {} cut view{})",
+                         tied.kept.size(), one ? "hole ties" : "holes tie", one ? "it" : "them",
+                         num_cut, num_cut == 1 ? "" : "s");
   }
   if (!dropped.empty()) {
     *brief += fmt::format("; {} dropped: their views disagree beyond their sigma", dropped.size());
