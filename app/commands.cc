@@ -344,7 +344,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
     // writes are restarted, not failed; the same signal again ends the
     // program at once (SA_RESETHAND; the next run removes what it left).
     const StopSignals stop_signals(SA_RESTART | SA_RESETHAND);
-    const Project project = LoadProject(project_dir, num_threads);
+    Project project = LoadProject(project_dir, num_threads);
     spdlog::info("loaded {}: {} calibration images, {} tiles, {} measurements", project.name,
                  project.calib_images.size(), project.tiles.size(), project.measurements.size());
     TerminalProgress progress(IsStderrTerminal());
@@ -359,7 +359,7 @@ int RunCommand(const fs::path& project_dir, const std::vector<Stage>& stages,
       if (g_stop_signal != 0) throw StopRequested{g_stop_signal};
       report(done, total, what);
     };
-    const RunSummary summary = RunProject(project, options);
+    const RunSummary summary = RunProject(std::move(project), options);
     progress.Finish();
     spdlog::info("{}", summary.Brief());
     fmt::print("{}\n", summary.report_path.string());

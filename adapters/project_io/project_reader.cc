@@ -707,8 +707,8 @@ int SampleBits(const CameraSpec& camera, const std::vector<LoadedImage>& loaded,
   if (camera.sample_bits) {
     const int full_scale = (1 << *camera.sample_bits) - 1;
     for (size_t i = 0; i < loaded.size(); ++i) {
-      if (loaded[i].image.bit_depth != 16) continue;
-      if (const int largest = LargestSample(loaded[i].image); largest > full_scale) {
+      if (loaded[i].image->bit_depth != 16) continue;
+      if (const int largest = LargestSample(*loaded[i].image); largest > full_scale) {
         throw InputError(paths[i].string(),
                          fmt::format("a sample of {}, beyond the full scale {} of "
                                      "project.yaml's camera.sample_bits {}",
@@ -719,8 +719,8 @@ int SampleBits(const CameraSpec& camera, const std::vector<LoadedImage>& loaded,
   }
   std::uint16_t largest = 0;
   for (const LoadedImage& file : loaded) {
-    if (file.image.bit_depth != 16) return 16;
-    largest = std::max(largest, LargestSample(file.image));
+    if (file.image->bit_depth != 16) return 16;
+    largest = std::max(largest, LargestSample(*file.image));
   }
   for (const int bits : {10, 12, 14})
     if (largest < (1 << bits)) return bits;
@@ -742,10 +742,10 @@ void LoadImages(const fs::path& dir, int num_threads, Project& project) {
       throw InputError(path.string(), "image file not found");
     const std::string bytes = ReadTextFile(path, "cannot read image file");
     loaded[i].sha256 = Sha256Hex(bytes);
-    loaded[i].image = DecodeImage(bytes, path);
+    loaded[i].image = std::make_shared<const StoredImage>(DecodeImage(bytes, path));
   });
   for (size_t i = 0; i < loaded.size(); ++i) {
-    const StoredImage& image = loaded[i].image;
+    const StoredImage& image = *loaded[i].image;
     if (i == 0) {
       project.image_width_px = image.width;
       project.image_height_px = image.height;

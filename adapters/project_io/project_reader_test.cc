@@ -498,10 +498,11 @@ TEST_F(ProjectReaderTest, LoadedImagesAreThoseOfTheFiles) {
     all.emplace_back(read.TilePath(read.tiles[i].image), &read.images->tiles[i]);
   for (const auto& [path, loaded] : all) {
     const StoredImage file = ReadStoredImage(path);
-    EXPECT_EQ(loaded->image.width, file.width) << path;
-    EXPECT_EQ(loaded->image.height, file.height) << path;
-    EXPECT_EQ(loaded->image.bit_depth, file.bit_depth) << path;
-    EXPECT_EQ(loaded->image.samples, file.samples) << path;
+    ASSERT_NE(loaded->image, nullptr) << path;
+    EXPECT_EQ(loaded->image->width, file.width) << path;
+    EXPECT_EQ(loaded->image->height, file.height) << path;
+    EXPECT_EQ(loaded->image->bit_depth, file.bit_depth) << path;
+    EXPECT_EQ(loaded->image->samples, file.samples) << path;
     EXPECT_EQ(loaded->sha256, Sha256Hex(testing::ReadTextFile(path))) << path;
   }
 }

@@ -17,4 +17,13 @@ const char* MeasurementTypeName(MeasurementType type) {
   return "?";
 }
 
+LoadedImages WithoutDecodedImages(const LoadedImages& loaded, bool calib, bool tiles) {
+  LoadedImages kept = loaded;
+  if (calib)
+    for (LoadedImage& image : kept.calib) image.image.reset();
+  if (tiles)
+    for (LoadedImage& image : kept.tiles) image.image.reset();
+  return kept;
+}
+
 }  // namespace omm

@@ -72,7 +72,9 @@ struct CmmValue {
 // An image file as LoadProject read it: read once, its bytes hashed and
 // decoded, so that the stages of the same process need not read it again.
 struct LoadedImage {
-  StoredImage image;
+  // Null once the run no longer needs it (WithoutDecodedImages): a stage
+  // that asks for it then reads the file again.
+  std::shared_ptr<const StoredImage> image;
   std::string sha256;  // of the file's bytes, 64 lower-case hex digits
 };
 
@@ -80,6 +82,10 @@ struct LoadedImages {
   std::vector<LoadedImage> calib;  // parallel to Project::calib_images
   std::vector<LoadedImage> tiles;  // parallel to Project::tiles
 };
+
+// `loaded` with the decoded calib images, or tiles, dropped (the hashes
+// kept); the images themselves are freed with the last copy that holds them.
+LoadedImages WithoutDecodedImages(const LoadedImages& loaded, bool calib, bool tiles);
 
 struct Project {
   std::filesystem::path dir;  // the project directory (absolute)

@@ -96,20 +96,20 @@ ReportValue StudyReport(const ImageCountStudy& study) {
 }
 
 // The plate in every calib image, num_threads at a time, each image
-// converted to gray (from the one LoadProject decoded, else read from its
-// file) where it is detected and dropped after: held together, the demo's 20
-// took 154 MB through the solves.
-std::vector<PlateObservation> DetectCalibPlates(const Project& project,
-                                                const PlateDetectionOptions& options,
-                                                const ProgressCallback& progress, int num_threads) {
+// converted to gray (from the one LoadProject decoded, taken from `decoded`
+// if it is there, else read from its file) where it is detected and dropped
+// after: held together, the demo's 20 took 154 MB through the solves.
+std::vector<PlateObservation> DetectCalibPlates(
+    const Project& project, std::vector<std::shared_ptr<const StoredImage>> decoded,
+    const PlateDetectionOptions& options, const ProgressCallback& progress, int num_threads) {
   const int num_images = static_cast<int>(project.calib_images.size());
+  decoded.resize(num_images);
   std::vector<PlateObservation> detections(num_images);
   std::mutex progress_mutex;
   int num_done = 0;
   ParallelFor(num_images, num_threads, [&](int i) {
-    const GrayImage image =
-        ProjectGrayImage(project, project.images ? &project.images->calib[i].image : nullptr,
-                         project.calib_images[i]);
+    const GrayImage image = ProjectGrayImage(project, std::exchange(decoded[i], nullptr).get(),
+                                             project.calib_images[i]);
     detections[i] = DetectPlate(image, *project.board, options);
     detections[i].image = project.calib_images[i].filename().string();
     const std::lock_guard lock(progress_mutex);
@@ -204,6 +204,21 @@ void RunStudy(StageContext& context, const CalibrationStageSummary& summary) {
   context.report.calibration->extra.emplace_back("study", StudyReport(study));
 }
 
+// The calibration's solves run on one core: the mosaic's camera-free work
+// fills the others, at a lower priority (lens-mismatch 284: 0.8 s of solves).
+// Started after the plate search, which keeps the cores busy anyway and
+// frees the calib images as it goes: side by side, the two took the demo
+// with 100 calib images to a peak of 490 MB, one after the other to 375 MB.
+void StartMosaicTiles(StageContext& context) {
+  if (!context.mosaic_follows || context.num_threads < 2 || context.mosaic_tiles.valid()) return;
+  context.mosaic_tiles = std::async(
+      std::launch::async, [&project = context.project, options = MosaicRegistrationOptions(context),
+                           num_threads = context.num_threads] {
+        YieldCoresToOtherThreads();
+        return PrepareMosaicTiles(project, options, num_threads);
+      });
+}
+
 void CalibrateFromImages(StageContext& context) {
   const Project& project = context.project;
   if (!project.board) throw InputError((project.dir / "project.yaml").string(), "board: missing");
@@ -215,8 +230,10 @@ void CalibrateFromImages(StageContext& context) {
   options.num_threads = context.num_threads;
   const auto detection_start = std::chrono::steady_clock::now();
   const std::vector<PlateObservation> detections =
-      DetectCalibPlates(project, options.detection, context.progress, context.num_threads);
+      DetectCalibPlates(project, std::move(context.calib_decoded), options.detection,
+                        context.progress, context.num_threads);
   const double detection_seconds = SecondsSince(detection_start);
+  StartMosaicTiles(context);
   CalibrationStageSummary summary =
       CalibrateFromDetections(detections, *project.board, project.camera, project.image_width_px,
                               project.image_height_px, options);
@@ -379,17 +396,8 @@ void ReuseCameraModel(StageContext& context, const fs::path& from) {
 
 void RunCalibrateStage(StageContext& context) {
   const Project& project = context.project;
-  // The calibration's solves run on one core: the mosaic's camera-free work
-  // fills the others, at a lower priority (lens-mismatch 284: 0.8 s of solves).
-  if (context.mosaic_follows && context.num_threads >= 2 && !context.mosaic_tiles.valid()) {
-    context.mosaic_tiles =
-        std::async(std::launch::async, [&project, options = MosaicRegistrationOptions(context),
-                                        num_threads = context.num_threads] {
-          YieldCoresToOtherThreads();
-          return PrepareMosaicTiles(project, options, num_threads);
-        });
-  }
   if (!project.calibration_from) return CalibrateFromImages(context);
+  StartMosaicTiles(context);
   if (context.calibration_study) {
     throw InputError((project.dir / "project.yaml").string(),
                      "--study needs calib/ images; this project reuses calibration.from");

@@ -193,6 +193,30 @@ void RemoveStaleStaging(const fs::path& out_dir) {
   if (fs::is_empty(out_dir, ec) && !ec) fs::remove(out_dir, ec);  // the stale run had made it
 }
 
+// Hands the calib images LoadProject decoded to the calibration
+// (StageContext::calib_decoded), which frees each once searched.
+void HandOverDecodedCalibImages(Project& project, StageContext& context) {
+  if (!project.images) return;
+  for (const LoadedImage& image : project.images->calib)
+    context.calib_decoded.push_back(image.image);
+  project.images =
+      std::make_shared<const LoadedImages>(WithoutDecodedImages(*project.images, true, false));
+}
+
+// Drops the decoded images no later stage of the run reads: the calib images
+// after any stage (the calibration runs first), the tiles once their gray
+// images exist (StageContext's mosaic_tiles or tiles). mosaic_tiles reads
+// project.images on another thread: it is waited for first (the mosaic
+// stage, next, waits for it anyway).
+void DropDecodedImagesNoLongerRead(StageContext& context, Project& project) {
+  context.calib_decoded.clear();
+  if (!project.images) return;
+  if (context.mosaic_tiles.valid()) context.mosaic_tiles.wait();
+  if (!context.mosaic_tiles.valid() && context.tiles == nullptr) return;
+  project.images =
+      std::make_shared<const LoadedImages>(WithoutDecodedImages(*project.images, false, true));
+}
+
 void RunStage(Stage stage, StageContext& context) {
   switch (stage) {
     case Stage::kCalibrate: return RunCalibrateStage(context);
@@ -227,7 +251,7 @@ std::string RunSummary::Brief() const {
                      report_path.string());
 }
 
-RunSummary RunProject(const Project& project, const RunOptions& options) {
+RunSummary RunProject(Project project, const RunOptions& options) {
   if (const std::string problem = options.Check(); !problem.empty()) {
     throw std::invalid_argument("RunOptions: " + problem);
   }
@@ -279,9 +303,11 @@ RunSummary RunProject(const Project& project, const RunOptions& options) {
     context.mosaic_follows =
         std::find(to_run.begin(), to_run.end(), Stage::kMosaic) != to_run.end();
     context.stale_in_out = stale;
+    HandOverDecodedCalibImages(project, context);
     for (const Stage stage : to_run) {
       spdlog::info("{}: starting", StageName(stage));
       options.runner(stage, context);
+      DropDecodedImagesNoLongerRead(context, project);
       report.stage_inputs_sha256[StageName(stage)] = stage_inputs.Of(stage);
       spdlog::info("{}: done", StageName(stage));
       summary.stages_run.push_back(stage);

@@ -81,8 +81,11 @@ struct RunSummary {
 
 // Runs `options.stages` on `project` and commits their outputs to out/.
 // Throws InputError (bad input, including an unwritable out/) or
-// StageFailedError; out/ is untouched then.
-RunSummary RunProject(const Project& project, const RunOptions& options);
+// StageFailedError; out/ is untouched then. The images LoadProject decoded
+// are dropped as soon as no later stage reads them (the calib images after
+// the calibration, the tiles once converted for the mosaic): freed if the
+// caller moved `project` in.
+RunSummary RunProject(Project project, const RunOptions& options);
 
 // True if out/report.json exists, was written by this software version from
 // the project's current inputs, and has every stage's section, and out/

@@ -2,10 +2,12 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <future>
+#include <memory>
 #include <thread>
 
 #include <gmock/gmock.h>
@@ -88,7 +90,7 @@ TEST_F(RunProjectTest, ProjectImagesAreLinearizedWithTheCameraGamma) {
   EXPECT_FLOAT_EQ(ProjectGrayImage(project_, nullptr, tile).pixels(0, 0), stored * stored);
   ASSERT_TRUE(project_.images);
   EXPECT_FLOAT_EQ(
-      ProjectGrayImage(project_, &project_.images->calib.front().image, calib).pixels(0, 0),
+      ProjectGrayImage(project_, project_.images->calib.front().image.get(), calib).pixels(0, 0),
       stored * stored);
 }
 
@@ -105,6 +107,48 @@ TEST_F(RunProjectTest, ProjectImagesAreScaledToTheirSamplesBits) {
   project_.sample_bits = 16;
   EXPECT_FLOAT_EQ(ProjectGrayImage(project_, &image, "twelve.png").pixels(0, 0),
                   4095.0f / 65535.0f);
+}
+
+// A run given the project (moved in) frees the images LoadProject decoded
+// as soon as no later stage reads them: each calib image once the
+// calibration has searched it, the tiles once their gray images exist (on 2
+// threads the calibration prepares them for the mosaic after its search).
+TEST_F(RunProjectTest, DecodedImagesAreFreedOnceNoLaterStageReadsThem) {
+  for (const int num_threads : {1, 2}) {
+    SCOPED_TRACE(num_threads);
+    Project moved = LoadProject(project_.dir);
+    ASSERT_TRUE(moved.images);
+    std::vector<std::weak_ptr<const StoredImage>> calib, tiles;
+    for (const LoadedImage& image : moved.images->calib) calib.push_back(image.image);
+    for (const LoadedImage& image : moved.images->tiles) tiles.push_back(image.image);
+    const auto num_freed = [](const std::vector<std::weak_ptr<const StoredImage>>& images) {
+      return static_cast<size_t>(
+          std::count_if(images.begin(), images.end(), [](const auto& i) { return i.expired(); }));
+    };
+    RunOptions options;
+    options.num_threads = num_threads;
+    options.runner = [&](Stage stage, StageContext& context) {
+      switch (stage) {
+        case Stage::kCalibrate:
+          EXPECT_EQ(num_freed(calib), 0u);
+          EXPECT_EQ(context.calib_decoded.size(), calib.size());
+          // The real calibration: it finds no plate in the tiny project's
+          // images, but has searched each of them.
+          EXPECT_THROW(RunOptions{}.runner(stage, context), StageFailedError);
+          EXPECT_EQ(num_freed(calib), calib.size());
+          EXPECT_EQ(num_freed(tiles), 0u);
+          EXPECT_EQ(context.mosaic_tiles.valid(), num_threads > 1);
+          break;
+        case Stage::kMosaic:
+          EXPECT_EQ(num_freed(tiles), num_threads > 1 ? tiles.size() : 0u);
+          context.tiles = std::make_shared<const std::vector<ImageF>>();
+          break;
+        case Stage::kMeasure: EXPECT_EQ(num_freed(tiles), tiles.size()); break;
+      }
+      FakeStage(stage, context, "v1");
+    };
+    RunProject(std::move(moved), options);
+  }
 }
 
 TEST_F(RunProjectTest, FailedStageStopsTheRunAndLeavesNoOut) {

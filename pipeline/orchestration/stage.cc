@@ -60,8 +60,8 @@ std::vector<ImageF> TileImages(const Project& project, int num_threads) {
   std::vector<ImageF> tiles(num_tiles);
   ParallelFor(num_tiles, num_threads, [&](int i) {
     const std::filesystem::path path = project.TilePath(project.tiles[i].image);
-    GrayImage image =
-        ProjectGrayImage(project, project.images ? &project.images->tiles[i].image : nullptr, path);
+    GrayImage image = ProjectGrayImage(
+        project, project.images ? project.images->tiles[i].image.get() : nullptr, path);
     if (const std::optional<double> level = BlankImageLevel(image.pixels)) {
       throw InputError(path.string(),
                        fmt::format("blank: almost every pixel is {:.1f} % of full scale, no "
