@@ -193,12 +193,15 @@ void RemoveStaleStaging(const fs::path& out_dir) {
   if (fs::is_empty(out_dir, ec) && !ec) fs::remove(out_dir, ec);  // the stale run had made it
 }
 
-// Hands the calib images LoadProject decoded to the calibration
-// (StageContext::calib_decoded), which frees each once searched.
-void HandOverDecodedCalibImages(Project& project, StageContext& context) {
+// Hands the calib images LoadProject decoded to the calibration, if it
+// runs (StageContext::calib_decoded), which frees each once searched; else
+// drops them.
+void HandOverDecodedCalibImages(bool calibrating, Project& project, StageContext& context) {
   if (!project.images) return;
-  for (const LoadedImage& image : project.images->calib)
-    context.calib_decoded.push_back(image.image);
+  if (calibrating) {
+    for (const LoadedImage& image : project.images->calib)
+      context.calib_decoded.push_back(image.image);
+  }
   project.images =
       std::make_shared<const LoadedImages>(WithoutDecodedImages(*project.images, true, false));
 }
@@ -303,7 +306,9 @@ RunSummary RunProject(Project project, const RunOptions& options) {
     context.mosaic_follows =
         std::find(to_run.begin(), to_run.end(), Stage::kMosaic) != to_run.end();
     context.stale_in_out = stale;
-    HandOverDecodedCalibImages(project, context);
+    HandOverDecodedCalibImages(
+        std::find(to_run.begin(), to_run.end(), Stage::kCalibrate) != to_run.end(), project,
+        context);
     for (const Stage stage : to_run) {
       spdlog::info("{}: starting", StageName(stage));
       options.runner(stage, context);

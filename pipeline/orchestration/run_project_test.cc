@@ -149,6 +149,18 @@ TEST_F(RunProjectTest, DecodedImagesAreFreedOnceNoLaterStageReadsThem) {
     };
     RunProject(std::move(moved), options);
   }
+  // Without the calibration, no stage reads the calib images.
+  Project moved = LoadProject(project_.dir);
+  std::vector<std::weak_ptr<const StoredImage>> calib;
+  for (const LoadedImage& image : moved.images->calib) calib.push_back(image.image);
+  RunOptions options;
+  options.stages = {Stage::kMosaic, Stage::kMeasure};
+  options.runner = [&](Stage stage, StageContext& context) {
+    EXPECT_TRUE(context.calib_decoded.empty());
+    for (const auto& image : calib) EXPECT_TRUE(image.expired());
+    FakeStage(stage, context, "v1");
+  };
+  RunProject(std::move(moved), options);
 }
 
 TEST_F(RunProjectTest, FailedStageStopsTheRunAndLeavesNoOut) {
