@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <numeric>
 #include <random>
@@ -223,34 +224,26 @@ std::vector<PairRegistration> PairsPredictedToOverlap(const Eigen::Matrix2d& px_
   return pairs;
 }
 
-}  // namespace
-
-PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
-                           const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
-                           const RegisterTilesOptions& options) {
+// PrepareTiles on the tiles tile_of(i), i < num_tiles, each width x height
+// px: tile_of returns a reference to a tile held elsewhere, or a tile made
+// for the call, which is dropped after its step 1.
+template <typename TileOf>
+PreparedTiles PrepareTilesFrom(int num_tiles, int width, int height, const TileOf& tile_of,
+                               const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                               const RegisterTilesOptions& options) {
   if (const std::string e = options.Check(); !e.empty())
     throw InputError("", "tile registration: " + e);
-  if (tiles.size() != commanded_table_pos_mm.size())
-    throw InputError("", "tile registration: " + std::to_string(tiles.size()) + " tiles but " +
+  if (static_cast<size_t>(num_tiles) != commanded_table_pos_mm.size())
+    throw InputError("", "tile registration: " + std::to_string(num_tiles) + " tiles but " +
                              std::to_string(commanded_table_pos_mm.size()) + " table positions");
-  for (size_t i = 1; i < tiles.size(); ++i) {
-    if (tiles[i].cols() != tiles[0].cols() || tiles[i].rows() != tiles[0].rows())
-      throw InputError("", "tile registration: tile " + std::to_string(i) + " is " +
-                               std::to_string(tiles[i].cols()) + " x " +
-                               std::to_string(tiles[i].rows()) + " px, tile 0 " +
-                               std::to_string(tiles[0].cols()) + " x " +
-                               std::to_string(tiles[0].rows()));
-  }
   PreparedTiles prepared;
   prepared.options = options;
   prepared.commanded_table_pos_mm = commanded_table_pos_mm;
-  const int num_tiles = static_cast<int>(tiles.size());
-  const int width = num_tiles > 0 ? static_cast<int>(tiles[0].cols()) : 0;
-  const int height = num_tiles > 0 ? static_cast<int>(tiles[0].rows()) : 0;
   prepared.width_px = width;
   prepared.height_px = height;
 
-  // 1. Features.
+  // 1. Features, each tile's with its tags: a tile made for the call lives
+  // no longer than its own work.
   auto t0 = Clock::now();
   std::vector<ImageF>& normalized = prepared.normalized;
   std::vector<ImageF>& spline = prepared.spline;
@@ -261,15 +254,15 @@ PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
   coarse_probe.resize(num_tiles);
   tags.resize(num_tiles);
   prepared.corners.resize(num_tiles);
-  // The tags as work items of their own, after the tiles' (longer) features:
-  // nine tiles on two threads would leave one thread idle for the last tile.
-  ParallelFor(options.use_apriltags ? 2 * num_tiles : num_tiles, options.num_threads, [&](int k) {
-    if (k >= num_tiles) {
-      tags[k - num_tiles] = DetectAprilTags36h11(tiles[k - num_tiles], options.tags);
-      return;
-    }
-    const int i = k;
-    normalized[i] = NormalizeTileIntensity(tiles[i]);
+  ParallelFor(num_tiles, options.num_threads, [&](int i) {
+    decltype(auto) tile = tile_of(i);
+    if (tile.cols() != width || tile.rows() != height)
+      throw InputError("", "tile registration: tile " + std::to_string(i) + " is " +
+                               std::to_string(tile.cols()) + " x " + std::to_string(tile.rows()) +
+                               " px, tile 0 " + std::to_string(width) + " x " +
+                               std::to_string(height));
+    if (options.use_apriltags) tags[i] = DetectAprilTags36h11(tile, options.tags);
+    normalized[i] = NormalizeTileIntensity(tile);
     if (options.matching_blur_sigma_px > 0)
       normalized[i] = GaussianBlur(normalized[i], options.matching_blur_sigma_px);
     spline[i] = CubicBSplineCoefficients(normalized[i]);
@@ -312,6 +305,26 @@ PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
   }
   prepared.matching_seconds = SecondsSince(t0);
   return prepared;
+}
+
+}  // namespace
+
+PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
+                           const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                           const RegisterTilesOptions& options) {
+  const int num_tiles = static_cast<int>(tiles.size());
+  return PrepareTilesFrom(
+      num_tiles, num_tiles > 0 ? static_cast<int>(tiles[0].cols()) : 0,
+      num_tiles > 0 ? static_cast<int>(tiles[0].rows()) : 0,
+      [&tiles](int i) -> const ImageF& { return tiles[static_cast<size_t>(i)]; },
+      commanded_table_pos_mm, options);
+}
+
+PreparedTiles PrepareTiles(int num_tiles, int width_px, int height_px,
+                           const std::function<ImageF(int)>& tile,
+                           const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                           const RegisterTilesOptions& options) {
+  return PrepareTilesFrom(num_tiles, width_px, height_px, tile, commanded_table_pos_mm, options);
 }
 
 TileRegistration RegisterTiles(const std::vector<ImageF>& tiles,

@@ -65,6 +65,7 @@
 // its brief says so.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -267,6 +268,15 @@ struct PreparedTiles {
 // input (sizes); a failure to find A comes back in motion (RegisterTiles
 // then reports it).
 PreparedTiles PrepareTiles(const std::vector<ImageF>& tiles,
+                           const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
+                           const RegisterTilesOptions& options);
+// The same on the tiles tile(i), i < num_tiles, each made when its step 1
+// starts and dropped when it ends, so that the tiles are not held beside
+// their matching images: a 6 x 6 grid's 36 tiles of 1600 x 1200 px are
+// 276 MB, as much again as those images or their coefficients. Also throws
+// what `tile` throws, and InputError for a tile not width_px x height_px.
+PreparedTiles PrepareTiles(int num_tiles, int width_px, int height_px,
+                           const std::function<ImageF(int)>& tile,
                            const std::vector<Eigen::Vector2d>& commanded_table_pos_mm,
                            const RegisterTilesOptions& options);
 

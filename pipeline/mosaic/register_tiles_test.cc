@@ -18,6 +18,7 @@
 #include "adapters/colmap/colmap_sift.h"
 #include "adapters/mrcal/lens.h"
 #include "adapters/opencv/image_io.h"
+#include "pipeline/core/error.h"
 #include "tests/sim_cache.h"
 
 namespace omm {
@@ -296,6 +297,58 @@ TEST(RegisterTiles, TagGateSkipsTheDemoAndKeepsEveryMarkersTag) {
   EXPECT_GT(num_tags, 9);
   for (const ImageF& tile : Render("demo-1").tiles)
     EXPECT_TRUE(DetectAprilTags36h11(tile, gated).empty());
+}
+
+// Tiles made one at a time for PrepareTiles (each asked for once, dropped
+// after its step 1) are prepared as the same tiles held together: matching
+// images, tags, corners and motion bit for bit, on the markers preset, whose
+// tiles hold tags. A tile of another size is refused by its index.
+TEST(RegisterTiles, TilesMadeOneAtATimeArePreparedAsHeldTiles) {
+  const Rendered r = Render("markers-1");
+  const int num_tiles = static_cast<int>(r.tiles.size());
+  const RegisterTilesOptions options;
+  const PreparedTiles held = PrepareTiles(r.tiles, r.commanded_mm, options);
+  std::vector<int> times_made(r.tiles.size(), 0);
+  const int width = static_cast<int>(r.tiles[0].cols());
+  const int height = static_cast<int>(r.tiles[0].rows());
+  const PreparedTiles made = PrepareTiles(
+      num_tiles, width, height,
+      [&](int i) {
+        ++times_made[static_cast<size_t>(i)];
+        return r.tiles[static_cast<size_t>(i)];
+      },
+      r.commanded_mm, options);
+  EXPECT_EQ(times_made, std::vector<int>(r.tiles.size(), 1));
+  ASSERT_EQ(made.normalized.size(), r.tiles.size());
+  int num_tags = 0;
+  for (size_t i = 0; i < r.tiles.size(); ++i) {
+    EXPECT_EQ(made.normalized[i], held.normalized[i]) << i;
+    EXPECT_EQ(made.spline[i], held.spline[i]) << i;
+    EXPECT_EQ(made.coarse_probe[i], held.coarse_probe[i]) << i;
+    ASSERT_EQ(made.tags[i].size(), held.tags[i].size()) << i;
+    for (size_t k = 0; k < made.tags[i].size(); ++k)
+      EXPECT_EQ(made.tags[i][k].corners_px, held.tags[i][k].corners_px) << i;
+    num_tags += static_cast<int>(made.tags[i].size());
+    ASSERT_EQ(made.corners[i].size(), held.corners[i].size()) << i;
+    for (size_t k = 0; k < made.corners[i].size(); ++k)
+      EXPECT_EQ(made.corners[i][k].pixel, held.corners[i][k].pixel) << i;
+  }
+  EXPECT_GT(num_tags, 9);
+  ASSERT_TRUE(made.motion.ok);
+  EXPECT_EQ(made.motion.px_per_table_mm, held.motion.px_per_table_mm);
+  EXPECT_EQ(made.pairs.size(), held.pairs.size());
+
+  try {
+    PrepareTiles(
+        num_tiles, width, height,
+        [&](int i) -> ImageF {
+          return i == 4 ? ImageF(r.tiles[4].topLeftCorner(height / 2, width)) : r.tiles[i];
+        },
+        r.commanded_mm, options);
+    FAIL() << "a tile of another size was prepared";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("tile 4 is"), std::string::npos) << e.what();
+  }
 }
 #endif
 

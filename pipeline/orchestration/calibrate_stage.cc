@@ -211,12 +211,12 @@ void RunStudy(StageContext& context, const CalibrationStageSummary& summary) {
 // with 100 calib images to a peak of 490 MB, one after the other to 375 MB.
 void StartMosaicTiles(StageContext& context) {
   if (!context.mosaic_follows || context.num_threads < 2 || context.mosaic_tiles.valid()) return;
-  context.mosaic_tiles = std::async(
-      std::launch::async, [&project = context.project, options = MosaicRegistrationOptions(context),
-                           num_threads = context.num_threads] {
-        YieldCoresToOtherThreads();
-        return PrepareMosaicTiles(project, options, num_threads);
-      });
+  context.mosaic_tiles =
+      std::async(std::launch::async,
+                 [&project = context.project, options = MosaicRegistrationOptions(context)] {
+                   YieldCoresToOtherThreads();
+                   return PrepareMosaicTiles(project, options);
+                 });
 }
 
 void CalibrateFromImages(StageContext& context) {

@@ -936,14 +936,12 @@ RegisterTilesOptions MosaicRegistrationOptions(const StageContext& context) {
   return options;
 }
 
-MosaicTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOptions& options,
-                               int num_threads) {
-  MosaicTiles tiles;
-  tiles.images = std::make_shared<const std::vector<ImageF>>(TileImages(project, num_threads));
+PreparedTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOptions& options) {
   std::vector<Eigen::Vector2d> commanded_mm;
   for (const TilePosition& tile : project.tiles) commanded_mm.push_back(tile.table_pos_mm);
-  tiles.prepared = PrepareTiles(*tiles.images, commanded_mm, options);
-  return tiles;
+  return PrepareTiles(
+      static_cast<int>(project.tiles.size()), project.image_width_px, project.image_height_px,
+      [&project](int i) { return TileImage(project, i); }, commanded_mm, options);
 }
 
 // The final adjustment's outcome in the log: its ties, and warnings of
@@ -1021,23 +1019,29 @@ void RunMosaicStage(StageContext& context) {
   std::vector<Vector6d> rt_cam_from_plates;
   std::future<TimedPrior> pending_prior = CalibrationPrior(context, &camera, &rt_cam_from_plates);
   const RegisterTilesOptions register_options = MosaicRegistrationOptions(context);
-  MosaicTiles prepared_tiles =
-      context.mosaic_tiles.valid()
-          ? context.mosaic_tiles.get()
-          : PrepareMosaicTiles(project, register_options, context.num_threads);
-  const std::shared_ptr<const std::vector<ImageF>> tile_images = prepared_tiles.images;
-  const std::vector<ImageF>& tiles = *tile_images;
-  CheckTileSizes(project, tiles, camera);
-  const std::vector<double> saturated_fraction = WarnOfOverexposedTiles(project, tiles);
-  const double read_seconds = SecondsSince(stage_start);
+  PreparedTiles prepared = context.mosaic_tiles.valid()
+                               ? context.mosaic_tiles.get()
+                               : PrepareMosaicTiles(project, register_options);
+  if (!project.tiles.empty())
+    CheckTileSize(project, 0, prepared.width_px, prepared.height_px, camera);
+  double read_seconds = SecondsSince(stage_start);
 
-  const int num_tiles = static_cast<int>(tiles.size());
+  const int num_tiles = static_cast<int>(project.tiles.size());
   if (context.progress) context.progress(num_tiles, num_tiles + 4, "register tiles");
   TileRegistration registration =
-      RegisterTiles(prepared_tiles.prepared, project.table_sigma_mm, camera,
-                    SiftMatches(context, prepared_tiles.prepared.pairs));
-  prepared_tiles.prepared = {};  // its matching images (the demo's: 143 MB) serve no later step
+      RegisterTiles(prepared, project.table_sigma_mm, camera, SiftMatches(context, prepared.pairs));
+  prepared = {};  // its matching images (the demo's: 143 MB) serve no later step
   spdlog::info("mosaic: {}", registration.brief);
+
+  // The tiles themselves, converted again: not held beside the matching
+  // images. Their overexposure is told even where the registration failed
+  // (it may be why).
+  const auto read_start = std::chrono::steady_clock::now();
+  const auto tile_images =
+      std::make_shared<const std::vector<ImageF>>(TileImages(project, context.num_threads));
+  const std::vector<ImageF>& tiles = *tile_images;
+  const std::vector<double> saturated_fraction = WarnOfOverexposedTiles(project, tiles);
+  read_seconds += SecondsSince(read_start);
   if (!registration.usable) throw StageFailedError(Stage::kMosaic, registration.brief);
 
   // Each pair's matches weighted by their own scatter.

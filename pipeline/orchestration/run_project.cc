@@ -207,15 +207,13 @@ void HandOverDecodedCalibImages(bool calibrating, Project& project, StageContext
 }
 
 // Drops the decoded images no later stage of the run reads: the calib images
-// after any stage (the calibration runs first), the tiles once their gray
-// images exist (StageContext's mosaic_tiles or tiles). mosaic_tiles reads
-// project.images on another thread: it is waited for first (the mosaic
-// stage, next, waits for it anyway).
+// after any stage (the calibration runs first), the tiles once the mosaic
+// stage has made their gray images (StageContext::tiles). A mosaic_tiles
+// still running reads project.images: it is waited for first.
 void DropDecodedImagesNoLongerRead(StageContext& context, Project& project) {
   context.calib_decoded.clear();
-  if (!project.images) return;
+  if (!project.images || context.tiles == nullptr) return;
   if (context.mosaic_tiles.valid()) context.mosaic_tiles.wait();
-  if (!context.mosaic_tiles.valid() && context.tiles == nullptr) return;
   project.images =
       std::make_shared<const LoadedImages>(WithoutDecodedImages(*project.images, false, true));
 }

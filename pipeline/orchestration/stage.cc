@@ -55,33 +55,40 @@ GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
   return image;
 }
 
+ImageF TileImage(const Project& project, int tile) {
+  const std::filesystem::path path = project.TilePath(project.tiles[tile].image);
+  GrayImage image = ProjectGrayImage(
+      project, project.images ? project.images->tiles[tile].image.get() : nullptr, path);
+  if (const std::optional<double> level = BlankImageLevel(image.pixels)) {
+    throw InputError(path.string(),
+                     fmt::format("blank: almost every pixel is {:.1f} % of full scale, no "
+                                 "picture of the part (a failed capture?)",
+                                 100.0 * *level));
+  }
+  return std::move(image.pixels);
+}
+
 std::vector<ImageF> TileImages(const Project& project, int num_threads) {
-  const int num_tiles = static_cast<int>(project.tiles.size());
-  std::vector<ImageF> tiles(num_tiles);
-  ParallelFor(num_tiles, num_threads, [&](int i) {
-    const std::filesystem::path path = project.TilePath(project.tiles[i].image);
-    GrayImage image = ProjectGrayImage(
-        project, project.images ? project.images->tiles[i].image.get() : nullptr, path);
-    if (const std::optional<double> level = BlankImageLevel(image.pixels)) {
-      throw InputError(path.string(),
-                       fmt::format("blank: almost every pixel is {:.1f} % of full scale, no "
-                                   "picture of the part (a failed capture?)",
-                                   100.0 * *level));
-    }
-    tiles[i] = std::move(image.pixels);
-  });
+  std::vector<ImageF> tiles(project.tiles.size());
+  ParallelFor(static_cast<int>(tiles.size()), num_threads,
+              [&](int i) { tiles[i] = TileImage(project, i); });
   return tiles;
+}
+
+void CheckTileSize(const Project& project, int tile, int width_px, int height_px,
+                   const CameraModel& camera) {
+  if (width_px != camera.width_px || height_px != camera.height_px) {
+    throw InputError(project.TilePath(project.tiles[tile].image).string(),
+                     fmt::format("{}x{} px, but the calibrated camera's imager is {}x{} px",
+                                 width_px, height_px, camera.width_px, camera.height_px));
+  }
 }
 
 void CheckTileSizes(const Project& project, const std::vector<ImageF>& tiles,
                     const CameraModel& camera) {
   for (size_t i = 0; i < tiles.size(); ++i) {
-    if (tiles[i].cols() != camera.width_px || tiles[i].rows() != camera.height_px) {
-      throw InputError(
-          project.TilePath(project.tiles[i].image).string(),
-          fmt::format("{}x{} px, but the calibrated camera's imager is {}x{} px", tiles[i].cols(),
-                      tiles[i].rows(), camera.width_px, camera.height_px));
-    }
+    CheckTileSize(project, static_cast<int>(i), static_cast<int>(tiles[i].cols()),
+                  static_cast<int>(tiles[i].rows()), camera);
   }
 }
 

@@ -59,13 +59,6 @@ class StageFailedError : public std::runtime_error {
   Stage stage_;
 };
 
-// The mosaic's tiles as gray images, in the project's tile order, and their
-// registration's camera-independent part (PrepareTiles).
-struct MosaicTiles {
-  std::shared_ptr<const std::vector<ImageF>> images;
-  PreparedTiles prepared;
-};
-
 struct StageContext {
   const Project& project;
   // Where this run's outputs go, named as they will be in out/.
@@ -102,10 +95,11 @@ struct StageContext {
   // their files (set by RunProject).
   std::vector<Stage> stale_in_out;
   bool StaleInOut(Stage stage) const;
-  // The mosaic's tiles, prepared on other threads while the camera is
-  // calibrated (started by the calibrate stage when the mosaic follows;
-  // invalid otherwise): the mosaic stage takes them from here.
-  std::future<MosaicTiles> mosaic_tiles;
+  // The registration's camera-independent part (PrepareMosaicTiles),
+  // prepared on other threads while the camera is calibrated (started by
+  // the calibrate stage when the mosaic follows; invalid otherwise): the
+  // mosaic stage takes it from here.
+  std::future<PreparedTiles> mosaic_tiles;
   // Output files still being written on other threads (the mosaic's):
   // RunProject waits for them, and rethrows their errors, before it commits
   // out/; destroying the context waits for them too.
@@ -127,13 +121,18 @@ struct StageContext {
 GrayImage ProjectGrayImage(const Project& project, const StoredImage* decoded,
                            const std::filesystem::path& path);
 
-// The project's tiles as gray images, in its tile order, num_threads at a
-// time: converted from those LoadProject decoded, else read from the files.
+// The project's tile `tile` (index into project.tiles) as a gray image:
+// converted from the one LoadProject decoded, else read from its file.
 // Throws InputError for a tile that is blank (BlankImageLevel): held by its
 // table position alone it would show a uniform square in the mosaic, and its
 // holes would fail as poor fits.
+ImageF TileImage(const Project& project, int tile);
+// All of them, in the project's tile order, num_threads at a time.
 std::vector<ImageF> TileImages(const Project& project, int num_threads);
-// Throws InputError for a tile whose size is not the camera's.
+// Throws InputError for a tile whose size is not the camera's: tile `tile`
+// of width_px x height_px, or each of `tiles`.
+void CheckTileSize(const Project& project, int tile, int width_px, int height_px,
+                   const CameraModel& camera);
 void CheckTileSizes(const Project& project, const std::vector<ImageF>& tiles,
                     const CameraModel& camera);
 // Both.
@@ -141,9 +140,9 @@ std::vector<ImageF> TileImages(const Project& project, const CameraModel& camera
 
 // How the mosaic stage registers the tiles (stage options from the context).
 RegisterTilesOptions MosaicRegistrationOptions(const StageContext& context);
-// TileImages, and PrepareTiles on them with `options`. Throws as they do.
-MosaicTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOptions& options,
-                               int num_threads);
+// PrepareTiles with `options` on the project's tiles (TileImage), each
+// converted where its step 1 starts and dropped after it. Throws as they do.
+PreparedTiles PrepareMosaicTiles(const Project& project, const RegisterTilesOptions& options);
 
 // Where a calibration measured the lens: the convex hull of its solve's inlier
 // mark centres, px (CameraModel::valid_region_px; empty if they span no area).
