@@ -1022,8 +1022,8 @@ void RunMosaicStage(StageContext& context) {
   PreparedTiles prepared = context.mosaic_tiles.valid()
                                ? context.mosaic_tiles.get()
                                : PrepareMosaicTiles(project, register_options);
-  if (!project.tiles.empty())
-    CheckTileSize(project, 0, prepared.width_px, prepared.height_px, camera);
+  // All tiles have one size (LoadProject, PrepareTiles): the first's is theirs.
+  CheckTileSize(project, 0, prepared.width_px, prepared.height_px, camera);
   double read_seconds = SecondsSince(stage_start);
 
   const int num_tiles = static_cast<int>(project.tiles.size());
