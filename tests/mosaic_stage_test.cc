@@ -10,6 +10,7 @@
 // own error (~0.05 raw px) would swamp the bound. The caltab lying on the
 // part (flat dots, no bore wall) checks the geometry against the truth
 // directly, with marks the locator cannot misread.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -510,6 +511,62 @@ TEST_F(MosaicStageTest, UnderexposedOrSaturatedTileFailsTheStageByName) {
   EXPECT_NE(bright.find(image + " has no pixel between 3 % and 97 %"), std::string::npos)
       << bright;
   EXPECT_NE(bright.find("a white or saturated image?"), std::string::npos) << bright;
+}
+
+// `image` of the project in `dir` given a glare band: its left `band_px`
+// columns at full scale (16-bit). Returns the fraction of its pixels at full
+// scale, counted on what was written.
+double AddGlareBand(const fs::path& dir, const std::string& image, int band_px) {
+  ImageF pixels = ReadGrayImage(dir / "tiles" / image).pixels;
+  pixels.leftCols(band_px).setOnes();
+  WriteGrayImage(dir / "tiles" / image, pixels, 16);
+  return static_cast<double>((pixels.array() >= 1.0f).count()) / static_cast<double>(pixels.size());
+}
+
+// The text the stage warns of an overexposed `image` with, up to its
+// percentage.
+std::string OverexposureWarning(const std::string& image, double fraction) {
+  return fmt::format("mosaic: {}: {:.1f} % of its pixels at full scale (overexposed)", image,
+                     100.0 * fraction);
+}
+
+// A tile with a glare band over a tenth of it is warned of by name with its
+// share at full scale, and the report gives the share; where the registration
+// fails (two tiles that do not overlap) the warning still comes, since the
+// glare may be why.
+TEST_F(MosaicStageTest, OverexposedTileIsWarnedOfByNameEvenWhereTheRegistrationFails) {
+  const std::string& centre = Truth().tiles[4].image;
+  const fs::path glare = CopyWithCamera("glare", Truth().camera.model);
+  const double fraction = AddGlareBand(glare, centre, Truth().camera.model.width_px / 10);
+  ASSERT_NEAR(fraction, 0.1, 0.01);  // nothing else in the tile at full scale
+  {
+    RunOptions options;
+    options.stages = {Stage::kMosaic};
+    const testing::LogCapture log;
+    RunProject(LoadProject(glare), options);
+    EXPECT_NE(log.Text().find(OverexposureWarning(centre, fraction)), std::string::npos)
+        << log.Text();
+    EXPECT_EQ(log.Text().find("(overexposed)"), log.Text().rfind("(overexposed)"))
+        << "only the glared tile is warned of: " << log.Text();
+    const Report report = ReadReportJson(glare / "out" / "report.json");
+    const ReportValue::Array* tiles = AsArray(Member(report.mosaic->extra, "tiles"));
+    ASSERT_NE(tiles, nullptr);
+    ASSERT_EQ(tiles->size(), Truth().tiles.size());
+    const ReportObject& row = *AsObject(&(*tiles)[4]);
+    EXPECT_EQ(*AsString(Member(row, "image")), centre);
+    EXPECT_NEAR(*AsNumber(Member(row, "saturated_fraction")), fraction, 1e-12);
+  }
+
+  const fs::path apart = CopyWithTiles("apart_glare", [](const TileTruth& tile) {
+    return (tile.grid_row == 0 && tile.grid_col == 0) || (tile.grid_row == 2 && tile.grid_col == 2);
+  });
+  const std::string& corner = Truth().tiles[0].image;
+  ASSERT_EQ(Truth().tiles[0].grid_row + Truth().tiles[0].grid_col, 0);
+  const double corner_fraction = AddGlareBand(apart, corner, Truth().camera.model.width_px / 10);
+  const testing::LogCapture log;
+  EXPECT_FALSE(MosaicStageFailure(apart).empty());
+  EXPECT_NE(log.Text().find(OverexposureWarning(corner, corner_fraction)), std::string::npos)
+      << log.Text();
 }
 
 TEST_F(MosaicStageTest, ColmapReadsTheExportedModel) {
