@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <vector>
 
@@ -349,36 +350,62 @@ void ScoreCandidate(const std::vector<CoarseSurface>& surfaces,
   }
 }
 
-// Step 3: the best candidate's (the first's) evidence over each clearly
-// different candidate's, on the pairs where they differ; the least ratio
-// (infinity if none differs).
-double MarginOverOthers(const std::vector<Candidate>& candidates,
-                        const std::vector<Eigen::Vector2d>& dt_mm, int coarse_factor,
-                        const ImageMotionOptions& options) {
-  const Candidate& best = candidates.front();
-  const int num_pairs = static_cast<int>(dt_mm.size());
-  double margin = std::numeric_limits<double>::infinity();
-  for (size_t i = 1; i < candidates.size(); ++i) {
-    double best_sum = 0, other_sum = 0;
-    int num_different = 0;
-    for (int k = 0; k < num_pairs; ++k) {
-      const LocalBest& x = best.at[k];
-      const LocalBest& y = candidates[i].at[k];
-      const bool x_valid = x.ncc > -1.0, y_valid = y.ncc > -1.0;
-      const bool same = x_valid == y_valid &&
-                        (!x_valid || coarse_factor * (x.shift - y.shift).cast<double>().norm() <=
-                                         Tolerance(options, best.a * dt_mm[k]));
-      if (same) continue;
-      ++num_different;
-      best_sum += Evidence(x.ncc);
-      other_sum += Evidence(y.ncc);
-    }
-    // Differing on fewer than half the pairs, it is the same motion with a
-    // spurious peak or two, not a competing one.
-    if (2 * num_different >= num_pairs && other_sum > 0)
-      margin = std::min(margin, best_sum / other_sum);
+// A pair's shift under a motion, for step 3's comparison: found or not,
+// where (px), and its NCC there.
+struct PairShift {
+  bool found = false;
+  Eigen::Vector2d px = Eigen::Vector2d::Zero();
+  double ncc = 0.0;
+};
+
+// A candidate's pairs at the coarsest level.
+std::vector<PairShift> CoarseShifts(const Candidate& c, int coarse_factor) {
+  std::vector<PairShift> shifts(c.at.size());
+  for (size_t k = 0; k < c.at.size(); ++k) {
+    if (c.at[k].ncc <= -1.0) continue;
+    shifts[k] = {true, coarse_factor * c.at[k].shift.cast<double>(), c.at[k].ncc};
   }
-  return margin;
+  return shifts;
+}
+
+// x's evidence over y's on the pairs where their shifts differ (by more
+// than tolerance_px[k], or one found and not the other); nothing where they
+// differ on fewer than half the pairs: then y is x's motion with a spurious
+// peak or two, not a competing one.
+std::optional<double> EvidenceRatio(const std::vector<PairShift>& x,
+                                    const std::vector<PairShift>& y,
+                                    const std::vector<double>& tolerance_px) {
+  const int num_pairs = static_cast<int>(x.size());
+  double x_sum = 0, y_sum = 0;
+  int num_different = 0;
+  for (int k = 0; k < num_pairs; ++k) {
+    const bool same =
+        x[k].found == y[k].found && (!x[k].found || (x[k].px - y[k].px).norm() <= tolerance_px[k]);
+    if (same) continue;
+    ++num_different;
+    if (x[k].found) x_sum += Evidence(x[k].ncc);
+    if (y[k].found) y_sum += Evidence(y[k].ncc);
+  }
+  if (2 * num_different < num_pairs || !(y_sum > 0)) return std::nullopt;
+  return x_sum / y_sum;
+}
+
+// Step 3: the first candidate's evidence ratio over each other one (as
+// EvidenceRatio, within the tolerance of the first's predictions), in the
+// candidates' order; nothing for the first.
+std::vector<std::optional<double>> RatiosOverOthers(const std::vector<Candidate>& candidates,
+                                                    const std::vector<Eigen::Vector2d>& dt_mm,
+                                                    int coarse_factor,
+                                                    const ImageMotionOptions& options) {
+  const Candidate& best = candidates.front();
+  const std::vector<PairShift> best_shifts = CoarseShifts(best, coarse_factor);
+  std::vector<double> tolerance_px(dt_mm.size());
+  for (size_t k = 0; k < dt_mm.size(); ++k) tolerance_px[k] = Tolerance(options, best.a * dt_mm[k]);
+  std::vector<std::optional<double>> ratios(candidates.size());
+  for (size_t i = 1; i < candidates.size(); ++i)
+    ratios[i] =
+        EvidenceRatio(best_shifts, CoarseShifts(candidates[i], coarse_factor), tolerance_px);
+  return ratios;
 }
 
 // Step 4 for a pair: its coarse shift followed down the pyramids to the
@@ -418,6 +445,64 @@ Eigen::Matrix2d FitMotion(const std::vector<Eigen::Vector2d>& dt_mm,
   std::vector<Eigen::Vector2d> refined_px(dt_mm.size());
   for (int k : agreeing) refined_px[k] = shifts[k].shift_px;
   return FitSimilarity(dt_mm, refined_px, agreeing, mirror);
+}
+
+// Step 3b: the contenders (the first candidate and the others whose ratio
+// is below min_margin, one of each set of coarse shifts) followed to the
+// finest level, where the fine texture decides. The index of the contender
+// with the most evidence there, and its least ratio over the others that
+// differ from it there (EvidenceRatio within the tolerance of its shifts;
+// infinity if none differs).
+struct FinestLevelVerdict {
+  size_t index = 0;
+  double margin = 0.0;
+};
+FinestLevelVerdict SettleAtFinestLevel(const std::vector<Candidate>& candidates,
+                                       const std::vector<std::optional<double>>& ratios,
+                                       const std::vector<std::vector<Level>>& pyramids,
+                                       const std::vector<std::pair<int, int>>& pairs,
+                                       const ImageMotionOptions& options) {
+  const auto same_shifts = [](const Candidate& x, const Candidate& y) {
+    for (size_t k = 0; k < x.at.size(); ++k) {
+      if ((x.at[k].ncc > -1.0) != (y.at[k].ncc > -1.0) || x.at[k].shift != y.at[k].shift)
+        return false;
+    }
+    return true;
+  };
+  std::vector<size_t> contenders = {0};
+  for (size_t i = 1; i < candidates.size(); ++i) {
+    if (!ratios[i] || *ratios[i] >= options.min_margin) continue;
+    if (std::none_of(contenders.begin(), contenders.end(),
+                     [&](size_t c) { return same_shifts(candidates[c], candidates[i]); }))
+      contenders.push_back(i);
+  }
+  const int num_pairs = static_cast<int>(pairs.size());
+  std::vector<std::vector<PairShift>> refined(contenders.size(),
+                                              std::vector<PairShift>(pairs.size()));
+  ParallelFor(static_cast<int>(contenders.size()) * num_pairs, options.num_threads, [&](int n) {
+    const size_t c = static_cast<size_t>(n / num_pairs);
+    const int k = n % num_pairs;
+    const LocalBest& coarse = candidates[contenders[c]].at[k];
+    if (coarse.ncc <= -1.0) return;
+    const TranslationEstimate t = RefineShift(pyramids[pairs[k].first], pyramids[pairs[k].second],
+                                              coarse, options.min_overlap_fraction);
+    if (t.ok) refined[c][k] = {true, t.shift_px, t.ncc};
+  });
+  std::vector<double> totals(contenders.size(), 0.0);
+  for (size_t c = 0; c < contenders.size(); ++c)
+    for (const PairShift& shift : refined[c])
+      if (shift.found) totals[c] += Evidence(shift.ncc);
+  const size_t w =
+      static_cast<size_t>(std::max_element(totals.begin(), totals.end()) - totals.begin());
+  std::vector<double> tolerance_px(pairs.size());
+  for (size_t k = 0; k < pairs.size(); ++k) tolerance_px[k] = Tolerance(options, refined[w][k].px);
+  FinestLevelVerdict verdict{contenders[w], std::numeric_limits<double>::infinity()};
+  for (size_t c = 0; c < contenders.size(); ++c) {
+    if (c == w) continue;
+    if (const std::optional<double> ratio = EvidenceRatio(refined[w], refined[c], tolerance_px))
+      verdict.margin = std::min(verdict.margin, *ratio);
+  }
+  return verdict;
 }
 
 }  // namespace
@@ -475,13 +560,30 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
   // 3. The margin over every clearly different candidate.
   estimate.score = best.score;
   estimate.mirrored = best.mirror < 0;
-  estimate.margin = MarginOverOthers(candidates, dt_mm, coarse_factor, options);
-  if (!(best.score > 0) || estimate.margin < options.min_margin) {
+  const std::vector<std::optional<double>> ratios =
+      RatiosOverOthers(candidates, dt_mm, coarse_factor, options);
+  estimate.margin = std::numeric_limits<double>::infinity();
+  for (const std::optional<double>& ratio : ratios)
+    if (ratio) estimate.margin = std::min(estimate.margin, *ratio);
+  // 3b. An ambiguity of the coarsest level settled at the finest.
+  if (best.score > 0 && estimate.margin < options.min_margin) {
+    const FinestLevelVerdict verdict =
+        SettleAtFinestLevel(candidates, ratios, pyramids, pairs, options);
+    estimate.finest_margin = verdict.margin;
+    if (verdict.margin >= options.min_margin) {
+      std::swap(candidates.front(), candidates[verdict.index]);
+      estimate.score = best.score;
+      estimate.mirrored = best.mirror < 0;
+    }
+  }
+  if (!(best.score > 0) ||
+      (estimate.margin < options.min_margin && estimate.finest_margin < options.min_margin)) {
     std::ostringstream brief;
     brief << "the image motion per table mm is ambiguous: the best consensus of the " << num_pairs
           << " neighbour pairs (evidence " << best.score
           << ") beats a different one only by a factor " << estimate.margin
-          << " on the pairs where they differ";
+          << " on the pairs where they differ, and by " << estimate.finest_margin
+          << " at the finest level";
     estimate.brief = brief.str();
     return estimate;
   }
@@ -522,7 +624,9 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
   std::ostringstream brief;
   brief << estimate.num_agreeing << " of " << num_pairs
         << " neighbour pairs agree on the image motion (evidence " << best.score << ", margin "
-        << estimate.margin << ")";
+        << estimate.margin;
+  if (estimate.finest_margin > 0) brief << ", at the finest level " << estimate.finest_margin;
+  brief << ")";
   estimate.brief = brief.str();
   return estimate;
 }

@@ -53,6 +53,7 @@ struct ImageMotionEstimate {
   bool mirrored = false;  // the consensus similarity's handedness (det A < 0)
   double score = 0.0;     // the best candidate's evidence (sum of z over all pairs)
   double margin = 0.0;    // the smallest ratio of step 3 (infinity: no different candidate)
+  double finest_margin = 0.0;                    // step 3b's, where step 3's fell short (else 0)
   std::vector<TranslationEstimate> pair_shifts;  // per input pair, refined around A's prediction
   std::vector<bool> pair_agrees;                 // its shift agrees with A
   int num_agreeing = 0;
@@ -77,6 +78,14 @@ struct ImageMotionEstimate {
 //    more found elsewhere), the best one's evidence on the pairs where they
 //    differ must be min_margin times the other's: a mirrored motion, say,
 //    agrees on the pairs along one table axis and differs on the others.
+// 3b. Where that fails, the best candidate and those it does not beat so
+//    (one of each set of coarse shifts) are followed down the pyramids, and
+//    the one with the most evidence at the finest level must beat the others
+//    there by min_margin on the pairs where they differ. What every tile
+//    shows alike (a strip's part edges along the motion, the background
+//    beside them) lines up at a false shift in all pairs of a strip, whose
+//    table displacements are all alike; at the coarsest level it can match
+//    the texture of the true overlap, at the finest it does not.
 // 4. Each pair's shift refined coarse-to-fine (a +-(ratio + 1) search per
 //    level) from the best candidate's down to finest_factor; A is the
 //    least-squares fit to the pairs that agree with the candidate (within

@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -100,6 +102,72 @@ TEST(EstimateImageMotion, FindsAMirroredOrRotatedMotionOnWeakTexture) {
       EXPECT_LE(((e.px_per_table_mm - truth) * dt).cwiseAbs().maxCoeff(), options.finest_factor);
     }
   }
+}
+
+// A strip of four 1600 x 1200 tiles, the table moving 80 mm along X between
+// neighbours and the image 500 px along y: the content at q in tile i is at
+// q + (0, 500 (j - i)) in tile j. The scene is a coarse pattern that repeats
+// every 200 px along y, so that it fits shifts of 300, 500 and 700 px alike,
+// plus `fine_amplitude` times a fine texture that does not repeat.
+struct StripTiles {
+  std::vector<ImageF> tiles;
+  std::vector<Eigen::Vector2d> table_mm;
+  std::vector<std::pair<int, int>> neighbours;
+  Eigen::Vector2d shift_px{0.0, 500.0};  // between neighbours
+};
+
+StripTiles PeriodicStrip(float fine_amplitude) {
+  const int rows = 1200, cols = 1600, period = 200, step = 500, num_tiles = 4;
+  const ImageF coarse = RandomTexture(period, cols, 12.0, 5);
+  const ImageF fine = RandomTexture(rows + (num_tiles - 1) * step, cols, 3.0, 6);
+  std::mt19937 rng(7);
+  std::normal_distribution<float> noise(0.0f, 0.05f);
+  StripTiles s;
+  for (int i = 0; i < num_tiles; ++i) {
+    // Tile i shows the scene from row (num_tiles - 1 - i) step down.
+    const int top = (num_tiles - 1 - i) * step;
+    ImageF tile(rows, cols);
+    for (int r = 0; r < rows; ++r)
+      for (int c = 0; c < cols; ++c)
+        tile(r, c) = coarse((top + r) % period, c) + fine_amplitude * fine(top + r, c) + noise(rng);
+    s.tiles.push_back(NormalizeTileIntensity(tile));
+    s.table_mm.emplace_back(80.0 * i, 0.0);
+    if (i > 0) s.neighbours.emplace_back(i - 1, i);
+  }
+  return s;
+}
+
+// Where only the coarse pattern tells the tiles apart at the coarsest level,
+// the shifts a period off the true one score alike there (step 3 fails);
+// followed to the finest level, the fine texture settles it (step 3b).
+TEST(EstimateImageMotion, AShiftThatOnlyTheCoarseLevelsCannotTellIsSettledAtTheFinest) {
+  const StripTiles s = PeriodicStrip(1.0f);
+  const ImageMotionOptions options;
+  const ImageMotionEstimate e = EstimateImageMotion(s.tiles, s.table_mm, s.neighbours, options);
+  std::printf("%s\n", e.brief.c_str());
+  ASSERT_TRUE(e.ok) << e.brief;
+  EXPECT_LT(e.margin, options.min_margin);
+  EXPECT_GE(e.finest_margin, options.min_margin);
+  EXPECT_EQ(e.num_agreeing, 3);
+  for (size_t k = 0; k < s.neighbours.size(); ++k) {
+    ASSERT_TRUE(e.pair_shifts[k].ok);
+    EXPECT_LE((e.pair_shifts[k].shift_px - s.shift_px).cwiseAbs().maxCoeff(), options.finest_factor)
+        << e.pair_shifts[k].shift_px.transpose();
+  }
+  EXPECT_LE((e.px_per_table_mm * Eigen::Vector2d(80.0, 0.0) - s.shift_px).norm(),
+            options.finest_factor);
+}
+
+// Without the fine texture the scene repeats at every level: the motion is
+// refused as ambiguous rather than guessed.
+TEST(EstimateImageMotion, AShiftThatNoLevelCanTellIsRefusedAsAmbiguous) {
+  const StripTiles s = PeriodicStrip(0.0f);
+  const ImageMotionOptions options;
+  const ImageMotionEstimate e = EstimateImageMotion(s.tiles, s.table_mm, s.neighbours, options);
+  std::printf("%s\n", e.brief.c_str());
+  EXPECT_FALSE(e.ok);
+  EXPECT_NE(e.brief.find("the image motion per table mm is ambiguous"), std::string::npos);
+  EXPECT_LT(e.finest_margin, options.min_margin);
 }
 
 // A sum of sinusoids below 0.2 cycles/px, sampled at (x - dx, y - dy).

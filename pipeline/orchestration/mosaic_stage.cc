@@ -1137,6 +1137,7 @@ void RunMosaicStage(StageContext& context) {
       {"plane_tilt_deg", registration.plane_tilt_deg},
       {"image_px_per_table_mm", ReportValue::Array{ReportValue::Array{a(0, 0), a(0, 1)},
                                                    ReportValue::Array{a(1, 0), a(1, 1)}}},
+      {"image_motion", registration.motion_brief},
       {"covariance_computed", registration.scene.covariance.size() > 0},
       {"intrinsics", IntrinsicsTreatment(adjusted, prior)},
       {"intrinsics_max_change_sigmas", IntrinsicsChangeSigmas(camera, adjusted, prior)},
