@@ -44,6 +44,8 @@ std::string RegisterTilesOptions::Check() const {
   if (!(probe_ransac_threshold_px > 0)) return "probe_ransac_threshold_px must be > 0";
   if (!(probe_contradiction_ncc > -1 && probe_contradiction_ncc < 1))
     return "probe_contradiction_ncc must be in (-1, 1)";
+  if (!(probe_texture_ncc > -1 && probe_texture_ncc < 1))
+    return "probe_texture_ncc must be in (-1, 1)";
   if (search_radius_px < 1) return "search_radius_px must be >= 1";
   if (!(ransac_threshold_px > 0)) return "ransac_threshold_px must be > 0";
   if (ransac_iterations < 1) return "ransac_iterations must be >= 1";
@@ -478,6 +480,26 @@ std::vector<int> PairCandidates(const MatchingInputs& in, PairRegistration* pair
   return candidates;
 }
 
+// The probe search's radius on the downsampled images, px.
+int ProbeSearchRadius(const RegisterTilesOptions& options) {
+  const int f = options.probe_downsample_factor;
+  return (options.probe_search_radius_px + f - 1) / f + 1;
+}
+
+// Whether a probe whose plain NCC fell short contradicts the table position
+// (RegisterTilesOptions::probe_texture_ncc): its template, at `anchor` of the
+// downsampled image a, shows texture of its own, and nothing around
+// `predicted` in b correlates with it once each window's plane is removed.
+bool ProbeContradicts(const ImageF& a, const Eigen::Vector2i& anchor, const ImageF& b,
+                      const Eigen::Vector2i& predicted, const RegisterTilesOptions& options) {
+  const int h = options.probe_half_size_px;
+  const double self = 0.5 * (BestDetrendedNcc(a, anchor, h, a, anchor + Eigen::Vector2i(1, 0), 0) +
+                             BestDetrendedNcc(a, anchor, h, a, anchor + Eigen::Vector2i(0, 1), 0));
+  if (self < options.probe_texture_ncc) return false;
+  return BestDetrendedNcc(a, anchor, h, b, predicted, ProbeSearchRadius(options)) <
+         options.probe_contradiction_ncc;
+}
+
 // The pair's Harris candidates with their predictions in tile b, or none:
 // probes (the strongest candidates, already spread by the bucketing) are
 // found in b by a wide NCC search on the downsampled images, refined at full
@@ -507,15 +529,17 @@ std::vector<Candidate> HarrisCandidates(const MatchingInputs& in,
         c.pixel.cast<double>() - (f * anchor_coarse.cast<double>().array() + centre).matrix();
     const Eigen::Vector2d predicted_coarse =
         ((c.pixel.cast<double>() + shift - offset).array() - centre) / f;
+    const Eigen::Vector2i predicted_coarse_px(static_cast<int>(std::lround(predicted_coarse.x())),
+                                              static_cast<int>(std::lround(predicted_coarse.y())));
     const NccPeak probe_peak =
         SearchNcc(prepared.coarse_probe[ta], anchor_coarse, options.probe_half_size_px,
-                  prepared.coarse_probe[tb],
-                  Eigen::Vector2i(static_cast<int>(std::lround(predicted_coarse.x())),
-                                  static_cast<int>(std::lround(predicted_coarse.y()))),
-                  (options.probe_search_radius_px + f - 1) / f + 1);
+                  prepared.coarse_probe[tb], predicted_coarse_px, ProbeSearchRadius(options));
     if (!probe_peak.ok) continue;
     ++pair->num_probes;
-    if (probe_peak.ncc < options.probe_contradiction_ncc) ++pair->num_contradicting_probes;
+    if (probe_peak.ncc < options.probe_contradiction_ncc &&
+        ProbeContradicts(prepared.coarse_probe[ta], anchor_coarse, prepared.coarse_probe[tb],
+                         predicted_coarse_px, options))
+      ++pair->num_contradicting_probes;
     const PatchMatch m = MatchPatch(
         prepared.normalized[ta], c.pixel, prepared.normalized[tb], prepared.spline[tb],
         (f * probe_peak.q_px.array() + centre).matrix() + offset, PatchWarp(), f, options.patch);

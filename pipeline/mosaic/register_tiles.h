@@ -57,8 +57,9 @@
 // names it) if it overlaps no other tile, or if its image contradicts
 // table.csv: at least min_pair_matches of its pairs' probe templates, and at
 // least half of them, find nothing alike (NCC below
-// probe_contradiction_ncc) anywhere in the probe search, as when the wrong
-// image is listed. Otherwise (weak or no texture: smooth patches correlate
+// probe_contradiction_ncc, also with each window's shading plane removed,
+// where the template shows texture of its own) anywhere in the probe search,
+// as when the wrong image is listed. Otherwise (weak or no texture: smooth patches correlate
 // well with their surroundings, so their probes do not contradict) and for
 // a tile whose observations the outlier passes all dropped, the tile is held
 // by its table prior alone; the summary lists it (tiles_held_by_prior) and
@@ -143,6 +144,16 @@ struct RegisterTilesOptions {
   // probes, median NCC 0.35-0.65; correct pairs, rich or weak texture: the
   // median is 0.83-0.99 even where too few probes pass the template match.
   double probe_contradiction_ncc = 0.7;
+  // ... and only if its template shows texture of its own: with each
+  // window's plane removed (shading that differs between the tiles), its NCC
+  // with itself one pixel over (mean of x and y) reaches this (noise: ~0),
+  // and the best such NCC in the probe search also stays below
+  // probe_contradiction_ncc. On low texture with vignetting, opposite shading
+  // ramps at two tiles' borders kept a faint texture's plain NCC at 0.1-0.7
+  // where the tiles did match (a 6 x 6 low-texture-exposure grid, seed 950:
+  // six tiles "contradicted"); their templates, the shading removed, were
+  // noise (self NCC 0.02-0.47), the demo's texture 0.68-0.89 (1-99 %).
+  double probe_texture_ncc = 0.6;
   int search_radius_px = 1;                // +- around the ray-homography-predicted position, px
   // Plane-induced homography on undistorted rays: inlier distance, px (measured
   // in the target tile with the camera's fx).

@@ -631,6 +631,60 @@ ImageMotionEstimate EstimateImageMotion(const std::vector<ImageF>& tiles,
   return estimate;
 }
 
+namespace {
+
+// A (2 h + 1)^2 window at `centre` less its least-squares plane, as a
+// vector; empty where that leaves only the samples' rounding (a plane). The
+// grid's coordinates are centred, so 1, x and y are orthogonal and each
+// coefficient a projection.
+Eigen::VectorXd DetrendedWindow(const ImageF& image, const Eigen::Vector2i& centre, int h) {
+  const int side = 2 * h + 1;
+  Eigen::VectorXd w(side * side);
+  double sum = 0, sum_x = 0, sum_y = 0;
+  for (int r = 0; r < side; ++r) {
+    for (int c = 0; c < side; ++c) {
+      const double v = image(centre.y() - h + r, centre.x() - h + c);
+      w(r * side + c) = v;
+      sum += v, sum_x += (c - h) * v, sum_y += (r - h) * v;
+    }
+  }
+  const double magnitude = w.norm();
+  // sum over the grid of x^2 (or y^2): side * sum_{i=-h..h} i^2.
+  const double sxx = side * h * (h + 1) * (2.0 * h + 1) / 3.0;
+  const double mean = sum / w.size(), b = sum_x / sxx, c = sum_y / sxx;
+  for (int r = 0; r < side; ++r)
+    for (int col = 0; col < side; ++col) w(r * side + col) -= mean + b * (col - h) + c * (r - h);
+  // float samples: relative rounding ~6e-8 each.
+  if (!(w.norm() > 1e-5 * magnitude)) return {};
+  return w;
+}
+
+bool WindowInside(const ImageF& image, const Eigen::Vector2i& centre, int h) {
+  return centre.x() - h >= 0 && centre.y() - h >= 0 && centre.x() + h < image.cols() &&
+         centre.y() + h < image.rows();
+}
+
+}  // namespace
+
+double BestDetrendedNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int half_size_px,
+                        const ImageF& target, const Eigen::Vector2i& center_px, int radius_px) {
+  const int h = half_size_px;
+  if (!WindowInside(reference, anchor_px, h)) return -2.0;
+  const Eigen::VectorXd t = DetrendedWindow(reference, anchor_px, h);
+  if (t.size() == 0) return -2.0;
+  const double t_norm = t.norm();
+  double best = -2.0;
+  for (int dy = -radius_px; dy <= radius_px; ++dy) {
+    for (int dx = -radius_px; dx <= radius_px; ++dx) {
+      const Eigen::Vector2i at = center_px + Eigen::Vector2i(dx, dy);
+      if (!WindowInside(target, at, h)) return -2.0;
+      const Eigen::VectorXd w = DetrendedWindow(target, at, h);
+      if (w.size() > 0) best = std::max(best, t.dot(w) / (t_norm * w.norm()));
+    }
+  }
+  return best;
+}
+
 NccPeak SearchNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int half_size_px,
                   const ImageF& target, const Eigen::Vector2i& center_px, int radius_px) {
   NccPeak peak;

@@ -113,6 +113,15 @@ struct NccPeak {
 NccPeak SearchNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int half_size_px,
                   const ImageF& target, const Eigen::Vector2i& center_px, int radius_px);
 
+// The best NCC of the same template in `target` over the integer centres
+// within +-radius_px of center_px, with each window's least-squares plane
+// (a + b x + c y) removed first: blind to shading that differs linearly
+// between the two windows (vignetting at opposite borders of two tiles, an
+// exposure ramp), which plain NCC counts against a faint texture. -2 where
+// a window leaves its image or is a plane.
+double BestDetrendedNcc(const ImageF& reference, const Eigen::Vector2i& anchor_px, int half_size_px,
+                        const ImageF& target, const Eigen::Vector2i& center_px, int radius_px);
+
 struct PatchMatchOptions {
   int half_size_px = 15;  // the template is (2 h + 1)^2 pixels of the reference tile
   double min_ncc = 0.8;   // NCC of the template and the matched, resampled patch

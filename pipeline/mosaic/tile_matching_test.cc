@@ -170,6 +170,35 @@ TEST(EstimateImageMotion, AShiftThatNoLevelCanTellIsRefusedAsAmbiguous) {
   EXPECT_LT(e.finest_margin, options.min_margin);
 }
 
+// A faint texture seen by two tiles at a known shift, under shading ramps
+// that run opposite ways (vignetting at two tiles' facing borders): plain
+// NCC counts the ramps against the texture, the detrended NCC finds the
+// texture at the true shift; a window that is a plane has no NCC.
+TEST(BestDetrendedNcc, FindsAFaintTextureUnderOppositeShadingRamps) {
+  const ImageF texture = RandomTexture(80, 80, 1.5, 11);
+  const Eigen::Vector2i shift(3, -2);  // content at q in a is at q + shift in b
+  ImageF a(60, 60), b(60, 60);
+  for (int r = 0; r < 60; ++r) {
+    for (int c = 0; c < 60; ++c) {
+      a(r, c) = 0.1f * texture(r + 10, c + 10) + 0.1f * c;
+      b(r, c) = 0.1f * texture(r + 10 - shift.y(), c + 10 - shift.x()) - 0.1f * c;
+    }
+  }
+  const Eigen::Vector2i anchor(30, 30);
+  const int h = 5, radius = 4;
+  const NccPeak plain = SearchNcc(a, anchor, h, b, anchor + shift, radius);
+  ASSERT_TRUE(plain.ok);
+  EXPECT_LT(plain.ncc, 0.3);
+  EXPECT_NEAR(BestDetrendedNcc(a, anchor, h, b, anchor + shift, radius), 1.0, 1e-6);
+  EXPECT_NEAR(BestDetrendedNcc(a, anchor, h, b, anchor + shift, 0), 1.0, 1e-6);
+  EXPECT_LT(BestDetrendedNcc(a, anchor, h, b, anchor + shift + Eigen::Vector2i(3, 0), 0), 0.7);
+  ImageF plane(60, 60);
+  for (int r = 0; r < 60; ++r)
+    for (int c = 0; c < 60; ++c) plane(r, c) = 0.3f * r - 0.2f * c + 1.0f;
+  EXPECT_EQ(BestDetrendedNcc(plane, anchor, h, b, anchor, radius), -2.0);
+  EXPECT_EQ(BestDetrendedNcc(a, anchor, h, b, Eigen::Vector2i(2, 30), radius), -2.0);  // leaves b
+}
+
 // A sum of sinusoids below 0.2 cycles/px, sampled at (x - dx, y - dy).
 ImageF Sinusoids(int rows, int cols, double dx, double dy) {
   ImageF image(rows, cols);
