@@ -1,7 +1,7 @@
 // `omm run` on other tile grids than 3 x 3, rendered by the simulator with
-// known truth (`omm simulate --grid`): a strip of one row, a strip of one
-// column (the table moving along one line only: a long part), and a larger
-// 4 x 3 grid. For a strip the registration seeds the plane from the one
+// known truth (`omm simulate --grid`): strips of one row, a strip of one
+// column (the table moving along one line only: a long part), and larger
+// 4 x 3 and 6 x 6 grids. For a strip the registration seeds the plane from the one
 // motion (pipeline/mosaic/plane_seed.h); before, the mosaic stage failed
 // with "the tile-to-tile motion is not that of a plane seen from above".
 // Every feature must be found, the hole centres sit within 0.05 raw px RMS
