@@ -20,6 +20,7 @@
 #include "adapters/project_io/project_reader.h"
 #include "adapters/project_io/scene_json.h"
 #include "pipeline/core/board.h"
+#include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/orchestration/run_project.h"
 #include "tests/sim_cache.h"
 #include "tests/test_util.h"
@@ -252,6 +253,49 @@ TEST(MosaicPlateStageSplined, AReusedCameraModelsRegionWeighsTheMarksOutsideIt) 
   const ReportObject without = plate_check(without_region);
   EXPECT_EQ(std::get<std::int64_t>(RequiredMember(without, "outside_calibrated_region").data()), 0);
   EXPECT_GT(std::abs(Number(without, "height_mm")), 5 * Number(without, "height_sigma_mm"));
+}
+
+// Lens-mismatch seed 1105 with 6 calibration images, 4 usable: the spline,
+// widened to 27 deg to map the image, is known only near the plate's marks,
+// and refined under its prior by the tiles' matches it folds short of the
+// image's corner (until 2026-12-03 the run then failed in the
+// orthorectification). The final adjustment keeps the calibration's
+// intrinsics instead, says why, and the tiles still land where the table
+// truly put them: RMS (origin gauge removed) below table.sigma_mm.
+TEST(MosaicPlateStageSplined, RefinedIntrinsicsThatWouldNotMapTheImageAreHeld) {
+  const testing::CachedProject sim = testing::SimulatedProject("lens-mismatch", 1105, 6);
+  const testing::TempDir dir;
+  const fs::path project = dir.path() / "fold";
+  testing::CopyProject(sim.project_dir, project);
+  RunOptions options;
+  options.stages = {Stage::kCalibrate, Stage::kMosaic};
+  const RunSummary summary = RunProject(LoadProject(project), options);
+  ASSERT_TRUE(summary.report.mosaic.has_value());
+  const std::string intrinsics = Text(summary.report.mosaic->extra, "intrinsics");
+  EXPECT_EQ(intrinsics.rfind("held: refined, they would map no ray to pixel (", 0), 0u)
+      << intrinsics;
+  const SavedScene scene = ReadSceneJson(project / "out" / "mosaic" / "scene.json");
+  EXPECT_FALSE(scene.intrinsics_refined);
+  const CameraModel calibrated = ReadCameraModel(project / "out" / "camera.cameramodel");
+  // The .cameramodel holds them to 6 decimals.
+  ASSERT_EQ(scene.scene.intrinsics.size(), calibrated.intrinsics.size());
+  EXPECT_LE((scene.scene.intrinsics - calibrated.intrinsics).cwiseAbs().maxCoeff(), 5e-7);
+  EXPECT_FALSE(FirstUnmappedTileBorderPixel(calibrated).has_value());
+
+  ASSERT_EQ(scene.tile_images.size(), sim.truth.tiles.size());
+  std::vector<Eigen::Vector2d> errors;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (size_t i = 0; i < scene.tile_images.size(); ++i) {
+    for (const TileTruth& tile : sim.truth.tiles) {
+      if (tile.image != scene.tile_images[i]) continue;
+      errors.push_back(scene.scene.table_pos_mm[i] - tile.actual_mm);
+      mean += errors.back() / static_cast<double>(scene.tile_images.size());
+    }
+  }
+  ASSERT_EQ(errors.size(), sim.truth.tiles.size());
+  double sum_sq = 0.0;
+  for (const Eigen::Vector2d& e : errors) sum_sq += (e - mean).squaredNorm();
+  EXPECT_LT(std::sqrt(sum_sq / (2.0 * errors.size())), sim.truth.table_sigma_mm);
 }
 
 // calibration.from a .cameramodel (no covariance) and the tile with the

@@ -44,6 +44,11 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// The border of the region a tile is sampled in, [1, W - 2] x [1, H - 2].
+Eigen::Matrix2Xd TileBorderPx(const CameraModel& camera) {
+  return RectangleBorderPx({1.0, 1.0}, {camera.width_px - 2.0, camera.height_px - 2.0}, 32);
+}
+
 // Area of a simple polygon (2 x N vertices in order, either sense).
 double PolygonArea(const Eigen::Matrix2Xd& polygon) {
   double twice = 0.0;
@@ -165,6 +170,10 @@ void OrthoGeometry::TileRowPixels(int tile, int row, int col0, int n,
   }
 }
 
+std::optional<Eigen::Vector2d> FirstUnmappedTileBorderPixel(const CameraModel& camera) {
+  return FirstUnmappedPixel(camera, TileBorderPx(camera), 0.01);
+}
+
 OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& scene,
                                    const OrthoOptions& options) {
   if (const std::string e = options.Check(); !e.empty()) throw InputError("mosaic options", e);
@@ -181,10 +190,9 @@ OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& 
   geometry.lens = BuildLensTable(camera, options.lens_table);
   geometry.vignetting = VignettingFrame::Of(camera);
 
-  // The border of the sampled region [1, W - 2] x [1, H - 2], as rays.
-  const Eigen::Matrix2Xd border =
-      RectangleBorderPx({1.0, 1.0}, {camera.width_px - 2.0, camera.height_px - 2.0}, 32);
-  if (const std::optional<Eigen::Vector2d> unmapped = FirstUnmappedPixel(camera, border, 0.01)) {
+  // The border of the sampled region, as rays.
+  const Eigen::Matrix2Xd border = TileBorderPx(camera);
+  if (const std::optional<Eigen::Vector2d> unmapped = FirstUnmappedTileBorderPixel(camera)) {
     char text[256];
     std::snprintf(text, sizeof(text),
                   "the lens model maps no ray to pixel (%.0f, %.0f) of the image border: it does "

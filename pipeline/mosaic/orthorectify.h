@@ -55,6 +55,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -195,6 +196,12 @@ struct OrthoGeometry {
 // camera (intrinsics, a tile whose image border does not meet the plane).
 OrthoGeometry ComputeOrthoGeometry(const CameraModel& camera, const PlaneScene& scene,
                                    const OrthoOptions& options);
+
+// The first of the points on the border of the region a tile is sampled in
+// ([1, W - 2] x [1, H - 2], 32 a side) that the lens maps to no ray;
+// nullopt if every one maps. ComputeOrthoGeometry needs them all: it finds
+// the tiles' footprints from their rays.
+std::optional<Eigen::Vector2d> FirstUnmappedTileBorderPixel(const CameraModel& camera);
 
 // Mean tile pixels per mosaic pixel along a row, at the tiles' footprint
 // centres (0 if none projects).

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <utility>
 
+#include <fmt/format.h>
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
 
@@ -18,6 +19,7 @@
 #include "pipeline/core/error.h"
 #include "pipeline/core/parallel_for.h"
 #include "pipeline/core/timing.h"
+#include "pipeline/mosaic/orthorectify.h"
 #include "pipeline/mosaic/plane_seed.h"
 #include "pipeline/mosaic/working_distance.h"
 
@@ -744,6 +746,26 @@ FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
     without.plate_not_used = why_not_used;
     without.seconds = SecondsSince(start);
     return without;
+  }
+  if (result.intrinsics_refined && result.summary.usable) {
+    // The tiles use the whole image: refined intrinsics whose lens folds
+    // short of its border (a spline moved past the knots its marks
+    // constrained) cannot render them, so the calibration's are kept.
+    CameraModel refined = camera;
+    refined.intrinsics = result.scene.intrinsics;
+    if (const std::optional<Eigen::Vector2d> q = FirstUnmappedTileBorderPixel(refined)) {
+      IntrinsicsPrior held;
+      held.measured_region_px = prior.measured_region_px;
+      held.why_held = fmt::format(
+          "refined, they would map no ray to pixel ({:.0f}, {:.0f}) of the image border, which "
+          "the tiles use",
+          q->x(), q->y());
+      FinalAdjustment with_held =
+          AdjustWithPlateAndPrior(camera, registered_input, registered_scene, plate, held, options);
+      with_held.intrinsics_held_why = held.why_held;
+      with_held.seconds = SecondsSince(start);
+      return with_held;
+    }
   }
   // Ceres' diagonal blocks are symmetric to rounding only; the saved matrix
   // is exactly.

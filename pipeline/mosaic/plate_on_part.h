@@ -215,6 +215,9 @@ struct FinalAdjustment {
   PlaneBundleInput input;  // the registration's, plus the plate and the prior
   PlaneBundleSummary summary;
   bool intrinsics_refined = false;
+  // Set when the prior would have refined the intrinsics but the
+  // adjustment held them (the refined lens would not map the whole image).
+  std::string intrinsics_held_why;
   // 1-sigma of the mosaic's scale from the covariance: of the scale of the
   // least-squares similarity fit of the adjusted to the commanded table
   // positions, ppm (0 if no covariance).
@@ -248,8 +251,11 @@ struct FinalAdjustment {
 // by PlateOnPartOptions::min_mark_sigma_px; corners: assumed); the marks are
 // then weighed by their scatter about that solve (dof-corrected, floored by
 // min_corner_sigma_px or min_dot_sigma_px) and the scene solved again, as
-// the calibration stage weighs them. Data failures come back in summary
-// (usable, brief); throws InputError for invalid options or sizes.
+// the calibration stage weighs them. Refined intrinsics whose lens maps no
+// ray to some point of the tiles' sampled border
+// (FirstUnmappedTileBorderPixel) are not kept: the scene is solved again with
+// the calibration's held (intrinsics_held_why). Data failures come back in
+// summary (usable, brief); throws InputError for invalid options or sizes.
 FinalAdjustment AdjustWithPlateAndPrior(const CameraModel& camera,
                                         const PlaneBundleInput& registered_input,
                                         const PlaneScene& registered_scene,

@@ -332,7 +332,10 @@ double IntrinsicsChangeSigmas(const CameraModel& camera, const FinalAdjustment& 
 
 // report.mosaic's intrinsics: how the adjustment treated them.
 std::string IntrinsicsTreatment(const FinalAdjustment& adjusted, const IntrinsicsPrior& prior) {
-  if (!adjusted.intrinsics_refined) return "held: " + prior.why_held;
+  if (!adjusted.intrinsics_refined) {
+    return "held: " +
+           (adjusted.intrinsics_held_why.empty() ? prior.why_held : adjusted.intrinsics_held_why);
+  }
   std::string text = "refined with the calibration covariance as prior";
   if (!prior.held.empty()) {
     text += fmt::format(" (the {} the calibration held kept)", prior.held.size());
@@ -1088,6 +1091,14 @@ void RunMosaicStage(StageContext& context) {
   FinalAdjustment& adjusted = final_outcome.adjusted;
   LogFinalAdjustment(final_outcome);
   if (!adjusted.summary.usable) throw StageFailedError(Stage::kMosaic, adjusted.summary.brief);
+  if (!adjusted.intrinsics_held_why.empty()) {
+    spdlog::warn(
+        "mosaic: the calibration's intrinsics are kept as they are: {}. Their uncertainty is "
+        "then left out of every sigma (its calibration part is 0). The lens is known only near "
+        "the calibration plate's marks; calibration images with the plate near the image's "
+        "corners and edges would measure it there",
+        adjusted.intrinsics_held_why);
+  }
   registration.scene = adjusted.scene;
   registration.bundle = adjusted.summary;
   registration.rms_px = adjusted.summary.final_rms_px;
