@@ -214,6 +214,12 @@ std::future<TimedPrior> CalibrationPrior(const StageContext& context, CameraMode
 // scale: beyond any height the plate may stand at (its unknown height moves
 // the scale by h / d: 5 mm at 400 mm is 12 500 ppm), a units error.
 constexpr double kPlateScaleUnitsPpm = 1e5;
+// The largest move of a refined intrinsic, in its calibration sigmas, that
+// a calibration covariance which holds leaves likely: a normal's |z| passes
+// 5 with probability 6e-7, so even over a spline's ~120 free intrinsics one
+// run in ~15000. Lens-mismatch projects with 18 calibration images moved
+// theirs by 1.1-4.0; with 4 (circles, seeds 1201-1219) by 7.8-18.7.
+constexpr double kMaxIntrinsicsChangeSigmas = 5.0;
 // The table's variance component (FinalAdjustmentWithHoles): priors this
 // many times looser show a scatter that stiff ones hide; the estimate is
 // repeated until it moves by less than kTableSigmaSettled.
@@ -1099,6 +1105,15 @@ void RunMosaicStage(StageContext& context) {
         "corners and edges would measure it there",
         adjusted.intrinsics_held_why);
   }
+  const double intrinsics_change_sigmas = IntrinsicsChangeSigmas(camera, adjusted, prior);
+  if (intrinsics_change_sigmas > kMaxIntrinsicsChangeSigmas) {
+    spdlog::warn(
+        "mosaic: the tiles moved the calibrated intrinsics by up to {:.1f} of their calibration "
+        "sigmas: the calibration's uncertainty is understated, and with it the calibration part "
+        "of every sigma. More calibration images, with the plate near the image's corners and "
+        "edges too, would measure the lens better",
+        intrinsics_change_sigmas);
+  }
   registration.scene = adjusted.scene;
   registration.bundle = adjusted.summary;
   registration.rms_px = adjusted.summary.final_rms_px;
@@ -1151,7 +1166,7 @@ void RunMosaicStage(StageContext& context) {
       {"image_motion", registration.motion_brief},
       {"covariance_computed", registration.scene.covariance.size() > 0},
       {"intrinsics", IntrinsicsTreatment(adjusted, prior)},
-      {"intrinsics_max_change_sigmas", IntrinsicsChangeSigmas(camera, adjusted, prior)},
+      {"intrinsics_max_change_sigmas", intrinsics_change_sigmas},
       {"scale_sigma_ppm", adjusted.scale_sigma_ppm},
       {"plate_scale_check", PlateReport(project, plate, adjusted)},
       {"hole_ties", std::move(final_outcome.ties_report)},
