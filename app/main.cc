@@ -1,6 +1,5 @@
 // `omm`: on-machine vision metrology from the command line. See README.md.
 #include <malloc.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -10,7 +9,6 @@
 #include <map>
 #include <optional>
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -77,38 +75,16 @@ std::string PresetList() {
 //   (`omm run` on the demo: 180 k page faults, 0.7 GB of zeroed pages, for
 //   a peak of 0.36 GB; 32 MB is glibc's largest mmap threshold).
 // - One arena: a thread's own arena keeps what it freed from the others.
-// - Transparent huge pages for the heap (the kernel gives them to memory
-//   that asks, `madvise` mode, Debian's default): 2 MB pages, one fault
-//   instead of 512 and fewer TLB misses while images are scanned. glibc
-//   takes this from the environment only (GLIBC_TUNABLES, read at start-up),
-//   so a process that runs stages sets it and starts itself again, once
-//   (~40 ms); the variable is then dropped, so that the programs omm starts
-//   (colmap) have their own defaults. A GLIBC_TUNABLES set by the caller is
-//   left alone (set it empty to keep glibc's defaults, e.g. under a
-//   debugger).
-// `omm run` on demo seed 347 / lens-mismatch seed 284 / low-texture seed 285,
-// 2-core machine, four interleaved rounds: 2.68 / 3.11 / 3.60 s wall with
-// the first alone, 2.04 / 2.67 / 3.13 s with all three (peak 363 / 378 /
-// 399 MB -> 329 / 339 / 367 MB; the results the same bits).
-void TuneAllocator(int argc, char** argv) {
-  static constexpr const char* kTunables = "glibc.malloc.hugetlb=1";
-  const char* tunables = std::getenv("GLIBC_TUNABLES");
-#if defined(__SANITIZE_ADDRESS__)
-  tunables = "";  // the sanitizer's allocator replaces glibc's
-#endif
-  const std::vector<omm::Stage> stages = omm::AllStages();
-  const bool runs_stages = std::any_of(argv + 1, argv + argc, [&stages](const char* argument) {
-    return std::string_view(argument) == "run" ||
-           std::any_of(stages.begin(), stages.end(), [argument](omm::Stage stage) {
-             return std::string_view(argument) == omm::StageName(stage);
-           });
-  });
-  if (tunables == nullptr && runs_stages) {
-    if (setenv("GLIBC_TUNABLES", kTunables, 1) == 0) execv("/proc/self/exe", argv);
-    unsetenv("GLIBC_TUNABLES");  // not restarted (no /proc): go on as we are
-  } else if (tunables != nullptr && std::string_view(tunables) == kTunables) {
-    unsetenv("GLIBC_TUNABLES");  // restarted: glibc has read it
-  }
+// Not transparent huge pages (glibc.malloc.hugetlb=1, which glibc takes
+// from GLIBC_TUNABLES only, so omm restarted itself with it until
+// 2026-12-03): on a virtual machine whose free memory goes back to the host
+// (virtio-balloon's free page reporting, in 2 MB blocks), a huge page's
+// first touch costs the host's faults too. Their kernel time varied from
+// 0.05 to 1.2 s a run with the machine's history; without them it stayed at
+// 0.23-0.40 s. Four interleaved rounds there, mean wall time without / with:
+// sparse-texture seed 1001 2.31 / 2.83 s, demo 1001 3.29 / 3.61 s,
+// lens-mismatch 1007 6.04 / 6.30 s.
+void TuneAllocator() {
   mallopt(M_MMAP_THRESHOLD, 32 << 20);
   mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max());
   mallopt(M_ARENA_MAX, 1);
@@ -228,7 +204,7 @@ CLI::App* AddReportCommand(CLI::App& app, std::string& project, bool& json) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  TuneAllocator(argc, argv);
+  TuneAllocator();
   CLI::App app{
       "omm: on-machine vision metrology. Calibrates the camera over an NC machine "
       "table, registers the tiles of a flat workpiece into an orthorectified mosaic, "

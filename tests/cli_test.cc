@@ -55,28 +55,20 @@ TEST(Cli, VersionAndUsageErrors) {
   EXPECT_THAT(no_threads.output, HasSubstr("--threads"));
 }
 
-// A command that runs stages starts itself again once, to tune glibc's
-// allocator (main.cc, TuneAllocator). Whatever GLIBC_TUNABLES the caller
-// set (none, omm's own, another, empty), the arguments arrive as given and
-// the exit code comes back: 1 (a stage failed on the data) and 2 (a path
-// with spaces that is not there, named in the message); `--version` (no
-// restart) says 0.
-TEST_F(CliTest, ArgumentsAndExitCodesPassThroughTheAllocatorRestart) {
+// The arguments arrive as given and the exit code comes back: 1 (a stage
+// failed on the data) and 2 (a path with spaces that is not there, named in
+// the message); `--version` says 0.
+TEST_F(CliTest, ArgumentsAndExitCodesPassThrough) {
   const fs::path spaced = dir_.path() / "a job with  spaces";
-  for (const std::string env :
-       {"env -u GLIBC_TUNABLES", "env GLIBC_TUNABLES=glibc.malloc.hugetlb=1",
-        "env GLIBC_TUNABLES=glibc.malloc.arena_max=2", "env GLIBC_TUNABLES="}) {
-    const std::string omm = env + " " + testing::OmmProgram().string() + " ";
-    const auto version = testing::RunCommand(omm + "--version");
-    EXPECT_EQ(version.exit_code, 0) << env;
-    EXPECT_THAT(version.output, HasSubstr("omm 0.")) << env;
-    const auto failed = testing::RunCommand(omm + "run " + Quoted(project_.dir));
-    EXPECT_EQ(failed.exit_code, 1) << env << ": " << failed.output;
-    EXPECT_THAT(failed.output, HasSubstr("stage 'calibrate' failed")) << env;
-    const auto missing = testing::RunCommand(omm + "run " + Quoted(spaced));
-    EXPECT_EQ(missing.exit_code, 2) << env << ": " << missing.output;
-    EXPECT_THAT(missing.output, HasSubstr(spaced.string())) << env;
-  }
+  const auto version = testing::RunOmm("--version");
+  EXPECT_EQ(version.exit_code, 0);
+  EXPECT_THAT(version.output, HasSubstr("omm 0."));
+  const auto failed = testing::RunOmm("run " + Quoted(project_.dir));
+  EXPECT_EQ(failed.exit_code, 1) << failed.output;
+  EXPECT_THAT(failed.output, HasSubstr("stage 'calibrate' failed"));
+  const auto missing = testing::RunOmm("run " + Quoted(spaced));
+  EXPECT_EQ(missing.exit_code, 2) << missing.output;
+  EXPECT_THAT(missing.output, HasSubstr(spaced.string()));
 }
 
 TEST_F(CliTest, BadProjectExitsTwoAndNamesFileAndKey) {
