@@ -17,6 +17,7 @@
 
 #include "adapters/project_io/project_reader.h"
 #include "adapters/project_io/report_json.h"
+#include "pipeline/core/board.h"
 #include "pipeline/orchestration/run_project.h"
 #include "tests/sim_cache.h"
 #include "tests/test_util.h"
@@ -67,6 +68,41 @@ TEST(MeasureBorePrior, ANearAxisSmallHoleBorrowsTheProjectsBore) {
     EXPECT_NE(views->find("project's k"), std::string::npos) << *views;
   }
   EXPECT_TRUE(seen);
+}
+
+// A hole whose views resolve no bore wall is located again once the prior
+// is pooled. Where its views disagree, the warning comes once, and says
+// what the report's final views note says: lens-mismatch seed 1201 (6
+// images of the circles grid), whose hole_06 is seen by four tiles that
+// resolve no wall and disagree on its centre (until 2026-12-03 warned
+// twice, in the threads' order).
+TEST(MeasureBorePrior, ViewsThatDisagreeAreWarnedOfOnceWithTheFinalNote) {
+  const testing::CachedProject sim =
+      testing::SimulatedProject("lens-mismatch", 1201, 6, false, {}, BoardType::kCircles);
+  testing::TempDir dir;
+  const fs::path project_dir = dir.path() / "lm1201";
+  testing::CopyProject(sim.project_dir, project_dir);
+  const testing::LogCapture log;
+  RunProject(LoadProject(project_dir), RunOptions{});
+  const Report report = ReadReportJson(project_dir / "out" / "report.json");
+  ASSERT_TRUE(report.features.has_value());
+  const std::string text = log.Text();
+  int num_warned = 0;
+  for (const FeatureReport& f : *report.features) {
+    const std::string prefix = "measure: " + f.name + ": measured in ";
+    size_t count = 0;
+    for (size_t at = text.find(prefix); at != std::string::npos; at = text.find(prefix, at + 1))
+      ++count;
+    EXPECT_LE(count, 1u) << f.name;
+    if (count == 0) continue;
+    ++num_warned;
+    const std::string* views = AsString(Member(f.extra, "views"));
+    ASSERT_NE(views, nullptr);
+    EXPECT_NE(text.find("measure: " + f.name + ": " + *views + "\n"), std::string::npos)
+        << f.name << ": " << *views;
+    EXPECT_NE(views->find("disagree"), std::string::npos) << *views;
+  }
+  EXPECT_GE(num_warned, 1);
 }
 
 }  // namespace

@@ -65,6 +65,9 @@ struct LocatedFeature {
   std::optional<CircleFeatureValue> value;  // none if not found
   int value_index = -1;                     // into the propagation's features; -1 if not found
   BoreEvidence bore;                        // of its fits (for a BorePrior)
+  // The views' note where they disagree (warned of once the feature is
+  // final: a hole with an unresolved bore is located twice); else empty.
+  std::string views_disagree;
 };
 
 // Each tile's exposure as the mosaic divided it out (report.json's mosaic
@@ -130,10 +133,11 @@ std::string FailedViewsNote(const std::vector<HoleFit>& failed, const SavedScene
 }
 
 // The report's notes on a hole measured in tiles: which tiles, their bores
-// and fits, the tiles that failed, and whether the views agree.
+// and fits, the tiles that failed, and whether the views agree (where they
+// do not, *views_disagree is the note).
 void AddTileViewNotes(const HoleViews& views, const CombinedCircle& combined,
                       const Eigen::Matrix3d& to_mm, const OrthoGrid& grid, const SavedScene& saved,
-                      const std::string& name_of_feature, FeatureReport* report) {
+                      FeatureReport* report, std::string* views_disagree) {
   const std::vector<HoleFit>& fits = views.fits;
   const std::vector<HoleFit>& failed = views.failed;
   const CircleFeatureValue& value = combined.value;
@@ -181,8 +185,7 @@ void AddTileViewNotes(const HoleViews& views, const CombinedCircle& combined,
     };
     views_note += "; " + agreement("centres", combined.centre) + "; " +
                   agreement("diameters", combined.diameter);
-    if (!combined.centre.consistent || !combined.diameter.consistent)
-      spdlog::warn("measure: {}: {}", name_of_feature, views_note);
+    if (!combined.centre.consistent || !combined.diameter.consistent) *views_disagree = views_note;
     report->extra.emplace_back(
         "fit",
         fmt::format("combined: centre ({:.3f}, {:.3f}) px, r {:.3f} px, sigma ({:.4f}, "
@@ -314,7 +317,9 @@ LocatedFeature LocateFeature(const FeatureSpec& spec, const HoleViewInputs& in,
     num_inliers += fit.circle.num_inliers;
     sum_squares += fit.circle.num_inliers * fit.circle.rms_px * fit.circle.rms_px;
   }
-  if (fits[0].tile) AddTileViewNotes(views_found, combined, to_mm, grid, saved, spec.name, &report);
+  if (fits[0].tile) {
+    AddTileViewNotes(views_found, combined, to_mm, grid, saved, &report, &located.views_disagree);
+  }
   report.centre_mm = value.centre_mm;
   report.diameter_mm = value.diameter_mm;
   report.extra.emplace_back("num_views", static_cast<int>(fits.size()));
@@ -560,6 +565,8 @@ void RunMeasureStage(StageContext& context) {
     }
     if (!feature.report.error.empty())
       spdlog::warn("measure: {}: {}", project.features[i].name, feature.report.error);
+    if (!feature.views_disagree.empty())
+      spdlog::warn("measure: {}: {}", project.features[i].name, feature.views_disagree);
   }
 
   const int num_tiles = static_cast<int>(saved.scene.table_pos_mm.size());
